@@ -1,0 +1,35 @@
+# Every external dependency of Sandtable, found once, as imported targets.
+# All come from Debian 12 packages installed by deploy/install-deps.sh.
+
+find_package(Threads REQUIRED)
+find_package(Eigen3 3.3 REQUIRED NO_MODULE)            # Eigen3::Eigen
+find_package(Ceres REQUIRED)                          # Ceres::ceres
+find_package(OpenCV 4 REQUIRED COMPONENTS core imgproc imgcodecs calib3d structured_light)
+find_package(glm REQUIRED)                            # glm::glm
+find_package(glfw3 3.3 REQUIRED)                      # glfw
+find_package(TinyGLTF REQUIRED)                       # TinyGLTF
+find_package(nlohmann_json 3 REQUIRED)                # nlohmann_json::nlohmann_json
+find_package(embree 3 REQUIRED)                       # embree
+find_package(Protobuf REQUIRED)                       # protobuf::libprotobuf, protobuf::protoc
+find_package(cppzmq REQUIRED)                         # cppzmq (brings libzmq)
+find_package(SQLite3 REQUIRED)                        # SQLite::SQLite3
+find_package(ZLIB REQUIRED)                           # ZLIB::ZLIB
+find_package(OpenGL REQUIRED COMPONENTS OpenGL EGL)   # OpenGL::OpenGL, OpenGL::EGL
+find_package(PkgConfig REQUIRED)
+pkg_check_modules(LIBUSB REQUIRED IMPORTED_TARGET libusb-1.0)   # PkgConfig::LIBUSB
+
+if(SANDTABLE_BUILD_TESTS)
+  find_package(GTest REQUIRED)                        # GTest::gtest, GTest::gmock
+  include(GoogleTest)
+endif()
+if(SANDTABLE_BUILD_BENCHMARKS)
+  find_package(benchmark REQUIRED)                    # benchmark::benchmark
+endif()
+
+# OpenCV's config defines no per-module imported target names we can rely on; wrap them.
+if(NOT TARGET sandtable_opencv)
+  add_library(sandtable_opencv INTERFACE)
+  add_library(sandtable::opencv ALIAS sandtable_opencv)
+  target_link_libraries(sandtable_opencv INTERFACE ${OpenCV_LIBS})
+  target_include_directories(sandtable_opencv SYSTEM INTERFACE ${OpenCV_INCLUDE_DIRS})
+endif()

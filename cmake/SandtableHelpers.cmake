@@ -1,0 +1,44 @@
+# sandtable_add_library(<name> SOURCES ... [DEPS ...] [PRIVATE_DEPS ...])
+#   Adds static library <name> with alias sandtable::<name>. Include paths are rooted at the
+#   project source dir, so headers are included as "common/geometry/rigid3.h".
+function(sandtable_add_library name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS;PRIVATE_DEPS" ${ARGN})
+  add_library(${name} STATIC ${ARG_SOURCES})
+  add_library(sandtable::${name} ALIAS ${name})
+  target_include_directories(${name} PUBLIC ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})
+  target_link_libraries(${name} PUBLIC ${ARG_DEPS} PRIVATE sandtable::options ${ARG_PRIVATE_DEPS})
+endfunction()
+
+# sandtable_add_test(<name> SOURCES ... DEPS ... [LABELS ...] [TIMEOUT s])
+#   Adds a GoogleTest executable and registers each of its tests with CTest
+#   (gtest_discover_tests), run from the project root so ../shared/data paths resolve.
+function(sandtable_add_test name)
+  cmake_parse_arguments(ARG "" "TIMEOUT" "SOURCES;DEPS;LABELS" ${ARGN})
+  if(NOT SANDTABLE_BUILD_TESTS)
+    return()
+  endif()
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_DEPS} GTest::gtest GTest::gtest_main
+    sandtable::options)
+  if(NOT ARG_TIMEOUT)
+    set(ARG_TIMEOUT 300)
+  endif()
+  set(properties TIMEOUT ${ARG_TIMEOUT})
+  if(ARG_LABELS)
+    list(APPEND properties LABELS "${ARG_LABELS}")
+  endif()
+  gtest_discover_tests(${name}
+    WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
+    PROPERTIES ${properties}
+    DISCOVERY_TIMEOUT 60)
+endfunction()
+
+# sandtable_add_benchmark(<name> SOURCES ... DEPS ...)
+function(sandtable_add_benchmark name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
+  if(NOT SANDTABLE_BUILD_BENCHMARKS)
+    return()
+  endif()
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_DEPS} benchmark::benchmark sandtable::options)
+endfunction()

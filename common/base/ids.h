@@ -1,0 +1,27 @@
+// Typed ids of Sandtable, each with an invalid sentinel.
+#pragma once
+
+#include <cstdint>
+#include <limits>
+
+namespace sandtable {
+
+// A projector unit (projector + camera + computer); one sandtable-node process each.
+using NodeId = uint32_t;
+constexpr NodeId kInvalidNodeId = std::numeric_limits<NodeId>::max();
+
+// A projector within a site; today equal to its unit's NodeId.
+using ProjectorId = uint32_t;
+constexpr ProjectorId kInvalidProjectorId = std::numeric_limits<ProjectorId>::max();
+
+// A camera within a site; today equal to its unit's NodeId.
+using CameraId = uint32_t;
+constexpr CameraId kInvalidCameraId = std::numeric_limits<CameraId>::max();
+
+// An annotation stroke, sequence numbers of events.
+using StrokeId = uint64_t;
+constexpr StrokeId kInvalidStrokeId = std::numeric_limits<StrokeId>::max();
+using SequenceNumber = uint64_t;
+constexpr SequenceNumber kInvalidSequenceNumber = std::numeric_limits<SequenceNumber>::max();
+
+}  // namespace sandtable

@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# Installs every Debian 12 package Sandtable builds, tests and runs with.
+# Idempotent and non-interactive: when every package is already present it
+# only checks and exits (well under a second). Needs root (or sudo) to install.
+set -euo pipefail
+
+PACKAGES=(
+  # toolchain
+  build-essential cmake ninja-build ccache pkg-config git clang-14 libclang-rt-14-dev
+  clang-format
+  # numerics
+  libeigen3-dev libceres-dev
+  # vision (contrib carries structured_light)
+  libopencv-dev libopencv-contrib-dev
+  # graphics: GL, EGL (Mesa llvmpipe for headless), windows, math, glTF
+  libglfw3-dev libglm-dev libtinygltf-dev libstb-dev nlohmann-json3-dev
+  libegl-dev libgl-dev libgles-dev libegl-mesa0 libgl1-mesa-dri mesa-utils xvfb xauth
+  # world ray casting
+  libembree-dev
+  # protocol and transport
+  libprotobuf-dev protobuf-compiler libzmq3-dev cppzmq-dev zlib1g-dev
+  # storage, devices
+  libsqlite3-dev sqlite3 libusb-1.0-0-dev
+  # tests, benchmarks, plots
+  libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox python3
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#PACKAGES[@]} packages present"
+  exit 0
+fi
+
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+echo "install-deps: installing ${#missing[@]} packages: ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -q
+$SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
+echo "install-deps: done"
