@@ -1,0 +1,1 @@
+#include "common/estimation/plane_fit.h"

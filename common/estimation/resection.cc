@@ -1,0 +1,1 @@
+#include "common/estimation/resection.h"
