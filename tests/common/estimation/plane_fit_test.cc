@@ -1,1 +1,5 @@
+#include "common/estimation/plane_fit.h"
+
 #include <gtest/gtest.h>
+
+TEST(plane_fit, Placeholder) {}

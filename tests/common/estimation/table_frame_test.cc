@@ -1,1 +1,5 @@
+#include "common/estimation/table_frame.h"
+
 #include <gtest/gtest.h>
+
+TEST(table_frame, Placeholder) {}

@@ -1,1 +1,5 @@
+#include "common/estimation/triangulation.h"
+
 #include <gtest/gtest.h>
+
+TEST(triangulation, Placeholder) {}
