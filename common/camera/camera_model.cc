@@ -66,6 +66,25 @@ Eigen::Vector2d CameraModel::Distort(const Eigen::Vector2d& undistorted) const {
   return out;
 }
 
+bool CameraModel::InDistortionDomain(const Eigen::Vector2d& undistorted) const {
+  if (!undistorted.allFinite()) return false;
+  // With s = r^2, d/dr [r (1 + k1 s + k2 s^2 + k3 s^3)] = h(s) = 1 + 3 k1 s + 5 k2 s^2 + 7 k3 s^3.
+  // h(0) = 1, so h > 0 on [0, s_max] iff h > 0 at s_max and at every critical point of h
+  // inside (0, s_max): the roots of h'(s) = 3 k1 + 10 k2 s + 21 k3 s^2.
+  const double a = 3.0 * distortion.k1, b = 5.0 * distortion.k2, c = 7.0 * distortion.k3;
+  auto h = [&](double s) { return 1.0 + s * (a + s * (b + s * c)); };
+  const double s_max = undistorted.squaredNorm();
+  if (!(h(s_max) > 0.0)) return false;
+  auto critical_ok = [&](double s) { return !(s > 0.0 && s < s_max) || h(s) > 0.0; };
+  if (c == 0.0) {
+    return b == 0.0 || critical_ok(-a / (2.0 * b));
+  }
+  const double discriminant = 4.0 * b * b - 12.0 * a * c;  // of 3c s^2 + 2b s + a
+  if (discriminant < 0.0) return true;
+  const double root = std::sqrt(discriminant);
+  return critical_ok((-2.0 * b + root) / (6.0 * c)) && critical_ok((-2.0 * b - root) / (6.0 * c));
+}
+
 Expected<Eigen::Vector2d> CameraModel::Undistort(const Eigen::Vector2d& distorted,
                                                  const UndistortOptions& options) const {
   if (!distorted.allFinite()) return InvalidArgumentError("undistort: input is not finite");
@@ -76,10 +95,13 @@ Expected<Eigen::Vector2d> CameraModel::Undistort(const Eigen::Vector2d& distorte
   // ApplyBrownDistortion. Starting from the distorted point is good while the map is close to
   // the identity; a determinant that approaches zero means we are near the fold where the
   // model stops being invertible, and we refuse rather than return a wrong branch.
-  Eigen::Vector2d x = distorted;
-  for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
-    const Eigen::Vector2d residual = Distort(x) - distorted;
-    if (residual.norm() < options.tolerance) return x;
+  //
+  // Converging is not enough: past the fold the map has other preimages, and Newton can land
+  // on one of them (measured before this check: barrel k1 = -0.5, k2 = -0.3 with p1 = p2 =
+  // 1e-3 returned a ray on the opposite side of the axis at distorted radius 1.08; k1 = -0.5,
+  // k3 = +0.05 returned rays beyond the fold for every distorted radius past 0.5628). A
+  // solution is accepted only inside InDistortionDomain() with a positive Jacobian.
+  auto jacobian_at = [&](const Eigen::Vector2d& x) {
     const double xx = x.x() * x.x(), yy = x.y() * x.y(), xy = x.x() * x.y();
     const double r2 = xx + yy;
     const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
@@ -89,6 +111,23 @@ Expected<Eigen::Vector2d> CameraModel::Undistort(const Eigen::Vector2d& distorte
     jacobian(0, 1) = 2.0 * xy * dradial_dr2 + 2.0 * p1 * x.x() + 2.0 * p2 * x.y();
     jacobian(1, 0) = 2.0 * xy * dradial_dr2 + 2.0 * p1 * x.x() + 2.0 * p2 * x.y();
     jacobian(1, 1) = radial + 2.0 * yy * dradial_dr2 + 6.0 * p1 * x.y() + 2.0 * p2 * x.x();
+    return jacobian;
+  };
+  auto wrong_branch = [&](const Eigen::Vector2d& x) {
+    std::ostringstream s;
+    s << "undistort: normalized (" << distorted.x() << ", " << distorted.y()
+      << ") is past the fold of the distortion (the only solution found, (" << x.x() << ", "
+      << x.y() << "), lies outside the lens model's valid domain)";
+    return NotConvergedError(s.str());
+  };
+  Eigen::Vector2d x = distorted;
+  for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
+    const Eigen::Vector2d residual = Distort(x) - distorted;
+    if (residual.norm() < options.tolerance) {
+      if (!InDistortionDomain(x) || !(jacobian_at(x).determinant() > 0.0)) return wrong_branch(x);
+      return x;
+    }
+    const Eigen::Matrix2d jacobian = jacobian_at(x);
     const double det = jacobian.determinant();
     if (!(det > 1e-6)) {
       std::ostringstream s;
@@ -100,7 +139,10 @@ Expected<Eigen::Vector2d> CameraModel::Undistort(const Eigen::Vector2d& distorte
     if (!x.allFinite()) break;
   }
   const Eigen::Vector2d residual = Distort(x) - distorted;
-  if (x.allFinite() && residual.norm() < options.tolerance) return x;
+  if (x.allFinite() && residual.norm() < options.tolerance) {
+    if (!InDistortionDomain(x) || !(jacobian_at(x).determinant() > 0.0)) return wrong_branch(x);
+    return x;
+  }
   std::ostringstream s;
   s << "undistort: no convergence within " << options.max_iterations
     << " iterations at normalized (" << distorted.x() << ", " << distorted.y() << ")";
@@ -110,7 +152,10 @@ Expected<Eigen::Vector2d> CameraModel::Undistort(const Eigen::Vector2d& distorte
 std::optional<Eigen::Vector2d> CameraModel::Project(const Eigen::Vector3d& x_in_camera) const {
   if (!x_in_camera.allFinite() || !(x_in_camera.z() > 0.0)) return std::nullopt;
   const Eigen::Vector2d normalized = x_in_camera.head<2>() / x_in_camera.z();
-  return PixelFromNormalized(Distort(normalized));
+  if (!InDistortionDomain(normalized)) return std::nullopt;
+  const Eigen::Vector2d pixel = PixelFromNormalized(Distort(normalized));
+  if (!pixel.allFinite()) return std::nullopt;  // overflow of a huge x/z
+  return pixel;
 }
 
 Expected<Eigen::Vector3d> CameraModel::Unproject(const Eigen::Vector2d& pixel,

@@ -5,9 +5,17 @@
 // unit. Normalized coordinates are (x/z, y/z). Pixels follow OpenCV: pixel (0, 0) is centred at
 // (0.0, 0.0), so the image covers [-0.5, width_px - 0.5] x [-0.5, height_px - 0.5].
 //   u_px = fx_px * x_distorted + cx_px,  v_px = fy_px * y_distorted + cy_px.
-// Failure: Project() of a point at or behind the camera plane returns nullopt; Unproject()
-// returns NOT_CONVERGED when the distortion cannot be inverted at that pixel (past the fold of
-// a strongly distorted lens), never a wrong ray.
+// Failure: Project() of a point at or behind the camera plane, or past the fold of the
+// distortion (see InDistortionDomain), returns nullopt; Unproject() returns NOT_CONVERGED when
+// the distortion cannot be inverted at that pixel (past the fold of a strongly distorted lens),
+// never a wrong ray.
+//
+// The fold: the radial map r -> r (1 + k1 r^2 + k2 r^4 + k3 r^6) is a valid lens model only
+// while it increases; where its derivative first reaches zero (radius r_fold) the model folds
+// back, and beyond it points land on pixels that belong to other rays (for barrel k1 = -0.5,
+// k2 = -0.3 the ray at r = 1.33 lands on the opposite side of the image). The valid domain is
+// r < r_fold; its image, distorted radius < g(r_fold), is the set of invertible pixels.
+// tests/common/camera/camera_model_stress_test.cc and docs/numerics.md give measured numbers.
 #pragma once
 
 #include <array>
@@ -71,7 +79,12 @@ class CameraModel {
   CameraModel() = default;
   CameraModel(int width, int height, double fx, double fy, double cx, double cy,
               BrownDistortion dist = {})
-      : width_px(width), height_px(height), fx_px(fx), fy_px(fy), cx_px(cx), cy_px(cy),
+      : width_px(width),
+        height_px(height),
+        fx_px(fx),
+        fy_px(fy),
+        cx_px(cx),
+        cy_px(cy),
         distortion(dist) {}
 
   // A model from a throw ratio (throw distance / image width) and lens shift, as projector
@@ -88,10 +101,17 @@ class CameraModel {
   static CameraModel FromK(int width, int height, const Eigen::Matrix3d& k,
                            BrownDistortion dist = {});
 
-  // Distortion in normalized coordinates.
+  // Distortion in normalized coordinates. Defined everywhere; meaningful only inside
+  // InDistortionDomain().
   Eigen::Vector2d Distort(const Eigen::Vector2d& undistorted) const;
-  // Inverse of Distort by Newton's method from the undistorted guess; NOT_CONVERGED if the
-  // iteration does not reach `options.tolerance` or meets a singular Jacobian.
+  // True when the undistorted normalized point lies inside the fold of the radial distortion:
+  // d/dr [r (1 + k1 r^2 + k2 r^4 + k3 r^6)] > 0 for every radius in [0, |undistorted|]
+  // (exact: the minimum of a cubic in r^2 over an interval). Always true without distortion.
+  // Tangential terms (p1, p2) are not part of this test; Undistort also checks the Jacobian.
+  bool InDistortionDomain(const Eigen::Vector2d& undistorted) const;
+  // Inverse of Distort by Newton's method from the distorted point as the first guess;
+  // NOT_CONVERGED if the iteration does not reach `options.tolerance`, meets a singular
+  // Jacobian, or converges to a point outside InDistortionDomain() (a wrong branch).
   Expected<Eigen::Vector2d> Undistort(const Eigen::Vector2d& distorted,
                                       const UndistortOptions& options = {}) const;
 
@@ -102,7 +122,8 @@ class CameraModel {
     return {(pixel.x() - cx_px) / fx_px, (pixel.y() - cy_px) / fy_px};
   }
 
-  // Pixel of a point in the camera frame; nullopt when z <= 0 or the input is not finite.
+  // Pixel of a point in the camera frame; nullopt when z <= 0, the input is not finite, the
+  // point is past the fold (!InDistortionDomain(x/z, y/z)) or the pixel overflows.
   // The pixel may fall outside the image: check InImage().
   std::optional<Eigen::Vector2d> Project(const Eigen::Vector3d& x_in_camera) const;
   // The ray through a pixel, as a direction in the camera frame with z = 1.
