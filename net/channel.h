@@ -1,0 +1,68 @@
+// Channel: a Socket that speaks Envelopes. It stamps outgoing headers (version, sender,
+// incarnation, sequence, send time), encodes/compresses, and on receive decodes, validates,
+// checks sequence order per sender and counts rejections (MessageCounters) and bytes.
+//
+// Framing: ROUTER sockets see [routing_id, envelope]; all others see [envelope]. DEALER <->
+// ROUTER use no empty delimiter frame. A message with any other frame count is rejected
+// (counted malformed). Not thread-safe.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "common/base/status.h"
+#include "net/socket.h"
+#include "proto/codec.h"
+#include "proto/envelope.pb.h"
+#include "proto/envelope_stamper.h"
+#include "proto/message_counters.h"
+#include "proto/sequence_tracker.h"
+
+namespace sandtable::net {
+
+struct Incoming {
+  std::string routing_id;        // ROUTER only: who sent it (reply with the same id)
+  wire::Envelope envelope;
+  size_t wire_bytes = 0;
+};
+
+struct ChannelStats {
+  uint64_t messages_sent = 0;
+  uint64_t bytes_sent = 0;
+  uint64_t messages_received = 0;  // accepted
+  uint64_t bytes_received = 0;     // of all messages, accepted or not
+};
+
+class Channel {
+ public:
+  // `counters` may be shared between channels of one process; it must outlive the channel.
+  Channel(std::unique_ptr<Socket> socket, uint32_t sender_id, uint64_t incarnation,
+          proto::MessageCounters* counters, proto::CodecLimits limits = {});
+
+  // Fills the header of `envelope` (whose body the caller has set) and sends it. For ROUTER
+  // sockets `routing_id` names the receiver. UNAVAILABLE when it cannot be queued.
+  Status Send(wire::Envelope envelope, const std::string& routing_id = {});
+
+  // One message if one is waiting and valid; nullopt when none is waiting. A rejected message
+  // returns its Status (already counted); the caller logs it and carries on.
+  Expected<std::optional<Incoming>> TryReceive();
+
+  // Forget a sender's sequence (it left or restarted).
+  void ForgetSender(uint32_t sender_id) { tracker_.Forget(sender_id); }
+
+  Socket& socket() { return *socket_; }
+  const ChannelStats& stats() const { return stats_; }
+  proto::MessageCounters& counters() { return *counters_; }
+
+ private:
+  std::unique_ptr<Socket> socket_;
+  proto::EnvelopeStamper stamper_;
+  proto::SequenceTracker tracker_;
+  proto::MessageCounters* counters_;
+  proto::CodecLimits limits_;
+  ChannelStats stats_;
+};
+
+}  // namespace sandtable::net

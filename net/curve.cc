@@ -1,0 +1,162 @@
+#include "net/curve.h"
+
+#include <zmq.h>
+
+#include <array>
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+#include "common/base/log.h"
+
+namespace sandtable::net {
+
+Expected<CurveKeyPair> GenerateCurveKeyPair() {
+  std::array<char, 41> public_key{};
+  std::array<char, 41> secret_key{};
+  if (zmq_curve_keypair(public_key.data(), secret_key.data()) != 0) {
+    return UnavailableError("CURVE key generation failed: libzmq built without CURVE support");
+  }
+  return CurveKeyPair{std::string(public_key.data(), 40), std::string(secret_key.data(), 40)};
+}
+
+Status WriteCurveKeyFile(const std::string& path, const CurveKeyPair& keys) {
+  std::ofstream out(path, std::ios::trunc);
+  if (!out) return IoError("cannot write CURVE key file " + path);
+  out << "# Sandtable site CURVE key pair (Z85). Keep the secret key private.\n"
+      << "public = " << keys.public_key_z85 << "\n"
+      << "secret = " << keys.secret_key_z85 << "\n";
+  if (!out) return IoError("error writing CURVE key file " + path);
+  return OkStatus();
+}
+
+Expected<CurveKeyPair> ReadCurveKeyFile(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return IoError("cannot read CURVE key file " + path);
+  CurveKeyPair keys;
+  std::string line;
+  int line_number = 0;
+  while (std::getline(in, line)) {
+    ++line_number;
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream fields(line);
+    std::string name, equals, value;
+    fields >> name >> equals >> value;
+    if (equals != "=" || value.size() != 40) {
+      return ParseError(path + ":" + std::to_string(line_number) +
+                        ": expected 'public = <40 Z85 chars>' or 'secret = <40 Z85 chars>'");
+    }
+    if (name == "public") {
+      keys.public_key_z85 = value;
+    } else if (name == "secret") {
+      keys.secret_key_z85 = value;
+    } else {
+      return ParseError(path + ":" + std::to_string(line_number) + ": unknown key '" + name +
+                        "'");
+    }
+  }
+  if (keys.public_key_z85.empty() || keys.secret_key_z85.empty()) {
+    return ParseError(path + ": needs both 'public' and 'secret' lines");
+  }
+  std::array<uint8_t, 32> decoded{};
+  if (zmq_z85_decode(decoded.data(), keys.public_key_z85.c_str()) == nullptr ||
+      zmq_z85_decode(decoded.data(), keys.secret_key_z85.c_str()) == nullptr) {
+    return ParseError(path + ": a key is not valid Z85");
+  }
+  return keys;
+}
+
+CurveSettings ServerCurve(const CurveKeyPair& site) {
+  CurveSettings s;
+  s.enabled = true;
+  s.server = true;
+  s.public_key_z85 = site.public_key_z85;
+  s.secret_key_z85 = site.secret_key_z85;
+  return s;
+}
+
+CurveSettings ClientCurve(const CurveKeyPair& site) {
+  CurveSettings s;
+  s.enabled = true;
+  s.server = false;
+  s.public_key_z85 = site.public_key_z85;
+  s.secret_key_z85 = site.secret_key_z85;
+  s.server_key_z85 = site.public_key_z85;
+  return s;
+}
+
+ZapHandler::ZapHandler(zmq::context_t* context, std::set<std::string> authorized_public_keys_z85)
+    : context_(context), authorized_(std::move(authorized_public_keys_z85)) {}
+
+ZapHandler::~ZapHandler() { Stop(); }
+
+Status ZapHandler::Start() {
+  try {
+    socket_ = std::make_unique<zmq::socket_t>(*context_, zmq::socket_type::rep);
+    socket_->set(zmq::sockopt::linger, 0);
+    socket_->bind("inproc://zeromq.zap.01");
+  } catch (const zmq::error_t& e) {
+    socket_.reset();
+    return UnavailableError(std::string("ZAP handler: cannot bind inproc://zeromq.zap.01: ") +
+                            e.what());
+  }
+  thread_ = std::thread([this] { Run(); });
+  return OkStatus();
+}
+
+void ZapHandler::Stop() {
+  stop_ = true;
+  if (thread_.joinable()) thread_.join();
+  socket_.reset();
+}
+
+void ZapHandler::Run() {
+  // ZAP request (RFC 27): version, request id, domain, address, identity, mechanism,
+  // credentials... ; reply: version, request id, status code, status text, user id, metadata.
+  while (!stop_) {
+    try {
+      zmq::pollitem_t item{static_cast<void*>(*socket_), 0, ZMQ_POLLIN, 0};
+      zmq::poll(&item, 1, std::chrono::milliseconds(50));
+      if (!(item.revents & ZMQ_POLLIN)) continue;
+      std::vector<zmq::message_t> request;
+      zmq::message_t part;
+      do {
+        if (!socket_->recv(part, zmq::recv_flags::none)) break;
+        request.push_back(std::move(part));
+        part = zmq::message_t();
+      } while (request.back().more());
+      if (request.size() < 6) continue;  // not a ZAP request; REP needs no reply to garbage
+      const std::string request_id = request[1].to_string();
+      const std::string address = request[3].to_string();
+      const std::string mechanism = request[5].to_string();
+      bool allowed = false;
+      std::string client_key = "(none)";
+      if (mechanism == "CURVE" && request.size() >= 7 && request[6].size() == 32) {
+        std::array<char, 41> z85{};
+        zmq_z85_encode(z85.data(), static_cast<const uint8_t*>(request[6].data()), 32);
+        client_key.assign(z85.data(), 40);
+        allowed = authorized_.count(client_key) > 0;
+      }
+      if (allowed) {
+        ++accepted_;
+      } else {
+        ++refused_;
+        ST_LOG(kWarning) << "CURVE: refused client " << client_key << " from " << address
+                         << " (mechanism " << mechanism << "): key not authorized for this site";
+      }
+      const std::vector<std::string> reply = {"1.0", request_id, allowed ? "200" : "400",
+                                              allowed ? "OK" : "key not authorized", "", ""};
+      for (size_t i = 0; i < reply.size(); ++i) {
+        socket_->send(zmq::buffer(reply[i]),
+                      i + 1 < reply.size() ? zmq::send_flags::sndmore : zmq::send_flags::none);
+      }
+    } catch (const zmq::error_t& e) {
+      if (e.num() == ETERM) return;
+      if (e.num() != EINTR) {
+        ST_LOG(kError) << "ZAP handler: " << e.what();
+      }
+    }
+  }
+}
+
+}  // namespace sandtable::net

@@ -1,0 +1,67 @@
+// CURVE security: site key files and a ZAP handler that refuses unknown clients.
+//
+// Site scheme (docs/protocol.md): every process of a site is given the same site key file
+// (`sandtable-coordinator --generate-curve-keys site.key`). Servers (bound ROUTER/PUB sockets)
+// use it as their CURVE key pair; clients (DEALER/SUB) use it as their own key pair and as the
+// server's public key. A ZAP handler accepts a client only if its public key is in the
+// authorized set (the site key, plus any extra keys). Clients without CURVE, or with another
+// key pair, get no connection; the refusal is logged and counted.
+//
+// Key file format (text, '#' comments):
+//   public = <40 Z85 characters>
+//   secret = <40 Z85 characters>
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <set>
+#include <string>
+#include <thread>
+
+#include <zmq.hpp>
+
+#include "common/base/status.h"
+#include "net/socket.h"
+
+namespace sandtable::net {
+
+struct CurveKeyPair {
+  std::string public_key_z85;
+  std::string secret_key_z85;
+};
+
+Expected<CurveKeyPair> GenerateCurveKeyPair();
+Status WriteCurveKeyFile(const std::string& path, const CurveKeyPair& keys);
+// IO_ERROR / PARSE_ERROR naming the file and line on failure.
+Expected<CurveKeyPair> ReadCurveKeyFile(const std::string& path);
+
+// Socket settings for a bound (server) or connecting (client) socket of a site.
+CurveSettings ServerCurve(const CurveKeyPair& site);
+CurveSettings ClientCurve(const CurveKeyPair& site);
+
+// Answers ZAP requests (RFC 27) for one context on inproc://zeromq.zap.01 in its own thread.
+// Start it before binding any CURVE server socket of that context; Stop() (or the destructor)
+// before the context is closed.
+class ZapHandler {
+ public:
+  ZapHandler(zmq::context_t* context, std::set<std::string> authorized_public_keys_z85);
+  ~ZapHandler();
+  Status Start();
+  void Stop();
+
+  uint64_t accepted() const { return accepted_.load(); }
+  uint64_t refused() const { return refused_.load(); }
+
+ private:
+  void Run();
+  zmq::context_t* context_;
+  std::set<std::string> authorized_;
+  std::unique_ptr<zmq::socket_t> socket_;
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::atomic<uint64_t> accepted_{0};
+  std::atomic<uint64_t> refused_{0};
+};
+
+}  // namespace sandtable::net
