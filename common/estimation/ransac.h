@@ -113,8 +113,12 @@ Expected<RansacResult<typename Estimator::Model>> Ransac(const Estimator& estima
         if (p_good >= 1.0 - 1e-12) {
           required = options.min_iterations;
         } else if (p_good > 0.0) {
-          const double needed = std::log(1.0 - options.confidence) / std::log(1.0 - p_good);
-          required = static_cast<int>(std::min<double>(std::ceil(needed), options.max_iterations));
+          // log1p: for p_good below ~1e-16, log(1 - p_good) is exactly 0 and the quotient
+          // -inf, whose cast to int is undefined (in practice INT_MIN: the loop stopped at
+          // min_iterations on large data sets with a poor first model).
+          const double needed = std::log(1.0 - options.confidence) / std::log1p(-p_good);
+          required = needed < options.max_iterations ? static_cast<int>(std::ceil(needed))
+                                                     : options.max_iterations;
         }
       }
     }

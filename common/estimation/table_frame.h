@@ -27,7 +27,7 @@
 // Failure (never aborts): INVALID_ARGUMENT for non-finite input, a plane normal that is not
 // unit length (|1 - |n|| > 1e-6), or options out of range; DEGENERATE for fewer than 3 points,
 // points whose projections are collinear or coincident (hull area below
-// kCollinearRelativeTolerance times the squared hull diameter), or an up hint within
+// kCollinearRelativeTolerance times the squared spread of the points), or an up hint within
 // options.min_hint_height_m of the plane.
 // Cost: O(N log N) for the hull, O(H) for the calipers (H hull vertices).
 #pragma once
