@@ -89,7 +89,7 @@ double Scene::AlbedoAt(int triangle, double u, double v) const {
 
 void Scene::Append(const Scene& other) {
   const int vertex_offset = NumVertices();
-  const int material_offset = static_cast<int>(materials.size());
+  const int material_offset = other.materials.empty() ? 0 : static_cast<int>(materials.size());
   const int texture_offset = static_cast<int>(textures.size());
   if (!other.texcoords.empty() || !texcoords.empty()) {
     texcoords.resize(positions_in_table_m.size(), Eigen::Vector2f::Zero());

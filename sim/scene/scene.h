@@ -58,7 +58,9 @@ struct Scene {
   // Rec. 709 luminance of AlbedoRgbAt, in [0, 1].
   double AlbedoAt(int triangle, double u, double v) const;
 
-  // Appends `other` (indices and material ids shifted).
+  // Appends `other`. Vertex indices are shifted; material ids are shifted past this scene's
+  // materials when `other` carries materials of its own, else kept (they then refer to this
+  // scene's materials, as for the procedural building blocks).
   void Append(const Scene& other);
 };
 

@@ -1,0 +1,270 @@
+#include "sim/scene/procedural_scene.h"
+
+#include <cmath>
+#include <numbers>
+#include <random>
+
+namespace sandtable::sim {
+
+namespace {
+
+// Uniform in [lo, hi) from the 53 high bits of mt19937_64 (portable, unlike
+// std::uniform_real_distribution whose algorithm is implementation-defined).
+class Rng {
+ public:
+  explicit Rng(uint64_t seed) : engine_(seed) {}
+  double Uniform(double lo, double hi) {
+    return lo + (hi - lo) * static_cast<double>(engine_() >> 11) * 0x1.0p-53;
+  }
+  int Index(int n) { return std::min(n - 1, static_cast<int>(Uniform(0.0, n))); }
+
+ private:
+  std::mt19937_64 engine_;
+};
+
+// Accumulates convex pieces; each triangle is turned to face away from the piece's interior
+// point, so winding is outward whatever order the corners are listed in.
+class MeshBuilder {
+ public:
+  explicit MeshBuilder(int material) : material_(material) {}
+
+  void Triangle(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
+                const Eigen::Vector3d& interior) {
+    const Eigen::Vector3d n = (b - a).cross(c - a);
+    const bool flip = n.dot((a + b + c) / 3.0 - interior) < 0.0;
+    const int base = scene_.NumVertices();
+    scene_.positions_in_table_m.push_back(a.cast<float>());
+    scene_.positions_in_table_m.push_back((flip ? c : b).cast<float>());
+    scene_.positions_in_table_m.push_back((flip ? b : c).cast<float>());
+    scene_.triangles.emplace_back(base, base + 1, base + 2);
+    scene_.triangle_material.push_back(material_);
+  }
+  void Quad(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
+            const Eigen::Vector3d& d, const Eigen::Vector3d& interior) {
+    Triangle(a, b, c, interior);
+    Triangle(a, c, d, interior);
+  }
+  Scene Take() { return std::move(scene_); }
+
+ private:
+  int material_;
+  Scene scene_;
+};
+
+Eigen::Vector3d Local(const Eigen::Vector2d& centre, double yaw_rad, double x, double y, double z) {
+  const double c = std::cos(yaw_rad), s = std::sin(yaw_rad);
+  return {centre.x() + c * x - s * y, centre.y() + s * x + c * y, z};
+}
+
+// Box in building-local coordinates: x in [x0, x1], y in [y0, y1], z in [z0, z1].
+void AddLocalBox(MeshBuilder* mesh, const Eigen::Vector2d& centre, double yaw_rad, double x0,
+                 double x1, double y0, double y1, double z0, double z1, bool bottom) {
+  auto p = [&](double x, double y, double z) { return Local(centre, yaw_rad, x, y, z); };
+  const Eigen::Vector3d interior = p(0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * (z0 + z1));
+  mesh->Quad(p(x0, y0, z1), p(x1, y0, z1), p(x1, y1, z1), p(x0, y1, z1), interior);  // top
+  if (bottom) mesh->Quad(p(x0, y0, z0), p(x1, y0, z0), p(x1, y1, z0), p(x0, y1, z0), interior);
+  mesh->Quad(p(x0, y0, z0), p(x1, y0, z0), p(x1, y0, z1), p(x0, y0, z1), interior);  // -y
+  mesh->Quad(p(x0, y1, z0), p(x1, y1, z0), p(x1, y1, z1), p(x0, y1, z1), interior);  // +y
+  mesh->Quad(p(x0, y0, z0), p(x0, y1, z0), p(x0, y1, z1), p(x0, y0, z1), interior);  // -x
+  mesh->Quad(p(x1, y0, z0), p(x1, y1, z0), p(x1, y1, z1), p(x1, y0, z1), interior);  // +x
+}
+
+Building RandomBuilding(Rng* rng, const Eigen::Vector2d& centre, double max_footprint_m) {
+  Building b;
+  b.centre_in_table_m = centre;
+  b.shape = static_cast<BuildingShape>(rng->Index(4));
+  b.yaw_rad = rng->Uniform(0.0, std::numbers::pi);
+  const double max_side = max_footprint_m;
+  switch (b.shape) {
+    case BuildingShape::kTower:
+      b.width_m = rng->Uniform(0.05, std::min(0.09, max_side));
+      b.depth_m = rng->Uniform(0.05, std::min(0.09, max_side));
+      b.height_m = rng->Uniform(0.18, 0.30);
+      break;
+    case BuildingShape::kGabled:
+      b.width_m = rng->Uniform(0.08, max_side);
+      b.depth_m = rng->Uniform(0.06, std::min(0.14, max_side));
+      b.height_m = rng->Uniform(0.05, 0.14);
+      break;
+    default:
+      b.width_m = rng->Uniform(0.07, max_side);
+      b.depth_m = rng->Uniform(0.07, max_side);
+      b.height_m = rng->Uniform(0.05, 0.25);
+      break;
+  }
+  return b;
+}
+
+}  // namespace
+
+Expected<ScenePreset> ParseScenePreset(std::string_view name) {
+  if (name == "sandtable") return ScenePreset::kSandtable;
+  if (name == "city") return ScenePreset::kCity;
+  if (name == "flat") return ScenePreset::kFlat;
+  return InvalidArgumentError("unknown scene preset '" + std::string(name) +
+                              "' (use sandtable, city or flat)");
+}
+
+std::string_view ScenePresetName(ScenePreset preset) {
+  switch (preset) {
+    case ScenePreset::kSandtable:
+      return "sandtable";
+    case ScenePreset::kCity:
+      return "city";
+    case ScenePreset::kFlat:
+      return "flat";
+  }
+  return "?";
+}
+
+Status ProceduralSceneOptions::Check() const {
+  if (num_buildings < -1 || num_buildings > 200) {
+    return InvalidArgumentError("num_buildings = " + std::to_string(num_buildings) +
+                                " must be -1 (default) or in [0, 200]");
+  }
+  for (double albedo : {table_albedo, building_albedo}) {
+    if (!(albedo >= 0.0 && albedo <= 1.0)) {
+      return InvalidArgumentError("albedo " + std::to_string(albedo) + " must be in [0, 1]");
+    }
+  }
+  return OkStatus();
+}
+
+Scene MakeBoxMesh(const Eigen::Vector3d& bottom_centre_in_table_m, const Eigen::Vector3d& size_m,
+                  double yaw_rad, int material) {
+  MeshBuilder mesh(material);
+  const Eigen::Vector3d h = 0.5 * size_m;
+  AddLocalBox(&mesh, bottom_centre_in_table_m.head<2>(), yaw_rad, -h.x(), h.x(), -h.y(), h.y(),
+              bottom_centre_in_table_m.z(), bottom_centre_in_table_m.z() + size_m.z(),
+              /*bottom=*/true);
+  return mesh.Take();
+}
+
+Scene MakeBuildingMesh(const Building& b, int material) {
+  MeshBuilder mesh(material);
+  const Eigen::Vector2d& c = b.centre_in_table_m;
+  const double hw = 0.5 * b.width_m, hd = 0.5 * b.depth_m;
+  switch (b.shape) {
+    case BuildingShape::kBox:
+      AddLocalBox(&mesh, c, b.yaw_rad, -hw, hw, -hd, hd, 0.0, b.height_m, false);
+      break;
+    case BuildingShape::kLShape:
+      // Two wings sharing the corner (-x, -y): a full-width wing and a full-depth wing.
+      AddLocalBox(&mesh, c, b.yaw_rad, -hw, hw, -hd, -hd + 0.45 * b.depth_m, 0.0, b.height_m,
+                  false);
+      AddLocalBox(&mesh, c, b.yaw_rad, -hw, -hw + 0.45 * b.width_m, -hd, hd, 0.0, 0.7 * b.height_m,
+                  false);
+      break;
+    case BuildingShape::kGabled: {
+      const double wall = 0.6 * b.height_m;
+      AddLocalBox(&mesh, c, b.yaw_rad, -hw, hw, -hd, hd, 0.0, wall, false);
+      // Roof prism, ridge along local x at the full height.
+      auto p = [&](double x, double y, double z) { return Local(c, b.yaw_rad, x, y, z); };
+      const Eigen::Vector3d interior = p(0, 0, wall + 0.3 * (b.height_m - wall));
+      mesh.Quad(p(-hw, -hd, wall), p(hw, -hd, wall), p(hw, 0, b.height_m), p(-hw, 0, b.height_m),
+                interior);
+      mesh.Quad(p(-hw, hd, wall), p(hw, hd, wall), p(hw, 0, b.height_m), p(-hw, 0, b.height_m),
+                interior);
+      mesh.Triangle(p(-hw, -hd, wall), p(-hw, hd, wall), p(-hw, 0, b.height_m), interior);
+      mesh.Triangle(p(hw, -hd, wall), p(hw, hd, wall), p(hw, 0, b.height_m), interior);
+      break;
+    }
+    case BuildingShape::kTower:
+      // A shaft and a narrower top stage.
+      AddLocalBox(&mesh, c, b.yaw_rad, -hw, hw, -hd, hd, 0.0, 0.8 * b.height_m, false);
+      AddLocalBox(&mesh, c, b.yaw_rad, -0.6 * hw, 0.6 * hw, -0.6 * hd, 0.6 * hd, 0.8 * b.height_m,
+                  b.height_m, false);
+      break;
+  }
+  return mesh.Take();
+}
+
+Scene MakeDiscMesh(double radius_m, int segments, int material) {
+  MeshBuilder mesh(material);
+  const Eigen::Vector3d below(0, 0, -1);  // the top faces +z
+  for (int i = 0; i < segments; ++i) {
+    const double a0 = 2 * std::numbers::pi * i / segments;
+    const double a1 = 2 * std::numbers::pi * (i + 1) / segments;
+    mesh.Triangle(Eigen::Vector3d::Zero(),
+                  Eigen::Vector3d(radius_m * std::cos(a0), radius_m * std::sin(a0), 0),
+                  Eigen::Vector3d(radius_m * std::cos(a1), radius_m * std::sin(a1), 0), below);
+  }
+  return mesh.Take();
+}
+
+Scene MakeRectangleMesh(const Eigen::Vector2d& size_m, int material) {
+  MeshBuilder mesh(material);
+  const double hx = 0.5 * size_m.x(), hy = 0.5 * size_m.y();
+  mesh.Quad({-hx, -hy, 0}, {hx, -hy, 0}, {hx, hy, 0}, {-hx, hy, 0}, Eigen::Vector3d(0, 0, -1));
+  return mesh.Take();
+}
+
+Expected<ProceduralScene> MakeProceduralScene(const ProceduralSceneOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
+  ProceduralScene out;
+  Rng rng(options.seed);
+  Material table{
+      "table", {options.table_albedo, options.table_albedo, options.table_albedo, 1.0}, -1};
+  Material building{
+      "building",
+      {options.building_albedo, options.building_albedo, options.building_albedo, 1.0},
+      -1};
+  out.scene.materials = {table, building};
+
+  switch (options.preset) {
+    case ScenePreset::kSandtable: {
+      out.table_is_disc = true;
+      out.table_radius_m = 0.5 * kSandtableTableDiameter_m;
+      out.scene.Append(MakeDiscMesh(out.table_radius_m, 96, 0));
+      const int wanted = options.num_buildings < 0 ? 14 : options.num_buildings;
+      const double display_radius_m = 0.5 * kSandtableDisplayDiameter_m;
+      constexpr double kGap_m = 0.03;
+      for (int attempt = 0; attempt < 2000 && static_cast<int>(out.buildings.size()) < wanted;
+           ++attempt) {
+        const double r = display_radius_m * std::sqrt(rng.Uniform(0.0, 1.0));
+        const double a = rng.Uniform(0.0, 2 * std::numbers::pi);
+        const Eigen::Vector2d centre(r * std::cos(a), r * std::sin(a));
+        Building b = RandomBuilding(&rng, centre, 0.2);
+        if (centre.norm() + b.FootprintRadius_m() > display_radius_m) continue;
+        bool clear = true;
+        for (const Building& o : out.buildings) {
+          if ((o.centre_in_table_m - centre).norm() <
+              o.FootprintRadius_m() + b.FootprintRadius_m() + kGap_m) {
+            clear = false;
+            break;
+          }
+        }
+        if (clear) out.buildings.push_back(b);
+      }
+      break;
+    }
+    case ScenePreset::kCity: {
+      out.table_is_disc = false;
+      out.table_size_m = {3.0, 2.0};
+      out.scene.Append(MakeRectangleMesh(out.table_size_m, 0));
+      constexpr double kBlock_m = 0.3, kStreet_m = 0.1;
+      const double pitch = kBlock_m + kStreet_m;
+      const int nx = static_cast<int>((out.table_size_m.x() - kStreet_m) / pitch);
+      const int ny = static_cast<int>((out.table_size_m.y() - kStreet_m) / pitch);
+      for (int j = 0; j < ny; ++j) {
+        for (int i = 0; i < nx; ++i) {
+          if (rng.Uniform(0.0, 1.0) > 0.7) continue;
+          const Eigen::Vector2d centre((i - 0.5 * (nx - 1)) * pitch, (j - 0.5 * (ny - 1)) * pitch);
+          Building b = RandomBuilding(&rng, centre, 0.2);
+          b.yaw_rad = 0.5 * std::numbers::pi * rng.Index(2);  // aligned with the streets
+          out.buildings.push_back(b);
+        }
+      }
+      break;
+    }
+    case ScenePreset::kFlat:
+      out.table_is_disc = false;
+      out.table_size_m = {2.0, 1.5};
+      out.scene.Append(MakeRectangleMesh(out.table_size_m, 0));
+      break;
+  }
+  for (const Building& b : out.buildings) out.scene.Append(MakeBuildingMesh(b, 1));
+  return out;
+}
+
+}  // namespace sandtable::sim
