@@ -1,0 +1,74 @@
+// CoordinatorServer: the coordinator's sockets and its membership/time service.
+//
+// Binds a ROUTER for requests (Hello -> HelloAck, Heartbeat -> HeartbeatAck, Goodbye,
+// TimeRequest -> TimeReply) and a PUB for events (MemberList on every change and every
+// republish_period for late subscribers; later tracker, cursor, annotation and timeline
+// events through Publish()). Any other request is answered with Rejected and counted as
+// wrong_type; invalid messages are counted and dropped. Single-threaded: call Step() in a
+// loop (or Run()). Never throws; failures of sockets come back as Status.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "coordinator/membership/membership_table.h"
+#include "net/channel.h"
+#include "net/curve.h"
+
+namespace sandtable::coordinator {
+
+// The coordinator's sender id on the wire (nodes use their NodeId).
+constexpr uint32_t kCoordinatorSenderId = 0xFFFFFFF0u;
+
+struct CoordinatorOptions {
+  std::string request_endpoint = "tcp://127.0.0.1:*";  // ROUTER
+  std::string event_endpoint = "tcp://127.0.0.1:*";    // PUB
+  MembershipOptions membership;
+  std::chrono::milliseconds republish_period{1000};
+  std::optional<net::CurveKeyPair> curve;  // site keys: require CURVE on both sockets
+  proto::CodecLimits limits;
+
+  Status Check() const;
+};
+
+class CoordinatorServer {
+ public:
+  explicit CoordinatorServer(CoordinatorOptions options);
+  ~CoordinatorServer();
+
+  // Binds both sockets (and starts the ZAP handler with CURVE).
+  Status Start();
+  const std::string& request_endpoint() const { return request_endpoint_; }
+  const std::string& event_endpoint() const { return event_endpoint_; }
+
+  // Serves what is waiting (at most `max_wait` of waiting), expires silent nodes, publishes.
+  Status Step(std::chrono::milliseconds max_wait);
+  // Steps until `stop` becomes true.
+  Status Run(const std::atomic<bool>& stop);
+
+  // Publishes an event (body set by the caller) to every subscriber.
+  Status Publish(wire::Envelope event);
+
+  const MembershipTable& members() const { return members_; }
+  const proto::MessageCounters& counters() const { return counters_; }
+
+ private:
+  void HandleRequest(net::Incoming request);
+  Status PublishMemberList();
+
+  CoordinatorOptions options_;
+  zmq::context_t context_;
+  std::unique_ptr<net::ZapHandler> zap_;
+  proto::MessageCounters counters_;
+  std::unique_ptr<net::Channel> requests_;
+  std::unique_ptr<net::Channel> events_;
+  std::string request_endpoint_, event_endpoint_;
+  MembershipTable members_;
+  uint64_t published_version_ = ~uint64_t{0};
+  Clock::time_point last_publish_{};
+};
+
+}  // namespace sandtable::coordinator
