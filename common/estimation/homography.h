@@ -137,7 +137,10 @@ struct HomographyRansacResult {
 // refit with the normalized DLT, then (options.refine) refined by RefineHomography, then
 // re-scored. Errors: those of EstimateHomographyDlt on the inputs (sizes, non-finite, < 4),
 // DEGENERATE when no sample yields a model with >= 4 inliers or the ratio is below
-// min_inlier_ratio.
+// min_inlier_ratio. Breakdown (200 pairs, 0.3 px noise, 1.5 px threshold, 20 seeds): correct up
+// to 85 % outliers with max_iterations = 10000; at 90 % it needs max_iterations ~ 1e5. Past
+// that it returns the best (wrong) model with a low inlier_ratio: set min_inlier_ratio to
+// turn that into an error. Cost ~27 us per sample at n = 200.
 Expected<HomographyRansacResult> EstimateHomographyRansac(
     std::span<const Eigen::Vector2d> points_from, std::span<const Eigen::Vector2d> points_to,
     const HomographyRansacOptions& options = {});
