@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Fuzzes Sandtable's message handlers (tests/fuzz/message_handlers.h) for a bounded time.
+#   deploy/fuzz.sh [seconds=60] [build_dir=build-fuzz]
+# With clang + libFuzzer (Debian: clang-14, libclang-rt-14-dev) it builds
+# fuzz_message_handlers with ASan/UBSan and runs it over a copy of tests/fuzz/corpus/ for the
+# given time; any crash is a failure (exit != 0) and leaves crash-* files in the build dir.
+# Without libFuzzer it builds with the default compiler and replays the checked-in corpus and
+# its mutations (fuzz_corpus_replay_test), as CI does.
+set -euo pipefail
+SECONDS_TO_RUN="${1:-60}"
+BUILD_DIR="${2:-build-fuzz}"
+ROOT="$(cd "$(dirname "$0")/.." && pwd)"
+cd "$ROOT"
+JOBS="${FUZZ_JOBS:-2}"
+
+CLANGXX="$(command -v clang++-14 || command -v clang++ || true)"
+CLANGCC="$(command -v clang-14 || command -v clang || true)"
+have_libfuzzer=0
+if [ -n "$CLANGXX" ]; then
+  probe="$(mktemp -d)"
+  printf 'extern "C" int LLVMFuzzerTestOneInput(const unsigned char*, unsigned long){return 0;}\n' \
+    > "$probe/p.cc"
+  if "$CLANGXX" -fsanitize=fuzzer "$probe/p.cc" -o "$probe/p" 2>/dev/null; then have_libfuzzer=1; fi
+  rm -rf "$probe"
+fi
+
+if [ "$have_libfuzzer" = 1 ]; then
+  echo "fuzz: libFuzzer with $CLANGXX for ${SECONDS_TO_RUN} s"
+  cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+    -DCMAKE_C_COMPILER="$CLANGCC" -DCMAKE_CXX_COMPILER="$CLANGXX" \
+    -DSANDTABLE_BUILD_FUZZERS=ON -DSANDTABLE_BUILD_BENCHMARKS=OFF > /dev/null
+  ninja -C "$BUILD_DIR" -j"$JOBS" fuzz_message_handlers
+  work="$BUILD_DIR/fuzz-corpus"
+  mkdir -p "$work"
+  cp -n tests/fuzz/corpus/* "$work/" 2>/dev/null || true
+  (cd "$BUILD_DIR" && ./tests/fuzz/fuzz_message_handlers -max_total_time="$SECONDS_TO_RUN" \
+     -max_len=65536 -rss_limit_mb=2048 -print_final_stats=1 fuzz-corpus)
+  echo "fuzz: no findings in ${SECONDS_TO_RUN} s"
+else
+  echo "fuzz: libFuzzer not available; replaying tests/fuzz/corpus"
+  cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo > /dev/null
+  ninja -C "$BUILD_DIR" -j"$JOBS" fuzz_corpus_replay_test
+  "$BUILD_DIR/tests/fuzz/fuzz_corpus_replay_test"
+fi
