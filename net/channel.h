@@ -23,7 +23,7 @@
 namespace sandtable::net {
 
 struct Incoming {
-  std::string routing_id;        // ROUTER only: who sent it (reply with the same id)
+  std::string routing_id;  // ROUTER only: who sent it (reply with the same id)
   wire::Envelope envelope;
   size_t wire_bytes = 0;
 };

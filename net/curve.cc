@@ -51,8 +51,7 @@ Expected<CurveKeyPair> ReadCurveKeyFile(const std::string& path) {
     } else if (name == "secret") {
       keys.secret_key_z85 = value;
     } else {
-      return ParseError(path + ":" + std::to_string(line_number) + ": unknown key '" + name +
-                        "'");
+      return ParseError(path + ":" + std::to_string(line_number) + ": unknown key '" + name + "'");
     }
   }
   if (keys.public_key_z85.empty() || keys.secret_key_z85.empty()) {
@@ -144,8 +143,9 @@ void ZapHandler::Run() {
         ST_LOG(kWarning) << "CURVE: refused client " << client_key << " from " << address
                          << " (mechanism " << mechanism << "): key not authorized for this site";
       }
-      const std::vector<std::string> reply = {"1.0", request_id, allowed ? "200" : "400",
-                                              allowed ? "OK" : "key not authorized", "", ""};
+      const std::vector<std::string> reply = {
+          "1.0", request_id, allowed ? "200" : "400", allowed ? "OK" : "key not authorized",
+          "",    ""};
       for (size_t i = 0; i < reply.size(); ++i) {
         socket_->send(zmq::buffer(reply[i]),
                       i + 1 < reply.size() ? zmq::send_flags::sndmore : zmq::send_flags::none);

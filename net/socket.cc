@@ -7,11 +7,16 @@ namespace {
 
 zmq::socket_type ToZmq(SocketType type) {
   switch (type) {
-    case SocketType::kRouter: return zmq::socket_type::router;
-    case SocketType::kDealer: return zmq::socket_type::dealer;
-    case SocketType::kPub: return zmq::socket_type::pub;
-    case SocketType::kSub: return zmq::socket_type::sub;
-    case SocketType::kPair: return zmq::socket_type::pair;
+    case SocketType::kRouter:
+      return zmq::socket_type::router;
+    case SocketType::kDealer:
+      return zmq::socket_type::dealer;
+    case SocketType::kPub:
+      return zmq::socket_type::pub;
+    case SocketType::kSub:
+      return zmq::socket_type::sub;
+    case SocketType::kPair:
+      return zmq::socket_type::pair;
   }
   return zmq::socket_type::pair;
 }

@@ -26,10 +26,10 @@ enum class SocketType { kRouter, kDealer, kPub, kSub, kPair };
 // text (40 characters).
 struct CurveSettings {
   bool enabled = false;
-  bool server = false;            // servers (binders) hold a secret key and authenticate clients
-  std::string public_key_z85;     // own public key
-  std::string secret_key_z85;     // own secret key
-  std::string server_key_z85;     // clients: the server's public key
+  bool server = false;         // servers (binders) hold a secret key and authenticate clients
+  std::string public_key_z85;  // own public key
+  std::string secret_key_z85;  // own secret key
+  std::string server_key_z85;  // clients: the server's public key
   std::string zap_domain = "sandtable";
 };
 
@@ -38,8 +38,8 @@ struct SocketOptions {
   std::chrono::milliseconds linger{0};            // pending messages are dropped on close
   int send_high_water_mark = 1000;
   int receive_high_water_mark = 1000;
-  std::string routing_id;           // DEALER: identity the ROUTER sees (empty: random)
-  bool subscribe_all = true;        // SUB: subscribe to every message
+  std::string routing_id;     // DEALER: identity the ROUTER sees (empty: random)
+  bool subscribe_all = true;  // SUB: subscribe to every message
   // Reconnect interval after a peer goes away (libzmq retries forever).
   std::chrono::milliseconds reconnect_interval{50};
   std::chrono::milliseconds reconnect_interval_max{500};

@@ -76,8 +76,9 @@ int main(int argc, char** argv) {
             << std::endl;
   Status ran = runtime.Run(g_stop);
   if (auto offset = runtime.clock_offset()) {
-    ST_LOG(kInfo) << "clock offset to coordinator " << offset->offset_s * 1e3 << " ms, error <= "
-                  << offset->error_bound_s * 1e3 << " ms over " << offset->samples << " samples";
+    ST_LOG(kInfo) << "clock offset to coordinator " << offset->offset_s * 1e3
+                  << " ms, error <= " << offset->error_bound_s * 1e3 << " ms over "
+                  << offset->samples << " samples";
   }
   ST_LOG(kInfo) << "stopping; messages " << runtime.counters().ToString();
   return ran.ok() ? 0 : 1;

@@ -2,7 +2,10 @@
 
 #include <utility>
 
+#include "common/base/log.h"
 #include "proto/compression.h"
+
+#include <google/protobuf/stubs/logging.h>
 
 namespace sandtable::proto {
 namespace {
@@ -30,6 +33,22 @@ bool HasHeaderOrCompression(const wire::Envelope& e) {
          e.send_time_ns() != 0 || e.sender_incarnation() != 0 ||
          e.compression() != wire::COMPRESSION_NONE || e.body_size_bytes() != 0 ||
          !e.compressed_body().empty();
+}
+
+// libprotobuf logs every invalid UTF-8 string it parses at ERROR level: a peer could flood
+// our logs. Rejections are already counted and returned as Status, so its messages go to
+// debug level.
+void ProtobufLogToDebug(google::protobuf::LogLevel, const char* file, int line,
+                        const std::string& message) {
+  ST_LOG(kDebug) << "libprotobuf " << file << ":" << line << ": " << message;
+}
+
+void RouteProtobufLogsOnce() {
+  static const bool installed = [] {
+    google::protobuf::SetLogHandler(&ProtobufLogToDebug);
+    return true;
+  }();
+  (void)installed;
 }
 
 Status Reject(MessageCounters* counters, RejectReason reason, Status status) {
@@ -100,16 +119,17 @@ Expected<std::string> EncodeEnvelope(wire::Envelope envelope, const CodecLimits&
   local.wire_bytes = wire_bytes.size();
   if (info != nullptr) *info = local;
   if (wire_bytes.size() > limits.max_message_bytes) {
-    return InvalidArgumentError("codec: message of " + std::to_string(wire_bytes.size()) +
-                                " bytes exceeds max_message_bytes = " +
-                                std::to_string(limits.max_message_bytes) +
-                                "; split the payload or raise the limit on both sides");
+    return InvalidArgumentError(
+        "codec: message of " + std::to_string(wire_bytes.size()) +
+        " bytes exceeds max_message_bytes = " + std::to_string(limits.max_message_bytes) +
+        "; split the payload or raise the limit on both sides");
   }
   return wire_bytes;
 }
 
 Expected<wire::Envelope> DecodeEnvelope(std::string_view bytes, const CodecLimits& limits,
                                         MessageCounters* counters) {
+  RouteProtobufLogsOnce();
   if (bytes.size() > limits.max_message_bytes) {
     return Reject(counters, RejectReason::kOversized,
                   ParseError("message of " + std::to_string(bytes.size()) +
@@ -123,11 +143,11 @@ Expected<wire::Envelope> DecodeEnvelope(std::string_view bytes, const CodecLimit
                              " bytes is not a valid Envelope (truncated or corrupt)"));
   }
   if (envelope.protocol_version() != kProtocolVersion) {
-    return Reject(counters, RejectReason::kWrongVersion,
-                  ParseError("protocol_version " + std::to_string(envelope.protocol_version()) +
-                             " from sender " + std::to_string(envelope.sender_id()) +
-                             ", this build speaks " + std::to_string(kProtocolVersion) +
-                             "; run the same release on every machine"));
+    return Reject(
+        counters, RejectReason::kWrongVersion,
+        ParseError("protocol_version " + std::to_string(envelope.protocol_version()) +
+                   " from sender " + std::to_string(envelope.sender_id()) + ", this build speaks " +
+                   std::to_string(kProtocolVersion) + "; run the same release on every machine"));
   }
   if (envelope.sequence() == 0) {
     return Reject(counters, RejectReason::kMalformed,

@@ -38,8 +38,8 @@ struct CodecLimits {
 };
 
 struct EncodeInfo {
-  size_t body_bytes = 0;   // serialized body before compression
-  size_t wire_bytes = 0;   // whole envelope on the wire
+  size_t body_bytes = 0;  // serialized body before compression
+  size_t wire_bytes = 0;  // whole envelope on the wire
   bool compressed = false;
 };
 

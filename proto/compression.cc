@@ -9,9 +9,9 @@ namespace sandtable::proto {
 std::string ZlibCompress(std::string_view raw, int level) {
   uLongf bound = compressBound(static_cast<uLong>(raw.size()));
   std::string out(bound, '\0');
-  const int rc = compress2(reinterpret_cast<Bytef*>(out.data()), &bound,
-                           reinterpret_cast<const Bytef*>(raw.data()),
-                           static_cast<uLong>(raw.size()), level);
+  const int rc =
+      compress2(reinterpret_cast<Bytef*>(out.data()), &bound,
+                reinterpret_cast<const Bytef*>(raw.data()), static_cast<uLong>(raw.size()), level);
   ST_CHECK(rc == Z_OK) << "zlib compress2 failed (" << rc << ") on " << raw.size()
                        << " bytes; out of memory?";
   out.resize(bound);

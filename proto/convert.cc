@@ -56,8 +56,8 @@ Expected<Rigid3d> FromWire(const wire::Rigid3& target_from_source) {
   const double norm = q.norm();
   if (std::abs(norm - 1.0) > kQuaternionNormTolerance) {
     return InvalidArgumentError("Rigid3 rotation quaternion has norm " + std::to_string(norm) +
-                                ", must be 1 (within " +
-                                std::to_string(kQuaternionNormTolerance) + ")");
+                                ", must be 1 (within " + std::to_string(kQuaternionNormTolerance) +
+                                ")");
   }
   Expected<Eigen::Vector3d> t = FromWire(target_from_source.translation_m());
   if (!t.ok()) return t.status().WithContext("Rigid3 translation_m");

@@ -6,17 +6,28 @@ namespace sandtable::proto {
 
 std::string_view RejectReasonName(RejectReason reason) {
   switch (reason) {
-    case RejectReason::kOversized: return "oversized";
-    case RejectReason::kMalformed: return "malformed";
-    case RejectReason::kWrongVersion: return "wrong_version";
-    case RejectReason::kUnknownType: return "unknown_type";
-    case RejectReason::kEmptyBody: return "empty_body";
-    case RejectReason::kBadCompression: return "bad_compression";
-    case RejectReason::kOutOfOrder: return "out_of_order";
-    case RejectReason::kWrongType: return "wrong_type";
-    case RejectReason::kInvalidContent: return "invalid_content";
-    case RejectReason::kUnknownSender: return "unknown_sender";
-    case RejectReason::kCount: break;
+    case RejectReason::kOversized:
+      return "oversized";
+    case RejectReason::kMalformed:
+      return "malformed";
+    case RejectReason::kWrongVersion:
+      return "wrong_version";
+    case RejectReason::kUnknownType:
+      return "unknown_type";
+    case RejectReason::kEmptyBody:
+      return "empty_body";
+    case RejectReason::kBadCompression:
+      return "bad_compression";
+    case RejectReason::kOutOfOrder:
+      return "out_of_order";
+    case RejectReason::kWrongType:
+      return "wrong_type";
+    case RejectReason::kInvalidContent:
+      return "invalid_content";
+    case RejectReason::kUnknownSender:
+      return "unknown_sender";
+    case RejectReason::kCount:
+      break;
   }
   return "?";
 }

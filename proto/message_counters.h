@@ -13,16 +13,16 @@
 namespace sandtable::proto {
 
 enum class RejectReason {
-  kOversized = 0,       // larger than the configured limit (wire or decompressed)
-  kMalformed,           // not a parsable Envelope, missing required header fields
-  kWrongVersion,        // protocol_version != kProtocolVersion
-  kUnknownType,         // a body this build does not know (newer sender)
-  kEmptyBody,           // no body at all
-  kBadCompression,      // unknown compression, or the compressed body does not inflate
-  kOutOfOrder,          // sequence not above the last one seen from the same sender
-  kWrongType,           // a known body this socket/handler does not serve
-  kInvalidContent,      // a body whose fields fail validation (NaN, sizes that do not match)
-  kUnknownSender,       // a request from a sender that must register first
+  kOversized = 0,   // larger than the configured limit (wire or decompressed)
+  kMalformed,       // not a parsable Envelope, missing required header fields
+  kWrongVersion,    // protocol_version != kProtocolVersion
+  kUnknownType,     // a body this build does not know (newer sender)
+  kEmptyBody,       // no body at all
+  kBadCompression,  // unknown compression, or the compressed body does not inflate
+  kOutOfOrder,      // sequence not above the last one seen from the same sender
+  kWrongType,       // a known body this socket/handler does not serve
+  kInvalidContent,  // a body whose fields fail validation (NaN, sizes that do not match)
+  kUnknownSender,   // a request from a sender that must register first
   kCount,
 };
 

@@ -38,8 +38,8 @@ Status CoordinatorServer::Start() {
   net::SocketOptions socket_options;
   socket_options.max_message_bytes = static_cast<int64_t>(options_.limits.max_message_bytes);
   if (options_.curve) {
-    zap_ = std::make_unique<net::ZapHandler>(
-        &context_, std::set<std::string>{options_.curve->public_key_z85});
+    zap_ = std::make_unique<net::ZapHandler>(&context_,
+                                             std::set<std::string>{options_.curve->public_key_z85});
     ST_RETURN_IF_ERROR(zap_->Start());
     socket_options.curve = net::ServerCurve(*options_.curve);
   }
@@ -50,8 +50,8 @@ Status CoordinatorServer::Start() {
   Expected<std::string> request_endpoint = (*router)->Bind(options_.request_endpoint);
   if (!request_endpoint.ok()) return request_endpoint.status().WithContext("requests");
   request_endpoint_ = *request_endpoint;
-  requests_ = std::make_unique<net::Channel>(std::move(*router), kCoordinatorSenderId,
-                                             incarnation, &counters_, options_.limits);
+  requests_ = std::make_unique<net::Channel>(std::move(*router), kCoordinatorSenderId, incarnation,
+                                             &counters_, options_.limits);
 
   Expected<std::unique_ptr<net::Socket>> pub =
       net::Socket::Create(&context_, net::SocketType::kPub, socket_options);
@@ -99,9 +99,7 @@ Status CoordinatorServer::Run(const std::atomic<bool>& stop) {
   return OkStatus();
 }
 
-Status CoordinatorServer::Publish(wire::Envelope event) {
-  return events_->Send(std::move(event));
-}
+Status CoordinatorServer::Publish(wire::Envelope event) { return events_->Send(std::move(event)); }
 
 Status CoordinatorServer::PublishMemberList() {
   wire::Envelope envelope;

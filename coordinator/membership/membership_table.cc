@@ -15,16 +15,15 @@ Status MembershipOptions::Check() const {
   return OkStatus();
 }
 
-HelloOutcome MembershipTable::OnHello(NodeId id, const wire::Hello& hello,
-                                      Clock::time_point now) {
+HelloOutcome MembershipTable::OnHello(NodeId id, const wire::Hello& hello, Clock::time_point now) {
   auto it = members_.find(id);
   if (it != members_.end() && it->second.member.incarnation() == hello.incarnation()) {
     // The same process saying hello again (its HelloAck was lost): nothing changes.
     it->second.last_heard = now;
     return HelloOutcome::kRepeated;
   }
-  const HelloOutcome outcome = it == members_.end() ? HelloOutcome::kJoined
-                                                    : HelloOutcome::kRestarted;
+  const HelloOutcome outcome =
+      it == members_.end() ? HelloOutcome::kJoined : HelloOutcome::kRestarted;
   Entry& entry = members_[id];
   entry.member.set_node_id(id);
   entry.member.set_incarnation(hello.incarnation());

@@ -2,8 +2,7 @@
 
 namespace sandtable::node {
 
-bool ClockOffsetEstimator::AddSample(int64_t t0_ns, int64_t t1_ns, int64_t t2_ns,
-                                     int64_t t3_ns) {
+bool ClockOffsetEstimator::AddSample(int64_t t0_ns, int64_t t1_ns, int64_t t2_ns, int64_t t3_ns) {
   const int64_t delay_ns = (t3_ns - t0_ns) - (t2_ns - t1_ns);
   if (delay_ns < 0 || t3_ns < t0_ns || t2_ns < t1_ns) return false;
   // Halve each difference before adding: no overflow for clocks far apart.

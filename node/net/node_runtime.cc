@@ -54,8 +54,8 @@ Status NodeRuntime::Start() {
   ST_RETURN_IF_ERROR(options_.Check());
   net::SocketOptions server = ClientSocketOptions();
   if (options_.curve) {
-    zap_ = std::make_unique<net::ZapHandler>(
-        &context_, std::set<std::string>{options_.curve->public_key_z85});
+    zap_ = std::make_unique<net::ZapHandler>(&context_,
+                                             std::set<std::string>{options_.curve->public_key_z85});
     ST_RETURN_IF_ERROR(zap_->Start());
     server.curve = net::ServerCurve(*options_.curve);
   }
@@ -81,8 +81,8 @@ Status NodeRuntime::Start() {
   auto sub = net::Socket::Create(&context_, net::SocketType::kSub, ClientSocketOptions());
   if (!sub.ok()) return sub.status();
   ST_RETURN_IF_ERROR((*sub)->Connect(options_.coordinator_events));
-  events_ = std::make_unique<net::Channel>(std::move(*sub), options_.id, incarnation_,
-                                           &counters_, options_.limits);
+  events_ = std::make_unique<net::Channel>(std::move(*sub), options_.id, incarnation_, &counters_,
+                                           options_.limits);
   return OkStatus();
 }
 
@@ -187,8 +187,8 @@ void NodeRuntime::HandleCoordinatorReply(const wire::Envelope& in) {
       break;
     case wire::Envelope::kTimeReply: {
       const wire::TimeReply& r = in.time_reply();
-      if (!clock_.AddSample(r.t0_client_send_ns(), r.t1_server_receive_ns(),
-                            r.t2_server_send_ns(), t3_ns)) {
+      if (!clock_.AddSample(r.t0_client_send_ns(), r.t1_server_receive_ns(), r.t2_server_send_ns(),
+                            t3_ns)) {
         counters_.CountRejected(proto::RejectReason::kInvalidContent);
       }
       break;
@@ -273,8 +273,7 @@ void NodeRuntime::HandlePeerMessage(net::Incoming in) {
   } else {
     counters_.CountRejected(proto::RejectReason::kWrongType);
     reply.mutable_rejected()->set_rejected_sequence(e.sequence());
-    reply.mutable_rejected()->set_reason("node peer socket does not serve " +
-                                         proto::BodyName(e));
+    reply.mutable_rejected()->set_reason("node peer socket does not serve " + proto::BodyName(e));
   }
   (void)peer_router_->Send(std::move(reply), in.routing_id);
 }

@@ -26,8 +26,8 @@ using Clock = std::chrono::steady_clock;
 
 struct NodeOptions {
   NodeId id = kInvalidNodeId;
-  std::string coordinator_requests;           // coordinator ROUTER endpoint
-  std::string coordinator_events;             // coordinator PUB endpoint
+  std::string coordinator_requests;             // coordinator ROUTER endpoint
+  std::string coordinator_events;               // coordinator PUB endpoint
   std::string peer_bind = "tcp://127.0.0.1:*";  // own ROUTER for peers (advertised as bound)
   std::chrono::milliseconds heartbeat_period{100};
   std::chrono::milliseconds coordinator_timeout{500};  // silent this long: coordinator down

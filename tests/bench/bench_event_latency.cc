@@ -82,8 +82,9 @@ int main(int argc, char** argv) {
   }
   std::sort(all.begin(), all.end());
   auto pct = [&](double p) { return all[std::min(all.size() - 1, size_t(p * all.size()))]; };
-  std::printf("event_latency rate_hz=%.0f subscribers=%d sent=%d received=%zu p50_us=%.1f "
-              "p99_us=%.1f max_us=%.1f\n",
-              rate_hz, subscribers, events, all.size(), pct(0.50), pct(0.99), all.back());
+  std::printf(
+      "event_latency rate_hz=%.0f subscribers=%d sent=%d received=%zu p50_us=%.1f "
+      "p99_us=%.1f max_us=%.1f\n",
+      rate_hz, subscribers, events, all.size(), pct(0.50), pct(0.99), all.back());
   return 0;
 }

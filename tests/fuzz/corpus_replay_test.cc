@@ -63,16 +63,24 @@ TEST(CorpusReplayTest, CorpusAndMutationsNeverCrash) {
   size_t accepted = 0, runs = 0;
   std::mt19937 rng(1234);
   for (const std::string& input : inputs) {
-    accepted += HandleUntrustedMessage(reinterpret_cast<const uint8_t*>(input.data()),
-                                       input.size(), &state);
+    accepted += HandleUntrustedMessage(reinterpret_cast<const uint8_t*>(input.data()), input.size(),
+                                       &state);
     ++runs;
     for (int m = 0; m < kMutationsPerSeed && !input.empty(); ++m) {
       std::string mutated = input;
       switch (rng() % 4) {
-        case 0: mutated[rng() % mutated.size()] ^= static_cast<char>(1 + rng() % 255); break;
-        case 1: mutated.resize(rng() % mutated.size()); break;  // truncate
-        case 2: mutated.insert(rng() % mutated.size(), 1, static_cast<char>(rng())); break;
-        default: mutated += mutated.substr(0, rng() % mutated.size()); break;
+        case 0:
+          mutated[rng() % mutated.size()] ^= static_cast<char>(1 + rng() % 255);
+          break;
+        case 1:
+          mutated.resize(rng() % mutated.size());
+          break;  // truncate
+        case 2:
+          mutated.insert(rng() % mutated.size(), 1, static_cast<char>(rng()));
+          break;
+        default:
+          mutated += mutated.substr(0, rng() % mutated.size());
+          break;
       }
       accepted += HandleUntrustedMessage(reinterpret_cast<const uint8_t*>(mutated.data()),
                                          mutated.size(), &state);

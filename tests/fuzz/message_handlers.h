@@ -35,25 +35,34 @@ inline bool HandleUntrustedMessage(const uint8_t* data, size_t size, HandlerStat
   if (!state->tracker.Accept(e, &state->counters).ok()) return true;
   const auto now = coordinator::Clock::now();
   switch (e.body_case()) {
-    case wire::Envelope::kHello: state->members.OnHello(e.sender_id(), e.hello(), now); break;
+    case wire::Envelope::kHello:
+      state->members.OnHello(e.sender_id(), e.hello(), now);
+      break;
     case wire::Envelope::kHeartbeat:
       state->members.OnHeartbeat(e.sender_id(), e.heartbeat().incarnation(), now);
       break;
-    case wire::Envelope::kGoodbye: state->members.OnGoodbye(e.sender_id()); break;
+    case wire::Envelope::kGoodbye:
+      state->members.OnGoodbye(e.sender_id());
+      break;
     case wire::Envelope::kTimeReply:
       state->clock.AddSample(e.time_reply().t0_client_send_ns(),
                              e.time_reply().t1_server_receive_ns(),
                              e.time_reply().t2_server_send_ns(), e.send_time_ns());
       (void)state->clock.Estimate();
       break;
-    case wire::Envelope::kTrackerPose: (void)proto::FromWire(e.tracker_pose().table_from_sensor()); break;
+    case wire::Envelope::kTrackerPose:
+      (void)proto::FromWire(e.tracker_pose().table_from_sensor());
+      break;
     case wire::Envelope::kCalibrationResult:
       (void)proto::FromWire(e.calibration_result().projector_model());
       (void)proto::FromWire(e.calibration_result().projector_from_table());
       (void)proto::FromWire(e.calibration_result().camera_model());
       break;
-    case wire::Envelope::kCursor: (void)proto::FromWire(e.cursor().hit_in_table_m()); break;
-    default: break;
+    case wire::Envelope::kCursor:
+      (void)proto::FromWire(e.cursor().hit_in_table_m());
+      break;
+    default:
+      break;
   }
   (void)state->members.ExpireSilent(now);
   (void)state->members.ToWire();

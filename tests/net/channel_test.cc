@@ -86,7 +86,7 @@ TEST(ChannelTest, BadInputIsRejectedCountedAndTheChannelKeepsWorking) {
   old_version.mutable_heartbeat();
   old_version.set_protocol_version(proto::kProtocolVersion + 7);
 
-  ASSERT_TRUE((*raw)->Send({good_bytes.substr(0, good_bytes.size() - 2)}).ok());  // truncated
+  ASSERT_TRUE((*raw)->Send({good_bytes.substr(0, good_bytes.size() - 2)}).ok());     // truncated
   ASSERT_TRUE((*raw)->Send({std::string("\x0a\xff\xff\xff\xff\xff\xff", 7)}).ok());  // garbage
   ASSERT_TRUE((*raw)->Send({old_version.SerializeAsString()}).ok());
   ASSERT_TRUE((*raw)->Send({good_bytes, good_bytes}).ok());  // wrong frame count

@@ -18,8 +18,7 @@ inline std::optional<Incoming> ReceiveWithin(Channel* channel, std::chrono::mill
     std::vector<bool> readable;
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
         until - std::chrono::steady_clock::now());
-    if (!Socket::Poll({&channel->socket()}, std::max(left, std::chrono::milliseconds(1)),
-                      &readable)
+    if (!Socket::Poll({&channel->socket()}, std::max(left, std::chrono::milliseconds(1)), &readable)
              .ok()) {
       return std::nullopt;
     }

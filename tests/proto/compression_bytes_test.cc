@@ -47,8 +47,7 @@ std::string CameraCapture() {
       const int gray = static_cast<int>(u) ^ (static_cast<int>(u) >> 1);
       const double falloff = 0.6 + 0.4 * std::cos((x - 640.0) / 1400.0);
       const double v = (((gray >> 5) & 1) ? 200.0 : 20.0) * falloff + noise(rng);
-      pixels[static_cast<size_t>(y) * kWidth_px + x] =
-          static_cast<char>(std::clamp(v, 0.0, 255.0));
+      pixels[static_cast<size_t>(y) * kWidth_px + x] = static_cast<char>(std::clamp(v, 0.0, 255.0));
     }
   }
   return pixels;

@@ -62,9 +62,9 @@ class Site {
     }
   }
   void StartNode(NodeId id) {
-    nodes_[id] = std::make_unique<ChildProcess>(std::vector<std::string>{
-        SANDTABLE_NODE_BIN, "--id", std::to_string(id), "--coordinator",
-        requests_ + "," + events_});
+    nodes_[id] = std::make_unique<ChildProcess>(
+        std::vector<std::string>{SANDTABLE_NODE_BIN, "--id", std::to_string(id), "--coordinator",
+                                 requests_ + "," + events_});
     std::optional<std::string> line = nodes_[id]->ReadLine(kStartDeadline);
     ASSERT_TRUE(line.has_value()) << "node " << id << " printed no endpoint";
     peer_endpoints_[id] = FieldOf(*line, "peer");
@@ -90,8 +90,8 @@ class Site {
     if (!status_clients_.count(id)) {
       auto dealer = net::Socket::Create(&context_, net::SocketType::kDealer);
       EXPECT_TRUE((*dealer)->Connect(peer_endpoints_[id]).ok());
-      status_clients_[id] = std::make_unique<net::Channel>(std::move(*dealer), 900001 + id, 1,
-                                                           &counters_);
+      status_clients_[id] =
+          std::make_unique<net::Channel>(std::move(*dealer), 900001 + id, 1, &counters_);
     }
     wire::Envelope request;
     request.mutable_peer_status_request();
@@ -154,8 +154,7 @@ TEST(MembershipAcceptanceTest, ConvergesDetectsDeathRejoinsSurvivesCoordinatorRe
       [](const wire::MemberList& l) { return Ids(l).count(kVictim) == 0; }, kConvergeDeadline);
   ASSERT_TRUE(without.has_value());
   const double detection_s = std::chrono::duration<double>(Clock::now() - killed_at).count();
-  std::printf("[ MEASURED ] SIGKILLed node gone from the member list after %.3f s\n",
-              detection_s);
+  std::printf("[ MEASURED ] SIGKILLed node gone from the member list after %.3f s\n", detection_s);
   RecordProperty("death_detection_ms", static_cast<int>(detection_s * 1000));
   EXPECT_LT(detection_s,
             std::chrono::duration<double>(kDeathRequirement + kDeathSchedulingMargin).count());
@@ -163,8 +162,8 @@ TEST(MembershipAcceptanceTest, ConvergesDetectsDeathRejoinsSurvivesCoordinatorRe
 
   // Restarted with the same id: back once, as a new incarnation.
   ASSERT_NO_FATAL_FAILURE(site.StartNode(kVictim));
-  const auto back = site.WaitForList(
-      [](const wire::MemberList& l) { return Ids(l) == AllIds(); }, kConvergeDeadline);
+  const auto back = site.WaitForList([](const wire::MemberList& l) { return Ids(l) == AllIds(); },
+                                     kConvergeDeadline);
   ASSERT_TRUE(back.has_value());
   int victim_entries = 0;
   for (const auto& m : back->members()) {
@@ -223,8 +222,8 @@ TEST(MembershipAcceptanceTest, ConvergesDetectsDeathRejoinsSurvivesCoordinatorRe
         auto s = site.PeerStatus(1);
         if (!s || s->coordinator_alive() || s->peers_size() != kNodeCount - 1) return false;
         for (const auto& p : s->peers()) {
-          if (!p.alive() || p.heartbeats_received() < heard_before[p.node_id()] +
-                                                          kPeerHeartbeatsWhileCoordinatorDown) {
+          if (!p.alive() || p.heartbeats_received() <
+                                heard_before[p.node_id()] + kPeerHeartbeatsWhileCoordinatorDown) {
             return false;
           }
         }
