@@ -24,7 +24,10 @@ set datafile separator ","
 set datafile missing "nan"
 set key top left box opaque
 set grid
-ok(routine) = strcol(1) eq routine
+set format y '%g'
+# A row of `routine` that succeeded (status_col is set by each plot).
+ok(routine) = strcol(1) eq routine && strcol(status_col) eq "ok"
+any(routine) = strcol(1) eq routine
 ${body}
 EOF
   then
@@ -36,7 +39,10 @@ EOF
 
 f="${dir}/runtime_vs_error.csv"
 [[ -f "$f" ]] && plot runtime_vs_error.png "
-set multiplot layout 1,2
+status_col = 9
+set terminal ${terminal/1200,500/1600,500}
+set output '${dir}/runtime_vs_error.png'
+set multiplot layout 1,3
 set logscale xy
 set format y '%g'
 set title 'Run time (single core)'
@@ -44,19 +50,21 @@ set xlabel 'correspondences n'; set ylabel 'time [ms]'
 plot '$f' using (ok('resection') ? \$2 : NaN):5 title 'resection (DLT + Ceres)' pt 7 ps 0.6, \
      '' using (ok('homography_dlt') ? \$2 : NaN):5 title 'homography DLT' pt 5 ps 0.6, \
      '' using (ok('homography_refined') ? \$2 : NaN):5 title 'homography DLT + refine' pt 9 ps 0.6
-set title 'Error against ground truth (reprojection / transfer rms on noise-free pixels)'
 set ylabel 'ground-truth rms [px]'
 set key bottom left
+set title 'Resection: reprojection rms on noise-free pixels'
 plot for [nz in '0.1 0.5 1 2 5'] '$f' using \
        (ok('resection') && abs(\$3 - (nz+0)) < 1e-9 ? \$2 : NaN):7 \
-       title 'resection, noise '.nz.' px' pt 7 ps 0.6, \
-     for [nz in '0.1 0.5 1 2 5'] '' using \
+       title 'noise '.nz.' px' pt 7 ps 0.6
+set title 'Homography (DLT + refine): transfer rms on noise-free pixels'
+plot for [nz in '0.1 0.5 1 2 5'] '$f' using \
        (ok('homography_refined') && abs(\$3 - (nz+0)) < 1e-9 ? \$2 : NaN):7 \
-       title 'homography, noise '.nz.' px' pt 4 ps 0.6
+       title 'noise '.nz.' px' pt 4 ps 0.6
 unset multiplot"
 
 f="${dir}/coordinate_scale.csv"
 [[ -f "$f" ]] && plot coordinate_scale.png "
+status_col = 7
 set logscale xy
 set title 'Coordinate scale (100 points, 0.5 px noise); points and world multiplied by scale'
 set xlabel 'scale'; set ylabel 'ground-truth rms [px]'
@@ -65,6 +73,7 @@ plot '$f' using (ok('homography_dlt') ? \$2 : NaN):5 title 'homography DLT' pt 5
 
 f="${dir}/near_coplanar.csv"
 [[ -f "$f" ]] && plot near_coplanar.png "
+status_col = 8
 set multiplot layout 1,2
 set logscale x
 set xrange [5e-7:0.5]
@@ -82,6 +91,7 @@ unset multiplot"
 
 f="${dir}/grazing.csv"
 [[ -f "$f" ]] && plot grazing.png "
+status_col = 9
 set multiplot layout 1,2
 set xlabel 'camera tilt from the plane normal [deg]'
 set logscale y
@@ -95,6 +105,7 @@ unset multiplot"
 
 f="${dir}/ransac_outliers.csv"
 [[ -f "$f" ]] && plot ransac_outliers.png "
+status_col = 11
 set multiplot layout 1,2
 set xlabel 'outliers [%]'
 set logscale y
@@ -110,24 +121,28 @@ unset multiplot"
 
 f="${dir}/undistortion.csv"
 [[ -f "$f" ]] && plot undistortion.png "
+status_col = 11
 set multiplot layout 1,2
 set xlabel 'k1'
 set xrange [0.02:-0.82]
 set title 'Pixels refused by Unproject (1280x800, fx = 1000 px)'
 set ylabel 'refused [% of grid]'
-plot '$f' using (ok('k1_only') ? \$2 : NaN):6 with linespoints title 'k1 only' pt 7, \
-     '' using (ok('k1_and_k2_negative') ? \$2 : NaN):6 with linespoints title 'k2 = k1 / 2' pt 5, \
-     '' using (ok('k1_and_k3_positive') ? \$2 : NaN):6 with linespoints title 'k3 = +0.05' pt 9
-set title 'Worst round trip of accepted pixels'
+plot '$f' using (any('k1_only') ? \$2 : NaN):6 with linespoints title 'k1 only' pt 7, \
+     '' using (any('k1_and_k2_negative') ? \$2 : NaN):6 with linespoints title 'k2 = k1 / 2' pt 5, \
+     '' using (any('k1_and_k3_positive') ? \$2 : NaN):6 with linespoints title 'k3 = +0.05' pt 9
+set title 'Worst round trip of accepted pixels (Newton tolerance 1e-10 normalized = 1e-7 px)'
 set ylabel 'px'
 set logscale y
-plot '$f' using (ok('k1_only') ? \$2 : NaN):8 title 'k1 only' pt 7, \
-     '' using (ok('k1_and_k2_negative') ? \$2 : NaN):8 title 'k2 = k1 / 2' pt 5, \
-     '' using (ok('k1_and_k3_positive') ? \$2 : NaN):8 title 'k3 = +0.05' pt 9
+set format y '%.0e'
+set yrange [1e-9:1e-5]
+plot '$f' using (any('k1_only') ? \$2 : NaN):8 title 'k1 only' pt 7, \
+     '' using (any('k1_and_k2_negative') ? \$2 : NaN):8 title 'k2 = k1 / 2' pt 5, \
+     '' using (any('k1_and_k3_positive') ? \$2 : NaN):8 title 'k3 = +0.05' pt 9
 unset multiplot"
 
 f="${dir}/gl_float.csv"
 [[ -f "$f" ]] && plot gl_float.png "
+status_col = 7
 set multiplot layout 1,2
 set logscale xy
 set ylabel 'float vs double [px]'
@@ -144,19 +159,21 @@ unset multiplot"
 
 f="${dir}/triangulation.csv"
 [[ -f "$f" ]] && plot triangulation.png "
+status_col = 9
 set multiplot layout 1,2
 set logscale xy
 set ylabel 'point error [mm]'
-set title 'Two-view triangulation, 0.5 px noise, 2 m'
-set xlabel 'triangulation angle [deg] (0 not shown)'
-plot '$f' using (ok('angle') ? \$2 : NaN):6 title 'angle sweep' pt 7
-set title 'Noise at a 20 deg angle'
+set title 'Two-view triangulation, 0.5 px noise, 2 m (refused below 1 deg)'
+set xlabel 'angle between the rays at the point [deg]'
+plot '$f' using (ok('angle') ? \$3 : NaN):7 title 'angle sweep' pt 7
+set title 'Noise, cameras turned 40 deg apart'
 set xlabel 'noise [px] (0 not shown)'
-plot '$f' using (ok('noise') ? \$3 : NaN):6 title 'noise sweep' pt 5
+plot '$f' using (ok('noise') ? \$4 : NaN):7 title 'noise sweep' pt 5
 unset multiplot"
 
 f="${dir}/plane_fit_noise.csv"
 [[ -f "$f" ]] && plot plane_fit_noise.png "
+status_col = 8
 set logscale xy
 set title 'Least-squares plane of a 1.2 m table: worst height error at the corners'
 set xlabel 'height noise [mm] (0 not shown)'; set ylabel 'corner height error [mm]'
@@ -165,6 +182,7 @@ plot for [n in '10 100 2000'] '$f' using (ok('plane_least_squares') && \$2 == n+
 
 f="${dir}/umeyama.csv"
 [[ -f "$f" ]] && plot umeyama.png "
+status_col = 9
 set multiplot layout 1,2
 set logscale xy
 set title 'Rigid Umeyama, 16 points in a 1.2 m box'
@@ -177,6 +195,7 @@ unset multiplot"
 
 f="${dir}/table_frame.csv"
 [[ -f "$f" ]] && plot table_frame.png "
+status_col = 8
 set title 'Table frame +x axis against the true long side (1.2 m table, 1 mm noise)'
 set xlabel 'aspect ratio short / long side'; set ylabel 'x axis error [deg] (90 = flipped)'
 set yrange [-5:95]
