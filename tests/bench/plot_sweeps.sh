@@ -25,7 +25,7 @@ set datafile missing "nan"
 set key top left box opaque
 set grid
 set format y '%g'
-# A row of `routine` that succeeded (status_col is set by each plot).
+# A row of the routine that succeeded (status_col is set by each plot).
 ok(routine) = strcol(1) eq routine && strcol(status_col) eq "ok"
 any(routine) = strcol(1) eq routine
 ${body}
@@ -45,12 +45,15 @@ set output '${dir}/runtime_vs_error.png'
 set multiplot layout 1,3
 set logscale xy
 set format y '%g'
+set xrange [7:15000]
+set yrange [1e-3:1e4]
 set title 'Run time (single core)'
 set xlabel 'correspondences n'; set ylabel 'time [ms]'
 plot '$f' using (ok('resection') ? \$2 : NaN):5 title 'resection (DLT + Ceres)' pt 7 ps 0.6, \
      '' using (ok('homography_dlt') ? \$2 : NaN):5 title 'homography DLT' pt 5 ps 0.6, \
      '' using (ok('homography_refined') ? \$2 : NaN):5 title 'homography DLT + refine' pt 9 ps 0.6
 set ylabel 'ground-truth rms [px]'
+set yrange [1e-4:100]
 set key bottom left
 set title 'Resection: reprojection rms on noise-free pixels'
 plot for [nz in '0.1 0.5 1 2 5'] '$f' using \
@@ -80,10 +83,12 @@ set xrange [5e-7:0.5]
 set xlabel 'out-of-plane spread of the 3D points [m] (0 not shown)'
 set title 'Resection of near-coplanar points (200 points, 0.5 px noise)'
 set logscale y
+set yrange [1e-4:1e3]
 set ylabel 'focal length error [%]'
 plot '$f' using (ok('resection_free_intrinsics') ? \$2 : NaN):7 title 'free intrinsics' pt 7, \
      '' using (ok('resection_fixed_intrinsics') ? \$2 : NaN):7 title 'fixed intrinsics' pt 5
 set ylabel 'ground-truth reprojection rms [px]'
+set yrange [1e-3:1e3]
 set title 'Reprojection error on noise-free pixels'
 plot '$f' using (ok('resection_free_intrinsics') ? \$2 : NaN):6 title 'free intrinsics' pt 7, \
      '' using (ok('resection_fixed_intrinsics') ? \$2 : NaN):6 title 'fixed intrinsics' pt 5
