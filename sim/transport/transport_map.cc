@@ -1,0 +1,193 @@
+#include "sim/transport/transport_map.h"
+
+#include <algorithm>
+#include <cmath>
+#include <thread>
+
+namespace sandtable::sim {
+
+namespace {
+
+// Shadow rays start this far from the surface point and stop this far from the projector, so
+// the point's own triangle (float rounding in Embree) never shadows it. 50 um is far below a
+// projector pixel's footprint (~1 mm on the table).
+constexpr double kShadowEpsilon_m = 5e-5;
+
+// Overlaps of the box [centre - half, centre + half] with pixels x0 .. x0 + 3 (pixel i covers
+// [i - 0.5, i + 0.5]), normalised to sum 1. Returns x0.
+int BoxWeights(double centre, double half, double weights[4]) {
+  half = std::clamp(half, 0.01, 0.5 * kMaxFootprint_px);
+  const double lo = centre - half, hi = centre + half;
+  const int x0 = static_cast<int>(std::floor(lo + 0.5));
+  for (int i = 0; i < 4; ++i) {
+    const double a = std::max(lo, x0 + i - 0.5), b = std::min(hi, x0 + i + 0.5);
+    weights[i] = std::max(0.0, b - a) / (2 * half);
+  }
+  return x0;
+}
+
+}  // namespace
+
+ProjectorSample SampleProjector(const ProjectorSpec& projector, const RayCaster& caster,
+                                const Eigen::Vector3d& point, const Eigen::Vector3d& normal) {
+  ProjectorSample out;
+  const Eigen::Vector3d centre = projector.table_from_projector.translation;
+  const Eigen::Vector3d to_projector = centre - point;
+  const double d = to_projector.norm();
+  if (!(d > 0)) return out;
+  const double cos_theta = normal.dot(to_projector) / d;
+  if (cos_theta <= 0.0) return out;
+  const Eigen::Vector3d x_in_projector =
+      projector.table_from_projector.rotation.conjugate() * (point - centre);
+  const std::optional<Eigen::Vector2d> pixel = projector.model.Project(x_in_projector);
+  if (!pixel || !projector.model.InImage(*pixel)) return out;
+  if (caster.Occluded(point, centre, kShadowEpsilon_m)) return out;
+  out.visible = true;
+  out.pixel_px = *pixel;
+  out.distance_m = d;
+  out.gain_per_m2 = cos_theta / (d * d);
+  if (projector.aperture_diameter_m > 0 && projector.focus_distance_m > 0) {
+    // Thin lens focused at s: the blur circle of a point at depth z (along the axis) on the
+    // image side is A f |z - s| / (z (s - f)); in pixels (f / pitch = fx_px, s >> f) that is
+    // fx_px A |z - s| / (z s).
+    const double z = x_in_projector.z();
+    const double s = projector.focus_distance_m;
+    out.blur_px = projector.model.fx_px * projector.aperture_diameter_m * std::abs(z - s) / (z * s);
+  }
+  return out;
+}
+
+size_t TransportMap::NumEntries() const {
+  size_t n = 0;
+  for (const auto& e : entries) n += e.size();
+  return n;
+}
+
+Status TransportOptions::Check() const {
+  if (num_threads < 0 || num_threads > 1024) {
+    return InvalidArgumentError("transport: num_threads = " + std::to_string(num_threads) +
+                                " must be in [0, 1024]");
+  }
+  return OkStatus();
+}
+
+Expected<TransportMap> BuildTransportMap(const Site& site, const RayCaster& caster,
+                                         const View& view, const TransportOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
+  if (view.width_px() <= 0 || view.height_px() <= 0) {
+    return InvalidArgumentError("transport: view has no pixels");
+  }
+  const Scene& scene = caster.scene();
+  const int width = view.width_px(), height = view.height_px();
+  const size_t num_pixels = static_cast<size_t>(width) * height;
+  const size_t num_units = site.units.size();
+  TransportMap map;
+  map.width_px = width;
+  map.height_px = height;
+  map.hit.assign(num_pixels, 0);
+  map.albedo.assign(num_pixels, 0.0f);
+  map.point_in_table_m.assign(num_pixels, Eigen::Vector3f::Zero());
+  map.normal_in_table.assign(num_pixels, Eigen::Vector3f::Zero());
+
+  int threads = options.num_threads > 0 ? options.num_threads
+                                        : static_cast<int>(std::thread::hardware_concurrency());
+  threads = std::clamp(threads, 1, height);
+  // Each thread fills a contiguous band of rows into its own entry lists; concatenating the
+  // bands in order gives the same map for any thread count.
+  std::vector<std::vector<std::vector<TransportEntry>>> band_entries(
+      threads, std::vector<std::vector<TransportEntry>>(num_units));
+  Eigen::Vector3d origin_step_x, direction_step_x, origin_step_y, direction_step_y;
+  view.RayStep(&origin_step_x, &direction_step_x, &origin_step_y, &direction_step_y);
+  auto work = [&](int band) {
+    const int y0 = static_cast<int>(static_cast<int64_t>(height) * band / threads);
+    const int y1 = static_cast<int>(static_cast<int64_t>(height) * (band + 1) / threads);
+    for (int y = y0; y < y1; ++y) {
+      for (int x = 0; x < width; ++x) {
+        const size_t pixel = static_cast<size_t>(y) * width + x;
+        Eigen::Vector3d origin, direction;
+        if (!view.Ray(x, y, &origin, &direction)) continue;
+        const RayHit hit = caster.Intersect(origin, direction);
+        if (!hit.hit) continue;
+        const Eigen::Vector3d point = origin + hit.distance_m * direction.normalized();
+        // (direction keeps the scale of View::Ray so the ray steps above apply to it.)
+        Eigen::Vector3d normal = scene.FaceNormal(hit.triangle);
+        if (normal.dot(direction) > 0) normal = -normal;  // two-sided: face the viewer
+        const double albedo = scene.AlbedoAt(hit.triangle, hit.u, hit.v);
+        map.hit[pixel] = 1;
+        map.albedo[pixel] = static_cast<float>(albedo);
+        map.point_in_table_m[pixel] = point.cast<float>();
+        map.normal_in_table[pixel] = normal.cast<float>();
+        // The pixel's footprint on the surface's tangent plane: where the rays of the pixel's
+        // edge midpoints (half a pixel step) meet the plane through `point` with `normal`.
+        Eigen::Vector3d footprint[2];
+        bool has_footprint = true;
+        for (int axis = 0; axis < 2; ++axis) {
+          const Eigen::Vector3d o = origin + 0.5 * (axis == 0 ? origin_step_x : origin_step_y);
+          const Eigen::Vector3d d =
+              direction + 0.5 * (axis == 0 ? direction_step_x : direction_step_y);
+          const double denominator = normal.dot(d);
+          if (std::abs(denominator) < 1e-12) {
+            has_footprint = false;
+            break;
+          }
+          footprint[axis] = o + normal.dot(point - o) / denominator * d;
+        }
+        for (size_t p = 0; p < num_units; ++p) {
+          const ProjectorSpec& projector = site.units[p].projector;
+          const ProjectorSample s = SampleProjector(projector, caster, point, normal);
+          if (!s.visible) continue;
+          // Half extents of the footprint box in projector pixels: twice the half-pixel
+          // displacements give the per-pixel Jacobian; the box covers |du/dx| + |du/dy|.
+          double half_u = 0.0, half_v = 0.0;
+          if (has_footprint) {
+            const Rigid3d projector_from_table = projector.table_from_projector.Inverse();
+            for (int axis = 0; axis < 2; ++axis) {
+              const std::optional<Eigen::Vector2d> q =
+                  projector.model.Project(projector_from_table * footprint[axis]);
+              if (!q) continue;
+              half_u += std::abs(q->x() - s.pixel_px.x());  // = 0.5 |du/d(axis)|
+              half_v += std::abs(q->y() - s.pixel_px.y());
+            }
+          }
+          // Defocus widens the box to the blur circle's diameter.
+          half_u = std::max(half_u, 0.5 * s.blur_px);
+          half_v = std::max(half_v, 0.5 * s.blur_px);
+          double wu[4], wv[4];
+          const int x0 = BoxWeights(s.pixel_px.x(), half_u, wu);
+          const int v0 = BoxWeights(s.pixel_px.y(), half_v, wv);
+          const int padded_width = projector.model.width_px + 2 * kFramePadding_px;
+          TransportEntry e;
+          e.pixel = static_cast<uint32_t>(pixel);
+          e.frame_offset =
+              static_cast<uint32_t>((v0 + kFramePadding_px) * padded_width + x0 + kFramePadding_px);
+          const double gain = albedo * projector.peak_luminance_at_1m_nits * s.gain_per_m2;
+          for (int i = 0; i < 4; ++i) {
+            e.wu[i] = static_cast<uint16_t>(std::lround(wu[i] * 65535.0));
+            e.wv[i] = static_cast<float>(wv[i] * gain);
+          }
+          band_entries[band][p].push_back(e);
+        }
+      }
+    }
+  };
+  if (threads == 1) {
+    work(0);
+  } else {
+    std::vector<std::thread> pool;
+    for (int b = 0; b < threads; ++b) pool.emplace_back(work, b);
+    for (std::thread& t : pool) t.join();
+  }
+  map.entries.resize(num_units);
+  for (size_t p = 0; p < num_units; ++p) {
+    size_t total = 0;
+    for (int b = 0; b < threads; ++b) total += band_entries[b][p].size();
+    map.entries[p].reserve(total);
+    for (int b = 0; b < threads; ++b) {
+      map.entries[p].insert(map.entries[p].end(), band_entries[b][p].begin(),
+                            band_entries[b][p].end());
+    }
+  }
+  return map;
+}
+
+}  // namespace sandtable::sim

@@ -1,0 +1,55 @@
+#include "sim/transport/view.h"
+
+namespace sandtable::sim {
+
+View View::Perspective(const CameraModel& model, const Rigid3d& table_from_camera) {
+  View v;
+  v.perspective_ = true;
+  v.width_px_ = model.width_px;
+  v.height_px_ = model.height_px;
+  v.model_ = model;
+  v.table_from_camera_ = table_from_camera;
+  return v;
+}
+
+View View::OrthographicTop(const Eigen::AlignedBox2d& area, int width_px, int height_px,
+                           double eye_height_m) {
+  View v;
+  v.perspective_ = false;
+  v.width_px_ = width_px;
+  v.height_px_ = height_px;
+  v.area_m_ = area;
+  v.eye_height_m_ = eye_height_m;
+  return v;
+}
+
+bool View::Ray(int x, int y, Eigen::Vector3d* origin, Eigen::Vector3d* direction) const {
+  if (perspective_) {
+    Expected<Eigen::Vector3d> ray_in_camera = model_.Unproject(Eigen::Vector2d(x, y));
+    if (!ray_in_camera.ok()) return false;
+    *origin = table_from_camera_.translation;
+    *direction = table_from_camera_.rotation * *ray_in_camera;
+    return true;
+  }
+  const Eigen::Vector2d size = area_m_.sizes();
+  *origin =
+      Eigen::Vector3d(area_m_.min().x() + (x + 0.5) / width_px_ * size.x(),
+                      area_m_.min().y() + (1.0 - (y + 0.5) / height_px_) * size.y(), eye_height_m_);
+  *direction = Eigen::Vector3d(0, 0, -1);
+  return true;
+}
+
+void View::RayStep(Eigen::Vector3d* origin_step_x, Eigen::Vector3d* direction_step_x,
+                   Eigen::Vector3d* origin_step_y, Eigen::Vector3d* direction_step_y) const {
+  if (perspective_) {
+    *origin_step_x = *origin_step_y = Eigen::Vector3d::Zero();
+    *direction_step_x = table_from_camera_.rotation * Eigen::Vector3d(1.0 / model_.fx_px, 0, 0);
+    *direction_step_y = table_from_camera_.rotation * Eigen::Vector3d(0, 1.0 / model_.fy_px, 0);
+    return;
+  }
+  *direction_step_x = *direction_step_y = Eigen::Vector3d::Zero();
+  *origin_step_x = Eigen::Vector3d(area_m_.sizes().x() / width_px_, 0, 0);
+  *origin_step_y = Eigen::Vector3d(0, -area_m_.sizes().y() / height_px_, 0);
+}
+
+}  // namespace sandtable::sim

@@ -1,0 +1,146 @@
+#include "sim/transport/world.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace sandtable::sim {
+
+Expected<std::unique_ptr<World>> World::Create(Site site, Scene scene,
+                                               const WorldOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
+  ST_RETURN_IF_ERROR(site.Check());
+  std::unique_ptr<World> world(new World());
+  world->site_ = std::move(site);
+  world->scene_ = std::make_unique<Scene>(std::move(scene));
+  world->options_ = options;
+  Expected<std::unique_ptr<RayCaster>> caster =
+      RayCaster::Create(*world->scene_, options.embree_config);
+  if (!caster.ok()) return caster.status();
+  world->caster_ = std::move(*caster);
+  for (const UnitSpec& unit : world->site_.units) {
+    world->frames_.push_back(UniformFrame(unit.projector, 0));
+    world->on_.push_back(true);
+  }
+  return world;
+}
+
+Expected<size_t> World::UnitIndex(NodeId unit) const {
+  for (size_t i = 0; i < site_.units.size(); ++i) {
+    if (site_.units[i].id == unit) return i;
+  }
+  return NotFoundError("world: no unit " + std::to_string(unit) + " in site '" + site_.name + "'");
+}
+
+Status World::SetProjectorFrame(NodeId unit, const cv::Mat& frame) {
+  Expected<size_t> index = UnitIndex(unit);
+  if (!index.ok()) return index.status();
+  const ProjectorSpec& projector = site_.units[*index].projector;
+  Expected<LinearFrame> decoded = DecodeProjectorFrame(projector, frame);
+  if (!decoded.ok()) return decoded.status().WithContext("unit " + std::to_string(unit));
+  frames_[*index] = std::move(*decoded);
+  return OkStatus();
+}
+
+Status World::SetProjectorUniform(NodeId unit, int value) {
+  Expected<size_t> index = UnitIndex(unit);
+  if (!index.ok()) return index.status();
+  if (value < 0 || value > 255) return InvalidArgumentError("uniform value must be in [0, 255]");
+  frames_[*index] = UniformFrame(site_.units[*index].projector, value);
+  return OkStatus();
+}
+
+Status World::SetProjectorOn(NodeId unit, bool on) {
+  Expected<size_t> index = UnitIndex(unit);
+  if (!index.ok()) return index.status();
+  on_[*index] = on;
+  return OkStatus();
+}
+
+std::vector<const LinearFrame*> World::CurrentFrames() const {
+  std::vector<const LinearFrame*> frames;
+  for (size_t i = 0; i < frames_.size(); ++i) frames.push_back(on_[i] ? &frames_[i] : nullptr);
+  return frames;
+}
+
+Expected<const TransportMap*> World::CameraTransport(NodeId unit) {
+  Expected<size_t> index = UnitIndex(unit);
+  if (!index.ok()) return index.status();
+  const UnitSpec& spec = site_.units[*index];
+  if (!spec.camera) return NotFoundError("world: unit " + std::to_string(unit) + " has no camera");
+  auto it = camera_maps_.find(unit);
+  if (it == camera_maps_.end()) {
+    const View view = View::Perspective(spec.camera->model, site_.TableFromCamera(spec));
+    Expected<TransportMap> map = BuildTransportMap(site_, *caster_, view, options_.transport);
+    if (!map.ok()) return map.status();
+    it = camera_maps_.emplace(unit, std::move(*map)).first;
+  }
+  return &it->second;
+}
+
+Expected<cv::Mat> World::Capture(NodeId unit, const CaptureNoise& noise) {
+  Expected<const TransportMap*> map = CameraTransport(unit);
+  if (!map.ok()) return map.status();
+  std::vector<float> luminance;
+  ST_RETURN_IF_ERROR(
+      GatherLuminance(**map, CurrentFrames(), site_.ambient_luminance_nits, &luminance));
+  return SynthesizeCapture(*site_.FindUnit(unit)->camera, (*map)->width_px, (*map)->height_px,
+                           luminance, noise);
+}
+
+Expected<std::vector<float>> World::RenderLuminance(const View& view) {
+  Expected<TransportMap> map = BuildTransportMap(site_, *caster_, view, options_.transport);
+  if (!map.ok()) return map.status();
+  std::vector<float> luminance;
+  ST_RETURN_IF_ERROR(
+      GatherLuminance(*map, CurrentFrames(), site_.ambient_luminance_nits, &luminance));
+  return luminance;
+}
+
+Expected<SurfaceTruth> World::TruthAlongRay(const Eigen::Vector3d& origin,
+                                            const Eigen::Vector3d& direction) const {
+  const RayHit hit = caster_->Intersect(origin, direction);
+  if (!hit.hit) return NotFoundError("world: the ray hits no surface");
+  SurfaceTruth truth;
+  truth.point_in_table_m = origin + hit.distance_m * direction.normalized();
+  truth.normal_in_table = scene_->FaceNormal(hit.triangle);
+  if (truth.normal_in_table.dot(direction) > 0) truth.normal_in_table = -truth.normal_in_table;
+  truth.albedo = scene_->AlbedoAt(hit.triangle, hit.u, hit.v);
+  truth.luminance_nits = truth.albedo * site_.ambient_luminance_nits;
+  for (size_t i = 0; i < site_.units.size(); ++i) {
+    const ProjectorSpec& projector = site_.units[i].projector;
+    ProjectorTruth p;
+    p.unit = site_.units[i].id;
+    p.sample = SampleProjector(projector, *caster_, truth.point_in_table_m, truth.normal_in_table);
+    if (p.sample.visible && on_[i]) {
+      // A point receives the light of the one projector pixel that contains it.
+      const int x = std::clamp(static_cast<int>(std::lround(p.sample.pixel_px.x())), 0,
+                               projector.model.width_px - 1);
+      const int y = std::clamp(static_cast<int>(std::lround(p.sample.pixel_px.y())), 0,
+                               projector.model.height_px - 1);
+      p.luminance_nits = truth.albedo * projector.peak_luminance_at_1m_nits * p.sample.gain_per_m2 *
+                         frames_[i].At(x, y);
+    }
+    truth.luminance_nits += p.luminance_nits;
+    truth.projectors.push_back(p);
+  }
+  return truth;
+}
+
+Expected<SurfaceTruth> World::TruthAtTableXY(const Eigen::Vector2d& xy) const {
+  return TruthAlongRay(Eigen::Vector3d(xy.x(), xy.y(), 100.0), Eigen::Vector3d(0, 0, -1));
+}
+
+cv::Mat LuminanceToImage(const std::vector<float>& luminance, int width, int height,
+                         double white_nits) {
+  cv::Mat out(height, width, CV_8UC1);
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      const double l = std::max(0.0, luminance[static_cast<size_t>(y) * width + x] / white_nits);
+      out.at<uint8_t>(y, x) =
+          static_cast<uint8_t>(std::nearbyint(255.0 * std::min(1.0, std::pow(l, 1.0 / 2.2))));
+    }
+  }
+  return out;
+}
+
+}  // namespace sandtable::sim
