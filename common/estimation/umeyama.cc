@@ -15,6 +15,7 @@ struct UmeyamaSolution {
   double scale = 1.0;
   Eigen::Vector3d mean_source;
   Eigen::Vector3d mean_target;
+  double source_spread_ratio = 0.0;
 };
 
 Eigen::Vector3d Mean(std::span<const Eigen::Vector3d> points) {
@@ -34,8 +35,9 @@ Eigen::Vector3d CentredSingularValues(std::span<const Eigen::Vector3d> points,
 }
 
 Status CheckSpread(std::span<const Eigen::Vector3d> points, const Eigen::Vector3d& mean,
-                   const char* which, double tolerance) {
+                   const char* which, double tolerance, double* spread_ratio) {
   const Eigen::Vector3d s = CentredSingularValues(points, mean);
+  *spread_ratio = s[0] > 0.0 ? s[1] / s[0] : 0.0;
   if (!(s[0] > 0.0) || s[1] < tolerance * s[0]) {
     std::ostringstream m;
     m << "umeyama: the " << which << " points are " << (s[0] > 0.0 ? "collinear" : "all coincident")
@@ -71,10 +73,12 @@ Expected<UmeyamaSolution> Solve(std::span<const Eigen::Vector3d> source,
   UmeyamaSolution solution;
   solution.mean_source = Mean(source);
   solution.mean_target = Mean(target);
-  ST_RETURN_IF_ERROR(
-      CheckSpread(source, solution.mean_source, "source", options.degenerate_relative_tolerance));
-  ST_RETURN_IF_ERROR(
-      CheckSpread(target, solution.mean_target, "target", options.degenerate_relative_tolerance));
+  double target_spread_ratio = 0.0;
+  ST_RETURN_IF_ERROR(CheckSpread(source, solution.mean_source, "source",
+                                 options.degenerate_relative_tolerance,
+                                 &solution.source_spread_ratio));
+  ST_RETURN_IF_ERROR(CheckSpread(target, solution.mean_target, "target",
+                                 options.degenerate_relative_tolerance, &target_spread_ratio));
 
   // Umeyama (1991), eqs. 38-42: with the cross-covariance
   //   Sigma = 1/n sum (y_i - mu_y)(x_i - mu_x)^T = U D V^T,
@@ -141,6 +145,7 @@ Expected<RigidFitReport> FitRigidUmeyama(std::span<const Eigen::Vector3d> points
   report.target_from_source = Rigid3d(
       solution->rotation, solution->mean_target - solution->rotation * solution->mean_source);
   report.num_points = static_cast<int>(points_in_source.size());
+  report.source_spread_ratio = solution->source_spread_ratio;
   FillResiduals(report.target_from_source, points_in_source, points_in_target, &report.residuals_m,
                 &report.rms_m, &report.max_m);
   return report;
@@ -157,6 +162,7 @@ Expected<SimilarityFitReport> FitSimilarityUmeyama(
       Sim3d(solution->scale, rotation,
             solution->mean_target - solution->scale * (solution->rotation * solution->mean_source));
   report.num_points = static_cast<int>(points_in_source.size());
+  report.source_spread_ratio = solution->source_spread_ratio;
   FillResiduals(report.target_from_source, points_in_source, points_in_target, &report.residuals_m,
                 &report.rms_m, &report.max_m);
   return report;

@@ -41,6 +41,10 @@ struct RigidFitReport {
   double rms_m = 0.0;
   double max_m = 0.0;
   int num_points = 0;
+  // sigma_2 / sigma_1 of the centred source points (1 for a well spread set, 0 on a line).
+  // Measured (tests): 16 points over 1.2 m with 0.5 mm noise give 0.28 mm error 0.5 m off the
+  // main axis at ratio 1, 1.3 mm at 0.1, 13 mm at 0.01: check it before trusting the rotation.
+  double source_spread_ratio = 0.0;
 };
 
 struct SimilarityFitReport {
@@ -49,6 +53,10 @@ struct SimilarityFitReport {
   double rms_m = 0.0;
   double max_m = 0.0;
   int num_points = 0;
+  // sigma_2 / sigma_1 of the centred source points (1 for a well spread set, 0 on a line).
+  // Measured (tests): 16 points over 1.2 m with 0.5 mm noise give 0.28 mm error 0.5 m off the
+  // main axis at ratio 1, 1.3 mm at 0.1, 13 mm at 0.01: check it before trusting the rotation.
+  double source_spread_ratio = 0.0;
 };
 
 Expected<RigidFitReport> FitRigidUmeyama(std::span<const Eigen::Vector3d> points_in_source,

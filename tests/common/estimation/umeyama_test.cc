@@ -1,6 +1,7 @@
 #include "common/estimation/umeyama.h"
 
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <random>
 #include <vector>
@@ -140,6 +141,10 @@ TEST(FitRigidUmeyama, NoiseSweepTrackerCalibration) {
     const double mean_rotation_rad = sum_rotation_rad / kTrials;
     const double rotation_bound_rad = 3.0 * sigma_m / (0.35 * std::sqrt(16.0));
     EXPECT_LT(mean_rotation_rad, rotation_bound_rad) << sigma_m;
+    std::printf(
+        "[ measured ] sigma %.0e m, 16 points: mean rms %.3e m (model %.3e m), mean "
+        "rotation error %.2e rad\n",
+        sigma_m, mean_rms_m, expected_rms_m, mean_rotation_rad);
   }
 }
 
@@ -156,6 +161,61 @@ TEST(FitRigidUmeyama, NearlyCollinearStillSolvedAboveTolerance) {
   ASSERT_TRUE(fit.ok()) << fit.status().ToString();
   constexpr double kNearlyCollinearTolerance_m = 1e-12;
   EXPECT_LT(fit->rms_m, kNearlyCollinearTolerance_m);
+}
+
+TEST(FitRigidUmeyama, NearlyCollinearBreakdownWithNoise) {
+  // 16 points along a 1.2 m line with an off-line spread of ratio * 1.2 m, 0.5 mm noise: the
+  // rotation about the line is determined by the off-line spread only, so the error it causes
+  // at a point 0.5 m off the line grows as 1 / ratio. Records where it passes 1 mm; below the
+  // 1e-9 tolerance the fit is refused.
+  constexpr double kNoise_m = 5e-4;
+  constexpr double kLever_m = 0.5;
+  for (double ratio : {1.0, 3e-1, 1e-1, 3e-2, 1e-2, 1e-3, 1e-6, 1e-11}) {
+    std::mt19937_64 rng(8);
+    std::uniform_real_distribution<double> u(-0.5, 0.5);
+    std::normal_distribution<double> noise(0.0, kNoise_m);
+    double sum_sq_m = 0.0;
+    int num_ok = 0, num_refused = 0;
+    constexpr int kTrials = 50;
+    for (int trial = 0; trial < kTrials; ++trial) {
+      std::vector<Eigen::Vector3d> source;
+      for (int i = 0; i < 16; ++i) {
+        source.emplace_back(1.2 * u(rng), ratio * 1.2 * u(rng), ratio * 1.2 * u(rng));
+      }
+      const Rigid3d truth(RandomRotation(rng), Eigen::Vector3d(0.1, 0.2, 0.3));
+      auto target = Apply(Sim3d(truth), source);
+      if (ratio > 1e-9) {
+        for (Eigen::Vector3d& p : target) p += Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+      }
+      auto fit = FitRigidUmeyama(source, target);
+      if (!fit.ok()) {
+        EXPECT_EQ(fit.status().code(), StatusCode::kDegenerate);
+        ++num_refused;
+        continue;
+      }
+      ++num_ok;
+      // Sampling: sigma_2 is the larger of the two off-line spreads of 16 uniform points.
+      constexpr double kSpreadRatioFactor = 3.0;
+      if (ratio <= 1e-1) {
+        EXPECT_LT(fit->source_spread_ratio, kSpreadRatioFactor * ratio);
+        EXPECT_GT(fit->source_spread_ratio, ratio / kSpreadRatioFactor);
+      }
+      const Eigen::Vector3d probe(0.0, kLever_m, 0.0);
+      sum_sq_m += (fit->target_from_source * probe - truth * probe).squaredNorm();
+    }
+    const double rms_probe_mm = num_ok > 0 ? 1e3 * std::sqrt(sum_sq_m / num_ok) : 0.0;
+    std::printf(
+        "[ measured ] off-line ratio %.0e, 0.5 mm noise: error 0.5 m off the line "
+        "%.3f mm rms over %d fits, %d refused\n",
+        ratio, rms_probe_mm, num_ok, num_refused);
+    if (ratio < 1e-9) {
+      EXPECT_EQ(num_refused, kTrials);
+    } else {
+      EXPECT_EQ(num_ok, kTrials);
+    }
+    constexpr double kWellConditionedMax_mm = 1.0;
+    if (ratio >= 3e-1) EXPECT_LT(rms_probe_mm, kWellConditionedMax_mm);
+  }
 }
 
 TEST(FitRigidUmeyama, RejectsBadInput) {
