@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <numbers>
 #include <random>
@@ -191,6 +192,61 @@ TEST(BuildTableFrame, NoisyPointsReportHeight) {
   constexpr double kMaxExpectedHeight_m = 5e-3;
   EXPECT_GT(frame->max_abs_height_m, kMinExpectedHeight_m);
   EXPECT_LT(frame->max_abs_height_m, kMaxExpectedHeight_m);
+}
+
+TEST(BuildTableFrame, NearTieStability) {
+  // A 1.2 m x (1.2 m - delta) table outline (200 points on its edges) with 1 mm in-plane
+  // noise, long side at 20 deg to the source +x. Records how often +x ends up along the short
+  // side (a 90 deg flip) and the jitter of the x axis about z otherwise.
+  constexpr double kNoise_m = 1e-3;
+  constexpr double kLong_m = 1.2;
+  const double a = DegToRad(20.0);
+  const Eigen::Vector3d ex(std::cos(a), std::sin(a), 0.0), ey(-std::sin(a), std::cos(a), 0.0);
+  for (double delta_m : {0.0, 1e-3, 3e-3, 1e-2, 3e-2}) {
+    std::mt19937_64 rng(12);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    std::normal_distribution<double> noise(0.0, kNoise_m);
+    const double short_m = kLong_m - delta_m;
+    int flips = 0;
+    double sum_sq_angle_rad = 0.0;
+    constexpr int kTrials = 100;
+    for (int trial = 0; trial < kTrials; ++trial) {
+      std::vector<Eigen::Vector3d> points;
+      for (int i = 0; i < 200; ++i) {
+        const double s = u(rng);
+        const int side = i % 4;
+        const double x = side == 0   ? s * kLong_m
+                         : side == 1 ? kLong_m
+                         : side == 2 ? s * kLong_m
+                                     : 0.0;
+        const double y = side == 0   ? 0.0
+                         : side == 1 ? s * short_m
+                         : side == 2 ? short_m
+                                     : s * short_m;
+        points.push_back((x + noise(rng)) * ex + (y + noise(rng)) * ey);
+      }
+      auto frame = BuildTableFrame(Plane{Eigen::Vector3d::UnitZ(), 0.0}, points,
+                                   Eigen::Vector3d(0.5, 0.5, 1.0));
+      ASSERT_TRUE(frame.ok());
+      const Eigen::Vector3d x_axis = frame->table_from_source.RotationMatrix().row(0).transpose();
+      if (std::abs(x_axis.dot(ex)) < std::abs(x_axis.dot(ey))) {
+        ++flips;
+      } else {
+        const double angle_rad = std::asin(std::abs(x_axis.cross(ex).z()));
+        sum_sq_angle_rad += angle_rad * angle_rad;
+      }
+    }
+    const double jitter_deg =
+        flips < kTrials ? RadToDeg(std::sqrt(sum_sq_angle_rad / (kTrials - flips))) : 0.0;
+    std::printf(
+        "[ measured ] sides differ by %.0f mm, 1 mm noise: %d/%d frames with +x along "
+        "the short side; x-axis jitter %.3f deg rms otherwise\n",
+        MToMm(delta_m), flips, kTrials, jitter_deg);
+    constexpr double kClearTie_m = 1e-2;  // 10 noise sigmas
+    if (delta_m >= kClearTie_m) EXPECT_EQ(flips, 0) << delta_m;
+    constexpr double kMaxJitter_deg = 0.5;
+    EXPECT_LT(jitter_deg, kMaxJitter_deg);
+  }
 }
 
 TEST(BuildTableFrame, RejectsBadInput) {
