@@ -174,23 +174,27 @@ Expected<cv::Mat> SynthesizeCapture(const CameraSpec& camera, int width, int hei
   const double well = camera.full_well_e;
   const bool shot = noise.enabled && well > 0;
   const bool read = noise.enabled && camera.read_noise_dn > 0;
+  const double read_variance_dn2 = read ? camera.read_noise_dn * camera.read_noise_dn : 0.0;
   for (int y = 0; y < height; ++y) {
     Rng rng(noise.seed * 0x100000001B3ull + static_cast<uint64_t>(y) + 1);
     const float* l = &luminance[static_cast<size_t>(y) * width];
     for (int x = 0; x < width; ++x) {
-      double s = l[x] * scale;  // linear, full scale = 1
+      const double s = l[x] * scale;  // linear, full scale = 1
+      double dn_linear = s * max_dn;
       if (shot) {
         const double electrons = s * well;
-        double counted;
         if (electrons < 32.0) {
-          counted = rng.SmallPoisson(electrons);
+          dn_linear = rng.SmallPoisson(electrons) / well * max_dn;
+          if (read) dn_linear += camera.read_noise_dn * rng.Gaussian();
         } else {
-          counted = electrons + std::sqrt(electrons) * rng.Gaussian();
+          // Poisson (Gaussian limit, variance = electrons) and read noise are independent
+          // Gaussians: one draw with the summed variance, in DN.
+          const double shot_dn = std::sqrt(electrons) / well * max_dn;
+          dn_linear += std::sqrt(shot_dn * shot_dn + read_variance_dn2) * rng.Gaussian();
         }
-        s = counted / well;
+      } else if (read) {
+        dn_linear += camera.read_noise_dn * rng.Gaussian();
       }
-      double dn_linear = s * max_dn;
-      if (read) dn_linear += camera.read_noise_dn * rng.Gaussian();
       double encoded = std::clamp(dn_linear / max_dn, 0.0, 1.0);
       if (!linear) encoded = std::pow(encoded, inverse_gamma);
       const double dn = std::nearbyint(encoded * max_dn);
