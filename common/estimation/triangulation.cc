@@ -257,9 +257,9 @@ Expected<TriangulationReport> TriangulatePoint(std::span<const TriangulationView
   }
   report.point_in_world = point;
   report.rms_px = std::sqrt(cost / static_cast<double>(views.size()));
-  report.min_depth = std::numeric_limits<double>::infinity();
+  report.min_depth_m = std::numeric_limits<double>::infinity();
   for (const PreparedView& view : prepared) {
-    report.min_depth = std::min(report.min_depth, Depth(view, point));
+    report.min_depth_m = std::min(report.min_depth_m, Depth(view, point));
     double r[2];
     Residual(view, point.data(), r);
     report.max_px = std::max(report.max_px, std::hypot(r[0], r[1]));

@@ -23,6 +23,7 @@
 //   - DEGENERATE: the triangulation angle (the largest angle between any two of the rays) is
 //     below options.min_angle_deg: "triangulation: rays meet at 0.0123 deg, below the 1 deg
 //     minimum ...". This is also how near-parallel rays are refused; nothing is returned.
+//     With min_angle_deg = 0, rays parallel to ~1e-7 rad still give DEGENERATE (midpoint).
 //   - OUT_OF_RANGE: the point lies at or behind some camera (depth <= 0 in that camera).
 // A successful result is always finite. The reprojection error is reported, not judged: the
 // caller decides which rms_px is acceptable for its data.
@@ -65,7 +66,7 @@ struct TriangulationReport {
   double max_px = 0.0;           // largest reprojection error of one view, px
   double midpoint_rms_px = 0.0;  // RMS reprojection error of the midpoint estimate, px
   double angle_deg = 0.0;        // triangulation angle: largest angle between two rays
-  double min_depth = 0.0;  // smallest depth (camera z) of the point over the views, world unit
+  double min_depth_m = 0.0;  // smallest depth (camera z) of the point over the views, world unit
   int num_views = 0;
   int iterations = 0;    // refinement iterations run (0 when refine is off)
   bool refined = false;  // the refined point replaced the midpoint

@@ -89,7 +89,7 @@ TEST(TriangulatePoint, ExactAtZeroNoiseForTwoToEightViews) {
       constexpr double kAngleTolerance_deg = 1e-6;
       EXPECT_NEAR(report->angle_deg, angle_deg, kAngleTolerance_deg);
       EXPECT_EQ(report->num_views, num_views);
-      EXPECT_GT(report->min_depth, 0.0);
+      EXPECT_GT(report->min_depth_m, 0.0);
     }
   }
 }
