@@ -226,7 +226,7 @@ Expected<HomographyRansacResult> EstimateHomographyRansac(
   ransac.seed = options.seed;
   const HomographyRansacEstimator estimator(points_from, points_to);
   auto found = Ransac(estimator, ransac);
-  if (!found.ok()) return found.status().WithContext("homography: ");
+  if (!found.ok()) return found.status().WithContext("homography");
 
   HomographyRansacResult result;
   result.to_from_from = found->model;

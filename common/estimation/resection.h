@@ -86,7 +86,10 @@ struct ResectionOptions {
 
   // Coplanarity gate for the DLT (see the pipeline above): below this out_of_plane_ratio the
   // DLT is refused with free intrinsics, and the DLT-with-known-K candidate is skipped with
-  // fixed intrinsics.
+  // fixed intrinsics. Measured (200 points, 1 m cloud, 0.5 px noise, all 15 parameters free):
+  // focal error ~1 % at ratio 0.02-0.06, 0.2 % at 0.2; with the gate off, a noise-free cloud at
+  // ratio 2e-3 converged to fx off by 25 %: the gate prevents such silent wrong answers.
+  // Lower it only with fewer free parameters or a better-spread cloud.
   double coplanar_ratio_threshold = 1e-2;
   // With fixed intrinsics, below this ratio the homography candidate is also tried.
   double homography_init_ratio = 5e-2;

@@ -1,0 +1,132 @@
+#include "common/estimation/resection_refine.h"
+
+#include <cmath>
+#include <memory>
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+namespace sandtable::internal {
+namespace {
+
+// Reprojection residual of one point, in px (observed minus predicted). Parameter blocks:
+// intrinsics (fx, fy, cx, cy), distortion (k1 k2 p1 p2 k3, common/camera order), rotation as
+// angle-axis (rad), translation (world unit); x_c = R(aa) X + t. The distortion is the very
+// ApplyBrownDistortion template the camera model uses, so the refined model projects exactly
+// as CameraModel::Project does.
+struct ReprojectionCost {
+  ReprojectionCost(const Eigen::Vector3d& point_in_world, const Eigen::Vector2d& observed_px)
+      : point_in_world(point_in_world), observed_px(observed_px) {}
+
+  template <typename T>
+  bool operator()(const T* intrinsics, const T* distortion, const T* rotation_aa,
+                  const T* translation, T* residual) const {
+    const T x_w[3] = {T(point_in_world.x()), T(point_in_world.y()), T(point_in_world.z())};
+    T x_c[3];
+    ceres::AngleAxisRotatePoint(rotation_aa, x_w, x_c);
+    x_c[0] += translation[0];
+    x_c[1] += translation[1];
+    x_c[2] += translation[2];
+    // A point at or behind the camera has no projection; report the residual as not
+    // computable so the step that produced it is rejected.
+    if (!(x_c[2] > T(0.0))) return false;
+    const T x = x_c[0] / x_c[2];
+    const T y = x_c[1] / x_c[2];
+    T xd, yd;
+    ApplyBrownDistortion(distortion, x, y, &xd, &yd);
+    residual[0] = T(observed_px.x()) - (intrinsics[0] * xd + intrinsics[2]);
+    residual[1] = T(observed_px.y()) - (intrinsics[1] * yd + intrinsics[3]);
+    return true;
+  }
+
+  Eigen::Vector3d point_in_world;
+  Eigen::Vector2d observed_px;
+};
+
+}  // namespace
+
+int NumFreeResectionParameters(const ResectionOptions& options) {
+  int p = 0;
+  if (!options.fix_intrinsics) p += 4;
+  if (!options.fix_distortion) p += options.fix_k3 ? 4 : 5;
+  if (!options.fix_pose) p += 6;
+  return p;
+}
+
+Expected<ResectionRefineOutput> RefineResection(std::span<const Eigen::Vector3d> points_in_world,
+                                                std::span<const Eigen::Vector2d> points_in_image_px,
+                                                const CameraModel& camera,
+                                                const Rigid3d& camera_from_world,
+                                                const ResectionOptions& options) {
+  double intrinsics[4] = {camera.fx_px, camera.fy_px, camera.cx_px, camera.cy_px};
+  std::array<double, 5> distortion = camera.distortion.ToArray();
+  double rotation_aa[3];
+  const Eigen::Matrix3d r = camera_from_world.RotationMatrix();
+  ceres::RotationMatrixToAngleAxis(ceres::ColumnMajorAdapter3x3(r.data()), rotation_aa);
+  double translation[3] = {camera_from_world.translation.x(), camera_from_world.translation.y(),
+                           camera_from_world.translation.z()};
+
+  ceres::Problem problem;
+  for (size_t i = 0; i < points_in_world.size(); ++i) {
+    ceres::LossFunction* loss = nullptr;
+    switch (options.loss) {
+      case ResectionLoss::kSquared:
+        break;
+      case ResectionLoss::kHuber:
+        loss = new ceres::HuberLoss(options.loss_scale_px);
+        break;
+      case ResectionLoss::kCauchy:
+        loss = new ceres::CauchyLoss(options.loss_scale_px);
+        break;
+    }
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<ReprojectionCost, 2, 4, 5, 3, 3>(
+                                 new ReprojectionCost(points_in_world[i], points_in_image_px[i])),
+                             loss, intrinsics, distortion.data(), rotation_aa, translation);
+  }
+  if (options.fix_intrinsics) problem.SetParameterBlockConstant(intrinsics);
+  if (options.fix_distortion) {
+    problem.SetParameterBlockConstant(distortion.data());
+  } else if (options.fix_k3) {
+    problem.SetManifold(distortion.data(), new ceres::SubsetManifold(5, {4}));
+  }
+  if (options.fix_pose) {
+    problem.SetParameterBlockConstant(rotation_aa);
+    problem.SetParameterBlockConstant(translation);
+  }
+
+  ceres::Solver::Options solver;
+  solver.linear_solver_type = ceres::DENSE_QR;
+  solver.max_num_iterations = options.max_iterations;
+  solver.function_tolerance = options.function_tolerance;
+  solver.parameter_tolerance = options.parameter_tolerance;
+  solver.gradient_tolerance = options.gradient_tolerance;
+  solver.logging_type = ceres::SILENT;
+  solver.num_threads = 1;
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver, &problem, &summary);
+
+  ResectionRefineOutput out;
+  out.termination = ceres::TerminationTypeToString(summary.termination_type);
+  out.message = summary.message;
+  out.converged = summary.termination_type == ceres::CONVERGENCE;
+  out.iterations = summary.num_successful_steps + summary.num_unsuccessful_steps;
+  out.camera =
+      CameraModel(camera.width_px, camera.height_px, intrinsics[0], intrinsics[1], intrinsics[2],
+                  intrinsics[3], BrownDistortion::FromArray(distortion.data()));
+  Eigen::Matrix3d refined_r;
+  ceres::AngleAxisToRotationMatrix(rotation_aa, ceres::ColumnMajorAdapter3x3(refined_r.data()));
+  // A fixed pose is returned bit for bit (the angle-axis round trip would perturb the last
+  // digits of the quaternion).
+  out.camera_from_world =
+      options.fix_pose
+          ? camera_from_world
+          : Rigid3d(refined_r, Eigen::Vector3d(translation[0], translation[1], translation[2]));
+  if (summary.termination_type == ceres::FAILURE || !out.camera_from_world.AllFinite() ||
+      !out.camera.Check().ok()) {
+    return NotConvergedError("resection refinement failed (" + out.termination +
+                             "): " + summary.message);
+  }
+  return out;
+}
+
+}  // namespace sandtable::internal
