@@ -1,13 +1,14 @@
 #include "common/structured_light/decoder_kernels.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <numbers>
 
 #include "common/structured_light/decoder.h"
 
-// Built with -O3 (see CMakeLists.txt) so that GCC vectorises these loops at any build type.
+// Built with -O3 -fno-math-errno -fno-trapping-math (see CMakeLists.txt) so that GCC vectorises these loops at any build type.
 // Every loop body is straight-line code: comparisons become masks, ternaries become blends.
 // target_clones builds an AVX2 variant next to the baseline one and picks it at load time.
 #if defined(__GNUC__) && defined(__x86_64__) && !defined(__clang__)
@@ -122,23 +123,30 @@ void FinishRow(const uint8_t* __restrict white, const uint8_t* __restrict black,
                int shadow_threshold, int max_weak_bits, const uint8_t* __restrict axis_flags,
                uint8_t* __restrict flags, float* __restrict uv, uint8_t* __restrict valid,
                float* __restrict confidence) {
-  const float nan = std::numeric_limits<float>::quiet_NaN();
+  // Two loops, because GCC 12 does not vectorise a select between floats on a mask computed
+  // from bytes: the float pass blends by bit masks instead.
   for (int x = 0; x < n; ++x) {
     const int lit_range = static_cast<int>(white[x]) - static_cast<int>(black[x]);
+    const int weak = std::max(weak_bits_u[x], weak_bits_v[x]);
     const uint8_t f = static_cast<uint8_t>(
         axis_flags[x] | (lit_range <= shadow_threshold ? kDecodeShadow : 0) |
-        (std::max(weak_bits_u[x], weak_bits_v[x]) > max_weak_bits ? kDecodeLowContrast : 0) |
+        (weak > max_weak_bits ? kDecodeLowContrast : 0) |
         (saturated[x] != 0 ? kDecodeSaturated : 0));
-    const bool ok = f == 0;
     flags[x] = f;
-    valid[x] = ok ? 255 : 0;
-    uv[2 * x] = ok ? position_u[x] : nan;
-    uv[2 * x + 1] = ok ? position_v[x] : nan;
+    valid[x] = f == 0 ? 255 : 0;
+  }
+  const uint32_t nan_bits = std::bit_cast<uint32_t>(std::numeric_limits<float>::quiet_NaN());
+  const float infinity = std::numeric_limits<float>::infinity();
+  for (int x = 0; x < n; ++x) {
+    const uint32_t keep = 0u - static_cast<uint32_t>(flags[x] == 0);
+    const uint32_t u = std::bit_cast<uint32_t>(position_u[x]);
+    const uint32_t v = std::bit_cast<uint32_t>(position_v[x]);
     const float modulation = std::min(modulation_u[x], modulation_v[x]);
-    const float signal = modulation < std::numeric_limits<float>::infinity()
-                             ? modulation
-                             : static_cast<float>(min_contrast[x]);
-    confidence[x] = ok ? signal : 0.0f;
+    const float contrast = static_cast<float>(min_contrast[x]);
+    const float signal = modulation < infinity ? modulation : contrast;
+    uv[2 * x] = std::bit_cast<float>((u & keep) | (nan_bits & ~keep));
+    uv[2 * x + 1] = std::bit_cast<float>((v & keep) | (nan_bits & ~keep));
+    confidence[x] = std::bit_cast<float>(std::bit_cast<uint32_t>(signal) & keep);
   }
 }
 
