@@ -25,6 +25,7 @@ set datafile missing "nan"
 set key top left box opaque
 set grid
 set format y '%g'
+set format x '%g'
 # A row of the routine that succeeded (status_col is set by each plot).
 ok(routine) = strcol(1) eq routine && strcol(status_col) eq "ok"
 any(routine) = strcol(1) eq routine
