@@ -2,7 +2,14 @@
 //
 //   sandtable-coordinator [--requests tcp://127.0.0.1:*] [--events tcp://127.0.0.1:*]
 //                         [--curve-keys site.key] [--heartbeat-ms 100] [--misses 5]
+//                         [--annotations FILE.db] [--annotation-sync full|normal]
+//                         [--export-session FILE.jsonl] [--import-session FILE.jsonl]
 //   sandtable-coordinator --generate-curve-keys site.key
+//
+// --annotations: the SQLite database of annotation events (created when absent). Without it
+// annotations live in memory only (a warning says so). A damaged database: the coordinator
+// refuses to start and says why (exit code 1). --export-session / --import-session work on the
+// database and exit (docs/coordinator.md).
 //
 // On start it prints one line on stdout, for operators and tests:
 //   sandtable-coordinator requests=tcp://127.0.0.1:40001 events=tcp://127.0.0.1:40002
@@ -11,9 +18,12 @@
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
+#include <memory>
 #include <string>
 
 #include "common/base/log.h"
+#include "coordinator/annotations/annotation_service.h"
+#include "coordinator/annotations/session_file.h"
 #include "coordinator/membership/coordinator_server.h"
 
 namespace {
@@ -25,6 +35,8 @@ int Usage(const char* why) {
   std::cerr << "sandtable-coordinator: " << why << "\n"
             << "usage: sandtable-coordinator [--requests ENDPOINT] [--events ENDPOINT]\n"
             << "         [--curve-keys FILE] [--heartbeat-ms N] [--misses N]\n"
+            << "         [--annotations FILE.db] [--annotation-sync full|normal]\n"
+            << "         [--export-session FILE.jsonl] [--import-session FILE.jsonl]\n"
             << "       sandtable-coordinator --generate-curve-keys FILE\n";
   return 2;
 }
@@ -35,6 +47,9 @@ int main(int argc, char** argv) {
   using namespace sandtable;
   SetLogTag("coordinator");
   coordinator::CoordinatorOptions options;
+  std::string annotations_path = ":memory:";
+  coordinator::AnnotationStoreOptions store_options;
+  std::string export_path, import_path;
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
     if (i + 1 >= argc) return Usage(("missing value after " + flag).c_str());
@@ -60,16 +75,54 @@ int main(int argc, char** argv) {
       options.membership.heartbeat_period = std::chrono::milliseconds(std::atoi(value.c_str()));
     } else if (flag == "--misses") {
       options.membership.misses_allowed = std::atoi(value.c_str());
+    } else if (flag == "--annotations") {
+      annotations_path = value;
+    } else if (flag == "--annotation-sync") {
+      if (value != "full" && value != "normal") return Usage("--annotation-sync: full or normal");
+      store_options.sync =
+          value == "full" ? coordinator::SyncMode::kFull : coordinator::SyncMode::kNormal;
+    } else if (flag == "--export-session") {
+      export_path = value;
+    } else if (flag == "--import-session") {
+      import_path = value;
     } else {
       return Usage(("unknown flag " + flag).c_str());
     }
   }
+  Expected<std::unique_ptr<coordinator::AnnotationStore>> store =
+      coordinator::AnnotationStore::Open(annotations_path, store_options);
+  if (!store.ok()) {
+    std::cerr << "sandtable-coordinator: cannot open annotations: " << store.status().ToString()
+              << "\n";
+    return 1;
+  }
+  if (annotations_path == ":memory:") {
+    ST_LOG(kWarning) << "annotations are kept in memory only (no --annotations FILE): a restart "
+                        "loses them";
+  } else {
+    ST_LOG(kInfo) << "annotations: " << annotations_path << ", " << (*store)->events_loaded()
+                  << " events restored, " << (*store)->state().strokes().size() << " strokes";
+  }
+  if (!import_path.empty() || !export_path.empty()) {
+    Expected<size_t> n = !import_path.empty()
+                             ? coordinator::ImportSession(import_path, store->get())
+                             : coordinator::ExportSession(**store, export_path);
+    if (!n.ok()) {
+      std::cerr << "sandtable-coordinator: " << n.status().ToString() << "\n";
+      return 1;
+    }
+    std::cout << (import_path.empty() ? "exported " : "imported ") << *n << " events\n";
+    return 0;
+  }
+  coordinator::AnnotationService annotations(store->get());
+
   struct sigaction action {};
   action.sa_handler = OnSignal;
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
 
   coordinator::CoordinatorServer server(options);
+  server.AddService(&annotations);
   Status started = server.Start();
   if (!started.ok()) {
     ST_LOG(kError) << "cannot start: " << started.ToString();

@@ -18,6 +18,8 @@ uint64_t NewIncarnation() {
 Status CoordinatorOptions::Check() const {
   ST_RETURN_IF_ERROR(membership.Check());
   ST_RETURN_IF_ERROR(limits.Check());
+  if (step_period.count() <= 0)
+    return InvalidArgumentError("coordinator: step_period must be > 0 ms");
   if (republish_period.count() <= 0) {
     return InvalidArgumentError("coordinator: republish_period must be > 0 ms");
   }
@@ -79,6 +81,7 @@ Status CoordinatorServer::Step(std::chrono::milliseconds max_wait) {
     if (!in->has_value()) break;
     HandleRequest(std::move(**in));
   }
+  for (CoordinatorService* service : services_) ST_RETURN_IF_ERROR(service->OnStep(*this));
   const Clock::time_point now = Clock::now();
   for (NodeId id : members_.ExpireSilent(now)) {
     ST_LOG(kInfo) << "node " << id << " declared dead (silent for more than "
@@ -94,12 +97,16 @@ Status CoordinatorServer::Step(std::chrono::milliseconds max_wait) {
 
 Status CoordinatorServer::Run(const std::atomic<bool>& stop) {
   while (!stop.load()) {
-    ST_RETURN_IF_ERROR(Step(std::chrono::milliseconds(50)));
+    ST_RETURN_IF_ERROR(Step(options_.step_period));
   }
   return OkStatus();
 }
 
 Status CoordinatorServer::Publish(wire::Envelope event) { return events_->Send(std::move(event)); }
+
+Status CoordinatorServer::Reply(wire::Envelope reply, const std::string& routing_id) {
+  return requests_->Send(std::move(reply), routing_id);
+}
 
 Status CoordinatorServer::PublishMemberList() {
   wire::Envelope envelope;
@@ -113,6 +120,12 @@ void CoordinatorServer::HandleRequest(net::Incoming request) {
   const wire::Envelope& in = request.envelope;
   const NodeId sender = in.sender_id();
   const Clock::time_point now = Clock::now();
+  for (CoordinatorService* service : services_) {
+    if (service->Serves(in.body_case())) {
+      service->OnRequest(std::move(request), *this);
+      return;
+    }
+  }
   wire::Envelope reply;
   switch (in.body_case()) {
     case wire::Envelope::kHello: {

@@ -4,8 +4,10 @@
 // TimeRequest -> TimeReply) and a PUB for events (MemberList on every change and every
 // republish_period for late subscribers; later tracker, cursor, annotation and timeline
 // events through Publish()). Any other request is answered with Rejected and counted as
-// wrong_type; invalid messages are counted and dropped. Single-threaded: call Step() in a
-// loop (or Run()). Never throws; failures of sockets come back as Status.
+// wrong_type, unless a CoordinatorService added with AddService() serves it (annotations,
+// tracker calibration, timeline: issue 6); invalid messages are counted and dropped.
+// Single-threaded: call Step() in a loop (or Run()). Never throws; failures of sockets come back as
+// Status.
 #pragma once
 
 #include <atomic>
@@ -13,6 +15,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "coordinator/membership/membership_table.h"
 #include "net/channel.h"
@@ -23,11 +26,28 @@ namespace sandtable::coordinator {
 // The coordinator's sender id on the wire (nodes use their NodeId).
 constexpr uint32_t kCoordinatorSenderId = 0xFFFFFFF0u;
 
+class CoordinatorServer;
+
+// A concern of the coordinator that serves some request bodies and/or does periodic work
+// (tracker polling, publishing). Called on the server's thread only.
+class CoordinatorService {
+ public:
+  virtual ~CoordinatorService() = default;
+  // True if this service handles requests with this body.
+  virtual bool Serves(wire::Envelope::BodyCase body) const = 0;
+  // One request it serves; reply now with server.Reply(), or later (e.g. after a commit).
+  virtual void OnRequest(net::Incoming request, CoordinatorServer& server) = 0;
+  // After every drain of the request socket (at least every step_period).
+  virtual Status OnStep(CoordinatorServer& server) = 0;
+};
+
 struct CoordinatorOptions {
   std::string request_endpoint = "tcp://127.0.0.1:*";  // ROUTER
   std::string event_endpoint = "tcp://127.0.0.1:*";    // PUB
   MembershipOptions membership;
   std::chrono::milliseconds republish_period{1000};
+  // Longest wait for requests in Run(): services polling a tracker at 100 Hz need <= 5 ms.
+  std::chrono::milliseconds step_period{50};
   std::optional<net::CurveKeyPair> curve;  // site keys: require CURVE on both sockets
   proto::CodecLimits limits;
 
@@ -51,6 +71,11 @@ class CoordinatorServer {
 
   // Publishes an event (body set by the caller) to every subscriber.
   Status Publish(wire::Envelope event);
+  // Sends a reply (body set by the caller) to the requester with this routing id.
+  Status Reply(wire::Envelope reply, const std::string& routing_id);
+
+  // Adds a service (not owned; must outlive the server). Services are asked in order.
+  void AddService(CoordinatorService* service) { services_.push_back(service); }
 
   const MembershipTable& members() const { return members_; }
   const proto::MessageCounters& counters() const { return counters_; }
@@ -67,6 +92,7 @@ class CoordinatorServer {
   std::unique_ptr<net::Channel> events_;
   std::string request_endpoint_, event_endpoint_;
   MembershipTable members_;
+  std::vector<CoordinatorService*> services_;
   uint64_t published_version_ = ~uint64_t{0};
   Clock::time_point last_publish_{};
 };
