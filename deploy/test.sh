@@ -16,6 +16,12 @@ cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 echo "test.sh: building with $jobs jobs"
 cmake --build "$build" -j "$jobs"
 
+# Bounded libFuzzer run over the message handlers (clang + libFuzzer from Debian); falls back
+# to replaying the checked-in corpus when libFuzzer is missing. FUZZ_SECONDS=0 skips it.
+if [ "${FUZZ_SECONDS:-60}" != 0 ]; then
+  FUZZ_JOBS="$jobs" bash "$root/deploy/fuzz.sh" "${FUZZ_SECONDS:-60}" "${build}-fuzz"
+fi
+
 echo "test.sh: running tests"
 cd "$build"
 ctest --output-on-failure -j "$jobs" --timeout 600

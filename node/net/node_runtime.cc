@@ -39,6 +39,7 @@ NodeRuntime::~NodeRuntime() {
   peers_.clear();
   coordinator_.reset();
   events_.reset();
+  if (peer_monitor_) peer_monitor_->Stop();
   peer_router_.reset();
   if (zap_) zap_->Stop();
 }
@@ -61,6 +62,11 @@ Status NodeRuntime::Start() {
   }
   auto router = net::Socket::Create(&context_, net::SocketType::kRouter, server);
   if (!router.ok()) return router.status();
+  if (options_.curve) {
+    // Logs peers refused during the handshake (no CURVE at all never reaches ZAP).
+    peer_monitor_ = std::make_unique<net::HandshakeMonitor>();
+    ST_RETURN_IF_ERROR(peer_monitor_->Attach(&context_, router->get(), "node peer router"));
+  }
   Expected<std::string> bound = (*router)->Bind(options_.peer_bind);
   if (!bound.ok()) return bound.status().WithContext("peer socket");
   peer_endpoint_ = *bound;

@@ -18,6 +18,7 @@
 #include "common/base/ids.h"
 #include "net/channel.h"
 #include "net/curve.h"
+#include "net/handshake_monitor.h"
 #include "node/net/clock_offset_estimator.h"
 
 namespace sandtable::node {
@@ -80,6 +81,7 @@ class NodeRuntime {
   uint64_t incarnation_ = 0;
   zmq::context_t context_;
   std::unique_ptr<net::ZapHandler> zap_;
+  std::unique_ptr<net::HandshakeMonitor> peer_monitor_;
   proto::MessageCounters counters_;
   std::unique_ptr<net::Channel> coordinator_;
   std::unique_ptr<net::Channel> events_;

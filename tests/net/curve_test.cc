@@ -8,6 +8,7 @@
 #include <set>
 
 #include "net/channel.h"
+#include "net/handshake_monitor.h"
 #include "tests/net/test_wait.h"
 
 namespace sandtable::net {
@@ -53,8 +54,11 @@ TEST(CurveTest, OnlyClientsWithTheSiteKeyAreServed) {
   server_options.curve = ServerCurve(site);
   auto router = Socket::Create(&context, SocketType::kRouter, server_options);
   ASSERT_TRUE(router.ok()) << router.status().ToString();
+  HandshakeMonitor monitor;
+  ASSERT_TRUE(monitor.Attach(&context, router->get(), "test router").ok());
   const std::string endpoint = *(*router)->Bind("tcp://127.0.0.1:*");
   Channel server(std::move(*router), 0, 1, &counters);
+  ::testing::internal::CaptureStderr();
 
   auto make_client = [&](const CurveSettings& curve, uint32_t id) {
     SocketOptions options;
@@ -82,7 +86,15 @@ TEST(CurveTest, OnlyClientsWithTheSiteKeyAreServed) {
   EXPECT_EQ(zap.accepted(), 1u);
   // Nothing else gets through.
   EXPECT_FALSE(testing::ReceiveWithin(&server, kRefusalWindow).has_value());
+  // Both refusals are logged: the wrong key by ZAP and by the monitor (authentication), the
+  // client without CURVE by the monitor alone (it never reaches ZAP).
+  ASSERT_TRUE(testing::WaitFor([&] { return monitor.failed_handshakes() >= 2; }, kDeadline));
+  monitor.Stop();
   zap.Stop();
+  const std::string log = ::testing::internal::GetCapturedStderr();
+  EXPECT_NE(log.find("security mechanism mismatch"), std::string::npos) << log;
+  EXPECT_NE(log.find("key not authorized"), std::string::npos) << log;
+  EXPECT_EQ(monitor.succeeded_handshakes(), 1u);
 }
 
 }  // namespace
