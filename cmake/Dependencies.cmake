@@ -20,6 +20,7 @@ pkg_check_modules(LIBUSB REQUIRED IMPORTED_TARGET libusb-1.0)   # PkgConfig::LIB
 
 if(SANDTABLE_BUILD_TESTS)
   find_package(GTest REQUIRED)                        # GTest::gtest, GTest::gmock
+  find_package(Python3 REQUIRED COMPONENTS Interpreter)  # tests/check_layering.py
   include(GoogleTest)
 endif()
 if(SANDTABLE_BUILD_BENCHMARKS)
