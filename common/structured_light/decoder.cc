@@ -29,6 +29,8 @@ struct RowScratch {
         weak_v(width),
         saturated(width),
         flags(width),
+        weakest_contrast(width),
+        weakest_bit(width),
         position_u(width),
         position_v(width),
         modulation_u(width),
@@ -37,6 +39,7 @@ struct RowScratch {
         c(width) {}
   std::vector<uint16_t> code_u, code_v;
   std::vector<uint8_t> min_contrast, weak_u, weak_v, saturated, flags;
+  std::vector<uint8_t> weakest_contrast, weakest_bit;  // per axis, reset for each
   std::vector<float> position_u, position_v, modulation_u, modulation_v, s, c;
 };
 
@@ -57,15 +60,26 @@ void DecodeAxisRow(const DecodeJob& job, const PatternLayout::Axis& axis, int si
       static_cast<uint8_t>(std::min(job.options->saturation_level, 256) - 1);
   std::fill(code.begin(), code.end(), uint16_t{0});
   std::fill(weak.begin(), weak.end(), uint8_t{0});
+  std::fill(r.weakest_contrast.begin(), r.weakest_contrast.end(), uint8_t{255});
+  std::fill(r.weakest_bit.begin(), r.weakest_bit.end(), uint8_t{0});
   const uint8_t contrast_threshold = static_cast<uint8_t>(job.options->min_contrast);
   for (int k = 0; k < axis.projected_bits; ++k) {
     sli::AccumulateGrayBit((*job.captures)[axis.gray_frame[k]].ptr<uint8_t>(y),
                            (*job.captures)[axis.gray_inverse_frame[k]].ptr<uint8_t>(y), width,
-                           contrast_threshold, saturation_minus_one, code.data(),
-                           r.min_contrast.data(), weak.data(), r.saturated.data());
+                           contrast_threshold, saturation_minus_one,
+                           static_cast<uint8_t>(axis.projected_bits - 1 - k), code.data(),
+                           r.min_contrast.data(), weak.data(), r.saturated.data(),
+                           r.weakest_contrast.data(), r.weakest_bit.data());
   }
   const int skip = axis.total_bits - axis.projected_bits;
   sli::GrayToPosition(code.data(), width, skip, size, position.data(), r.flags.data());
+  if (job.options->gray_subpixel) {
+    const PatternLayout& layout = *job.layout;
+    sli::RefineGrayEdge(code.data(), r.weakest_contrast.data(), r.weakest_bit.data(),
+                        (*job.captures)[layout.white_frame].ptr<uint8_t>(y),
+                        (*job.captures)[layout.black_frame].ptr<uint8_t>(y), width, skip,
+                        position.data());
+  }
   const int steps = static_cast<int>(axis.phase_frame.size());
   if (steps == 0) {
     std::fill(modulation.begin(), modulation.end(), std::numeric_limits<float>::infinity());
@@ -205,6 +219,7 @@ DecoderOptions DecoderOptions::OpenCvThresholds(int black_threshold, int white_t
   o.min_contrast = white_threshold;
   o.max_weak_bits_per_axis = 0;
   o.saturation_level = 256;
+  o.gray_subpixel = false;
   return o;
 }
 
@@ -222,6 +237,16 @@ std::string DecodeReport::ToString() const {
 Expected<Decoding> DecodeStructuredLight(const std::vector<cv::Mat>& captures,
                                          const PatternOptions& patterns,
                                          const DecoderOptions& options, DecodeReport* report) {
+  Decoding out;
+  ST_RETURN_IF_ERROR(DecodeStructuredLightInto(captures, patterns, options, &out, report));
+  return out;
+}
+
+Status DecodeStructuredLightInto(const std::vector<cv::Mat>& captures,
+                                 const PatternOptions& patterns, const DecoderOptions& options,
+                                 Decoding* out_ptr, DecodeReport* report) {
+  ST_CHECK(out_ptr != nullptr) << "DecodeStructuredLightInto needs an output Decoding";
+  Decoding& out = *out_ptr;
   ST_RETURN_IF_ERROR(options.CheckAgainst(patterns));
   const PatternLayout layout = MakePatternLayout(patterns);
   ST_RETURN_IF_ERROR(CheckCaptures(captures, layout));
@@ -229,7 +254,7 @@ Expected<Decoding> DecodeStructuredLight(const std::vector<cv::Mat>& captures,
   const auto start = std::chrono::steady_clock::now();
   const int rows = captures[0].rows;
   const int cols = captures[0].cols;
-  Decoding out;
+  // create() keeps the buffers when size and type already match (no page faults on reuse).
   out.projector_px.create(rows, cols, CV_32FC2);
   out.valid.create(rows, cols, CV_8UC1);
   out.confidence.create(rows, cols, CV_32FC1);
@@ -272,7 +297,7 @@ Expected<Decoding> DecodeStructuredLight(const std::vector<cv::Mat>& captures,
     report->threads_used = threads;
     report->decode_time_ms = std::chrono::duration<double, std::milli>(stop - start).count();
   }
-  return out;
+  return OkStatus();
 }
 
 }  // namespace sandtable

@@ -8,9 +8,10 @@
 
 #include "common/structured_light/decoder.h"
 
-// Built with -O3 -fno-math-errno -fno-trapping-math (see CMakeLists.txt) so that GCC vectorises these loops at any build type.
-// Every loop body is straight-line code: comparisons become masks, ternaries become blends.
-// target_clones builds an AVX2 variant next to the baseline one and picks it at load time.
+// Built with -O3 -fno-math-errno -fno-trapping-math (see CMakeLists.txt) so that GCC vectorises
+// these loops at any build type. Every loop body is straight-line code: comparisons become masks,
+// ternaries become blends. target_clones builds an AVX2 variant next to the baseline one and picks
+// it at load time.
 #if defined(__GNUC__) && defined(__x86_64__) && !defined(__clang__)
 #define ST_VECTOR_CLONES __attribute__((target_clones("avx2", "default")))
 #else
@@ -21,9 +22,10 @@ namespace sandtable::structured_light_internal {
 
 ST_VECTOR_CLONES
 void AccumulateGrayBit(const uint8_t* __restrict a, const uint8_t* __restrict b, int n,
-                       uint8_t contrast_threshold, uint8_t saturation_minus_one,
+                       uint8_t contrast_threshold, uint8_t saturation_minus_one, uint8_t bit_index,
                        uint16_t* __restrict code, uint8_t* __restrict min_contrast,
-                       uint8_t* __restrict weak_bits, uint8_t* __restrict saturated) {
+                       uint8_t* __restrict weak_bits, uint8_t* __restrict saturated,
+                       uint8_t* __restrict weakest_contrast, uint8_t* __restrict weakest_bit) {
   for (int x = 0; x < n; ++x) {
     const uint8_t hi = std::max(a[x], b[x]);
     const uint8_t lo = std::min(a[x], b[x]);
@@ -32,6 +34,35 @@ void AccumulateGrayBit(const uint8_t* __restrict a, const uint8_t* __restrict b,
     min_contrast[x] = std::min(min_contrast[x], contrast);
     weak_bits[x] = static_cast<uint8_t>(weak_bits[x] + (contrast < contrast_threshold ? 1 : 0));
     saturated[x] |= static_cast<uint8_t>(lo > saturation_minus_one);
+    const bool weaker = contrast < weakest_contrast[x];
+    weakest_contrast[x] = weaker ? contrast : weakest_contrast[x];
+    weakest_bit[x] = weaker ? bit_index : weakest_bit[x];
+  }
+}
+
+ST_VECTOR_CLONES
+void RefineGrayEdge(const uint16_t* __restrict code, const uint8_t* __restrict weakest_contrast,
+                    const uint8_t* __restrict weakest_bit, const uint8_t* __restrict white,
+                    const uint8_t* __restrict black, int n, int skip, float* __restrict position) {
+  const float cell_px = static_cast<float>(1 << skip);
+  for (int x = 0; x < n; ++x) {
+    const uint32_t gray = code[x];
+    const uint32_t flipped = gray ^ (1u << weakest_bit[x]);
+    uint32_t b = gray;
+    uint32_t bf = flipped;
+    b ^= b >> 1;
+    b ^= b >> 2;
+    b ^= b >> 4;
+    b ^= b >> 8;
+    bf ^= bf >> 1;
+    bf ^= bf >> 2;
+    bf ^= bf >> 4;
+    bf ^= bf >> 8;
+    const float delta = static_cast<float>(static_cast<int>(bf) - static_cast<int>(b));
+    const float adjacent = std::fabs(delta) == 1.0f ? 1.0f : 0.0f;
+    const float range = std::max(static_cast<float>(white[x]) - static_cast<float>(black[x]), 1.0f);
+    const float ratio = std::min(static_cast<float>(weakest_contrast[x]) / range, 1.0f);
+    position[x] += adjacent * delta * 0.5f * (1.0f - ratio) * cell_px;
   }
 }
 
@@ -128,10 +159,10 @@ void FinishRow(const uint8_t* __restrict white, const uint8_t* __restrict black,
   for (int x = 0; x < n; ++x) {
     const int lit_range = static_cast<int>(white[x]) - static_cast<int>(black[x]);
     const int weak = std::max(weak_bits_u[x], weak_bits_v[x]);
-    const uint8_t f = static_cast<uint8_t>(
-        axis_flags[x] | (lit_range <= shadow_threshold ? kDecodeShadow : 0) |
-        (weak > max_weak_bits ? kDecodeLowContrast : 0) |
-        (saturated[x] != 0 ? kDecodeSaturated : 0));
+    const uint8_t f =
+        static_cast<uint8_t>(axis_flags[x] | (lit_range <= shadow_threshold ? kDecodeShadow : 0) |
+                             (weak > max_weak_bits ? kDecodeLowContrast : 0) |
+                             (saturated[x] != 0 ? kDecodeSaturated : 0));
     flags[x] = f;
     valid[x] = f == 0 ? 255 : 0;
   }

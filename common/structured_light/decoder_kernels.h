@@ -9,10 +9,22 @@ namespace sandtable::structured_light_internal {
 
 // One Gray bit pair: code = (code << 1) | (a > b); min_contrast = min(min_contrast, |a - b|);
 // weak_bits += |a - b| < contrast_threshold; saturated |= min(a, b) > saturation_minus_one
-// (pass 255 to disable).
+// (pass 255 to disable); where |a - b| < weakest_contrast, weakest_contrast = |a - b| and
+// weakest_bit = bit_index (the bit's position in the final code, 0 = least significant).
 void AccumulateGrayBit(const uint8_t* a, const uint8_t* b, int n, uint8_t contrast_threshold,
-                       uint8_t saturation_minus_one, uint16_t* code, uint8_t* min_contrast,
-                       uint8_t* weak_bits, uint8_t* saturated);
+                       uint8_t saturation_minus_one, uint8_t bit_index, uint16_t* code,
+                       uint8_t* min_contrast, uint8_t* weak_bits, uint8_t* saturated,
+                       uint8_t* weakest_contrast, uint8_t* weakest_bit);
+
+// Sub-pixel Gray position: the weakest bit of a pixel is the one whose stripe edge lies
+// nearest. If flipping it names the adjacent cell, the pixel is moved from its cell centre
+// toward that edge by cell * 0.5 * (1 - weakest_contrast / (white - black)), clamped to [0, 0.5]
+// cell: half a cell when the bit is fully ambiguous, none when it has full contrast. Linear
+// in the fraction of the projector pixel that covers the camera pixel; independent of gamma
+// (each projector pixel is fully on or off) and of albedo and ambient (ratio of differences).
+void RefineGrayEdge(const uint16_t* code, const uint8_t* weakest_contrast,
+                    const uint8_t* weakest_bit, const uint8_t* white, const uint8_t* black, int n,
+                    int skip, float* position);
 
 // One phase sample with shift d: s += I sin d, c += I cos d; saturated |= I > sat_minus_one.
 void AccumulatePhaseSample(const uint8_t* image, int n, float sin_shift, float cos_shift,
