@@ -64,6 +64,11 @@ double HomographyTransferRms(const Eigen::Matrix3d& to_from_from,
 // Works for any coordinate scale (tested 1e-3 .. 1e4). Cost O(n).
 // Errors: see the top of the file. With exactly 4 pairs, three collinear points in either
 // set give DEGENERATE "three of the four points ... are collinear".
+// Near-collinear data: measured with 200 source points in a strip of a 1 m square and 0.5 px
+// noise, refused below width/length 1e-5; between 1e-5 and 1e-3 the DLT fits the data itself
+// badly (3-21 px rms) while RefineHomography brings it to the noise level (0.10 px) at every
+// width. Away from the strip H is undetermined (60 px at 1e-3, 6.6 px at 1e-2, 0.7 px at 0.1
+// over the whole square): do not extrapolate from near-collinear points.
 Expected<Eigen::Matrix3d> EstimateHomographyDlt(std::span<const Eigen::Vector2d> points_from,
                                                 std::span<const Eigen::Vector2d> points_to);
 

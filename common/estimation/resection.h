@@ -41,6 +41,8 @@
 //   OUT_OF_RANGE      points on both sides of the camera after the initial estimate, or
 //                     points behind the camera after refinement.
 //   NOT_CONVERGED     Ceres FAILURE or a non-finite result.
+// A refinement that stops on max_iterations (Ceres NO_CONVERGENCE) is returned as a result
+// with report.converged = false; callers that need a converged answer must check it.
 #pragma once
 
 #include <optional>
