@@ -130,6 +130,13 @@ Expected<ResectionResult> EstimateResection(std::span<const Eigen::Vector3d> poi
       << (options.fix_intrinsics ? " with fixed intrinsics" : " (DLT)");
     return DegenerateError(s.str());
   }
+  if (const int p = internal::NumFreeResectionParameters(options); 2 * n < p) {
+    std::ostringstream s;
+    s << "resection: " << n << " points give " << 2 * n << " residuals for " << p
+      << " free parameters; at least " << (p + 1) / 2
+      << " points needed (or hold distortion or k3 fixed)";
+    return DegenerateError(s.str());
+  }
   if (internal::CollinearityRatio(points_in_image_px) < kHomographyCollinearRatio) {
     return DegenerateError("resection: the image points are collinear");
   }
@@ -241,6 +248,13 @@ Expected<ResectionResult> EstimateResection(std::span<const Eigen::Vector3d> poi
   report.termination = refined->termination;
   report.message = refined->message;
   report.iterations = refined->iterations;
+  report.uncertainty_available = refined->uncertainty_available;
+  report.fx_std_px = refined->fx_std_px;
+  report.fy_std_px = refined->fy_std_px;
+  report.cx_std_px = refined->cx_std_px;
+  report.cy_std_px = refined->cy_std_px;
+  report.rotation_std_rad = refined->rotation_std_rad;
+  report.translation_std = refined->translation_std;
   if (const int behind = CountBehind(result.camera_from_world, points_in_world); behind > 0) {
     return BehindError("after refinement", behind, n);
   }

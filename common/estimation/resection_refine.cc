@@ -1,10 +1,14 @@
 #include "common/estimation/resection_refine.h"
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
+#include <utility>
+#include <vector>
 
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
+#include <Eigen/Eigenvalues>
 
 namespace sandtable::internal {
 namespace {
@@ -121,6 +125,66 @@ Expected<ResectionRefineOutput> RefineResection(std::span<const Eigen::Vector3d>
       options.fix_pose
           ? camera_from_world
           : Rigid3d(refined_r, Eigen::Vector3d(translation[0], translation[1], translation[2]));
+  const int n = static_cast<int>(points_in_world.size());
+  const int p = NumFreeResectionParameters(options);
+  // Fewer than kMinDof residual degrees of freedom make sigma^2 itself too noisy to trust.
+  constexpr int kMinDof = 5;
+  if (options.estimate_uncertainty && summary.termination_type != ceres::FAILURE &&
+      2 * n - p >= kMinDof) {
+    // Covariance of the free parameters: (J^T J)^-1 sigma^2, J the (robustified) Jacobian at
+    // the solution over the free blocks only (columns: intrinsics 4, distortion 5 or 4 in the
+    // SubsetManifold tangent, rotation 3, translation 3, minus the fixed groups), and sigma^2
+    // estimated from the residuals as sum r^2 / (2n - p) = 2 cost / (2n - p). J^T J is
+    // Jacobi-scaled before its condition is judged, so units do not matter; a reciprocal
+    // condition below 1e-12 means the data do not determine the free parameters.
+    std::vector<double*> free_blocks;
+    int rotation_column = -1;
+    if (!options.fix_intrinsics) free_blocks.push_back(intrinsics);
+    if (!options.fix_distortion) free_blocks.push_back(distortion.data());
+    if (!options.fix_pose) {
+      rotation_column = p - 6;
+      free_blocks.push_back(rotation_aa);
+      free_blocks.push_back(translation);
+    }
+    ceres::Problem::EvaluateOptions evaluate_options;
+    evaluate_options.parameter_blocks = free_blocks;
+    ceres::CRSMatrix crs;
+    double cost = 0.0;
+    if (problem.Evaluate(evaluate_options, &cost, nullptr, nullptr, &crs) && crs.num_cols == p) {
+      Eigen::MatrixXd j = Eigen::MatrixXd::Zero(crs.num_rows, crs.num_cols);
+      for (int row = 0; row < crs.num_rows; ++row) {
+        for (int k = crs.rows[row]; k < crs.rows[row + 1]; ++k) j(row, crs.cols[k]) = crs.values[k];
+      }
+      const Eigen::MatrixXd jtj = j.transpose() * j;
+      const Eigen::VectorXd d = jtj.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
+      const Eigen::MatrixXd scaled = d.asDiagonal() * jtj * d.asDiagonal();
+      const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(scaled);
+      const Eigen::VectorXd lambda = eig.eigenvalues();
+      if (lambda(0) > 1e-12 * lambda(p - 1)) {
+        const double sigma2 = 2.0 * summary.final_cost / (2 * n - p);
+        const Eigen::MatrixXd cov = d.asDiagonal() * eig.eigenvectors() *
+                                    lambda.cwiseInverse().asDiagonal() *
+                                    eig.eigenvectors().transpose() * d.asDiagonal() * sigma2;
+        auto largest = [&](int c) {
+          const Eigen::Matrix3d block = cov.block<3, 3>(c, c);
+          return std::sqrt(std::max(
+              0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(block, Eigen::EigenvaluesOnly)
+                       .eigenvalues()(2)));
+        };
+        out.uncertainty_available = true;
+        if (!options.fix_intrinsics) {
+          out.fx_std_px = std::sqrt(cov(0, 0));
+          out.fy_std_px = std::sqrt(cov(1, 1));
+          out.cx_std_px = std::sqrt(cov(2, 2));
+          out.cy_std_px = std::sqrt(cov(3, 3));
+        }
+        if (rotation_column >= 0) {
+          out.rotation_std_rad = largest(rotation_column);
+          out.translation_std = largest(rotation_column + 3);
+        }
+      }
+    }
+  }
   if (summary.termination_type == ceres::FAILURE || !out.camera_from_world.AllFinite() ||
       !out.camera.Check().ok()) {
     return NotConvergedError("resection refinement failed (" + out.termination +

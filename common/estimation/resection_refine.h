@@ -21,6 +21,11 @@ struct ResectionRefineOutput {
   std::string termination;
   std::string message;
   int iterations = 0;
+  // Filled when options.estimate_uncertainty (see ResectionReport).
+  bool uncertainty_available = false;
+  double fx_std_px = 0.0, fy_std_px = 0.0, cx_std_px = 0.0, cy_std_px = 0.0;
+  double rotation_std_rad = 0.0;
+  double translation_std = 0.0;
 };
 
 // Levenberg-Marquardt on the pixel reprojection error (model in resection.h) from `camera` and

@@ -138,6 +138,43 @@ TEST(ResectionTest, AcceptanceReachesNoiseFloor) {
   EXPECT_LT(RelativeFocalError(*r, s), kFocalTolerance);
   EXPECT_LE(r->report.final_rms_px, r->report.initial_rms_px);
   EXPECT_GT(r->report.solve_time.count(), 0.0);
+  // The reported uncertainty is consistent with the actual error.
+  constexpr double kMaxSigmas = 4.0;
+  ASSERT_TRUE(r->report.uncertainty_available);
+  EXPECT_GT(r->report.fx_std_px, 0.0);
+  EXPECT_LT(std::abs(r->camera.fx_px - s.camera.fx_px), kMaxSigmas * r->report.fx_std_px);
+  EXPECT_LT(std::abs(r->camera.cx_px - s.camera.cx_px), kMaxSigmas * r->report.cx_std_px);
+  EXPECT_LT(RotationAngleBetween_rad(r->camera_from_world, s.camera_from_world),
+            kMaxSigmas * r->report.rotation_std_rad);
+  SweepLog(
+      "acceptance: final rms %.4f px, floor %.4f px (ratio %.4f), focal error %.4f %%, "
+      "fx %.2f +- %.2f px, %d iterations, %.2f ms\n",
+      r->report.final_rms_px, floor_px, r->report.final_rms_px / floor_px,
+      100.0 * RelativeFocalError(*r, s), r->camera.fx_px, r->report.fx_std_px, r->report.iterations,
+      1e3 * r->report.solve_time.count());
+}
+
+TEST(ResectionTest, FewPointsAreRefusedOrReportLargeUncertainty) {
+  // With all 15 parameters free, 7 points give 14 residuals: refused. From 10 points on the
+  // answer comes with an uncertainty that covers the actual error and shrinks with n.
+  constexpr double kMaxSigmas = 5.0;
+  const Scene few = MakeScene(7, 29, 0.3);
+  const Status st = EstimateResection(few.world_m, few.pixels, 1280, 800).status();
+  EXPECT_EQ(st.code(), StatusCode::kDegenerate);
+  EXPECT_NE(st.message().find("free parameters"), std::string::npos) << st.message();
+  double previous_std_px = std::numeric_limits<double>::infinity();
+  for (int n : {10, 30, 100, 300}) {
+    const Scene s = MakeScene(n, 30, 0.3);
+    const Expected<ResectionResult> r =
+        EstimateResection(s.world_m, AddNoise(s.pixels, 0.5, 31), 1280, 800);
+    ASSERT_TRUE(r.ok()) << n << ": " << r.status().ToString();
+    ASSERT_TRUE(r->report.uncertainty_available) << n;
+    SweepLog("n %3d: focal error %.3f %%, fx std %.3f %%\n", n, 100.0 * RelativeFocalError(*r, s),
+             100.0 * r->report.fx_std_px / s.camera.fx_px);
+    EXPECT_LT(std::abs(r->camera.fx_px - s.camera.fx_px), kMaxSigmas * r->report.fx_std_px) << n;
+    EXPECT_LT(r->report.fx_std_px, previous_std_px) << n;
+    previous_std_px = r->report.fx_std_px;
+  }
 }
 
 TEST(ResectionTest, CoplanarPointsWithFreeIntrinsicsAreDegenerate) {
@@ -203,6 +240,8 @@ TEST(ResectionTest, EachGroupHeldFixed) {
     EXPECT_LT(ModelError_px(*r, s), kModelError_px);
     EXPECT_LT(RotationAngleBetween_rad(r->camera_from_world, s.camera_from_world), kRotation_rad);
     EXPECT_EQ(r->report.num_free_parameters, 11);
+    EXPECT_EQ(r->report.fx_std_px, 0.0);  // fixed group
+    EXPECT_GT(r->report.rotation_std_rad, 0.0);
   }
   {  // Distortion fixed (at a wrong k1): kept, everything else still estimated.
     ResectionOptions o;
@@ -226,6 +265,8 @@ TEST(ResectionTest, EachGroupHeldFixed) {
     EXPECT_LT(RelativeFocalError(*r, s), kFocalTolerance);
     EXPECT_EQ(r->report.initializer, "given_pose");
     EXPECT_EQ(r->report.num_free_parameters, 9);
+    EXPECT_EQ(r->report.rotation_std_rad, 0.0);  // fixed group
+    EXPECT_GT(r->report.fx_std_px, 0.0);
   }
   {  // Only k3 fixed (at zero, its true value here).
     ResectionOptions o;
