@@ -243,7 +243,9 @@ TEST(BuildTableFrame, NearTieStability) {
         "the short side; x-axis jitter %.3f deg rms otherwise\n",
         MToMm(delta_m), flips, kTrials, jitter_deg);
     constexpr double kClearTie_m = 1e-2;  // 10 noise sigmas
-    if (delta_m >= kClearTie_m) EXPECT_EQ(flips, 0) << delta_m;
+    if (delta_m >= kClearTie_m) {
+      EXPECT_EQ(flips, 0) << delta_m;
+    }
     constexpr double kMaxJitter_deg = 0.5;
     EXPECT_LT(jitter_deg, kMaxJitter_deg);
   }

@@ -214,7 +214,9 @@ TEST(FitRigidUmeyama, NearlyCollinearBreakdownWithNoise) {
       EXPECT_EQ(num_ok, kTrials);
     }
     constexpr double kWellConditionedMax_mm = 1.0;
-    if (ratio >= 3e-1) EXPECT_LT(rms_probe_mm, kWellConditionedMax_mm);
+    if (ratio >= 3e-1) {
+      EXPECT_LT(rms_probe_mm, kWellConditionedMax_mm);
+    }
   }
 }
 
