@@ -5,6 +5,8 @@
 #include <cmath>
 #include <numbers>
 
+#include "sim/transport/noise_rng.h"
+
 namespace sandtable::sim {
 
 namespace {
@@ -18,61 +20,6 @@ std::array<float, 256> EmissionTable(const ProjectorSpec& projector) {
   }
   return table;
 }
-
-// xoshiro256** seeded by splitmix64: fast, portable, well distributed.
-class Rng {
- public:
-  explicit Rng(uint64_t seed) {
-    for (uint64_t& s : s_) {
-      seed += 0x9E3779B97F4A7C15ull;
-      uint64_t z = seed;
-      z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-      z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-      s = z ^ (z >> 31);
-    }
-  }
-  uint64_t Next() {
-    const uint64_t result = Rotl(s_[1] * 5, 7) * 9;
-    const uint64_t t = s_[1] << 17;
-    s_[2] ^= s_[0];
-    s_[3] ^= s_[1];
-    s_[1] ^= s_[2];
-    s_[0] ^= s_[3];
-    s_[2] ^= t;
-    s_[3] = Rotl(s_[3], 45);
-    return result;
-  }
-  double Uniform() { return static_cast<double>(Next() >> 11) * 0x1.0p-53; }  // [0, 1)
-  double Gaussian() {
-    if (has_spare_) {
-      has_spare_ = false;
-      return spare_;
-    }
-    const double u1 = 1.0 - Uniform();  // (0, 1]
-    const double u2 = Uniform();
-    const double r = std::sqrt(-2.0 * std::log(u1));
-    spare_ = r * std::sin(2.0 * std::numbers::pi * u2);
-    has_spare_ = true;
-    return r * std::cos(2.0 * std::numbers::pi * u2);
-  }
-  // Poisson by multiplication of uniforms (Knuth); used below 32 expected events only.
-  int SmallPoisson(double mean) {
-    const double limit = std::exp(-mean);
-    double product = Uniform();
-    int k = 0;
-    while (product > limit) {
-      ++k;
-      product *= Uniform();
-    }
-    return k;
-  }
-
- private:
-  static uint64_t Rotl(uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
-  uint64_t s_[4];
-  double spare_ = 0.0;
-  bool has_spare_ = false;
-};
 
 }  // namespace
 
@@ -90,8 +37,7 @@ Expected<LinearFrame> DecodeProjectorFrame(const ProjectorSpec& projector, const
   LinearFrame out;
   out.width_px = frame.cols;
   out.height_px = frame.rows;
-  out.emission.assign(static_cast<size_t>(out.padded_width()) * (frame.rows + 2 * kFramePadding_px),
-                      0.0f);
+  out.emission.assign(static_cast<size_t>(out.padded_width()) * out.padded_height(), 0.0f);
   for (int y = 0; y < frame.rows; ++y) {
     const uint8_t* row = frame.ptr<uint8_t>(y);
     float* dst = &out.emission[static_cast<size_t>(y + kFramePadding_px) * out.padded_width() +
@@ -113,8 +59,7 @@ LinearFrame UniformFrame(const ProjectorSpec& projector, int value) {
   LinearFrame out;
   out.width_px = projector.model.width_px;
   out.height_px = projector.model.height_px;
-  out.emission.assign(
-      static_cast<size_t>(out.padded_width()) * (out.height_px + 2 * kFramePadding_px), 0.0f);
+  out.emission.assign(static_cast<size_t>(out.padded_width()) * out.padded_height(), 0.0f);
   const float e = EmissionTable(projector)[std::clamp(value, 0, 255)];
   for (int y = 0; y < out.height_px; ++y) {
     float* row = &out.emission[static_cast<size_t>(y + kFramePadding_px) * out.padded_width() +
@@ -138,19 +83,26 @@ Status GatherLuminance(const TransportMap& map, const std::vector<const LinearFr
   for (size_t p = 0; p < frames.size(); ++p) {
     const LinearFrame* f = frames[p];
     if (!f) continue;
-    if (f->emission.empty())
-      return InvalidArgumentError("gather: empty frame for projector " + std::to_string(p));
+    if (f->emission.size() != static_cast<size_t>(f->padded_width()) * f->padded_height()) {
+      return InvalidArgumentError("gather: frame of projector " + std::to_string(p) + " has " +
+                                  std::to_string(f->emission.size()) +
+                                  " values, expected the padded size");
+    }
     const size_t stride = f->padded_width();
     const float* emission = f->emission.data();
     constexpr float kWeightScale = 1.0f / 65535.0f;
     for (const TransportEntry& e : map.entries[p]) {
       const float* base = emission + e.frame_offset;
-      const float wu0 = e.wu[0], wu1 = e.wu[1], wu2 = e.wu[2], wu3 = e.wu[3];
-      float sum = 0.0f;
+      // Columns first (c = sum_j wv[j] row_j, four independent lanes the compiler keeps in
+      // one SIMD register), then one dot product with wu: one horizontal sum per entry.
+      float c[4] = {0.0f, 0.0f, 0.0f, 0.0f};
       for (int j = 0; j < 4; ++j) {
         const float* row = base + j * stride;
-        sum += e.wv[j] * (wu0 * row[0] + wu1 * row[1] + wu2 * row[2] + wu3 * row[3]);
+        const float w = e.wv[j];
+        for (int i = 0; i < 4; ++i) c[i] += w * row[i];
       }
+      const float sum = static_cast<float>(e.wu[0]) * c[0] + static_cast<float>(e.wu[1]) * c[1] +
+                        static_cast<float>(e.wu[2]) * c[2] + static_cast<float>(e.wu[3]) * c[3];
       out[e.pixel] += kWeightScale * sum;
     }
   }
@@ -168,40 +120,71 @@ Expected<cv::Mat> SynthesizeCapture(const CameraSpec& camera, int width, int hei
   const bool eight_bit = camera.bit_depth <= 8;
   cv::Mat out(height, width, eight_bit ? CV_8UC1 : CV_16UC1);
   const double max_dn = camera.MaxDn();
-  const double scale = camera.exposure_s / camera.saturation_nit_s;  // 1 = full scale
-  const double inverse_gamma = 1.0 / camera.gamma;
-  const bool linear = camera.gamma == 1.0;
   const double well = camera.full_well_e;
   const bool shot = noise.enabled && well > 0;
   const bool read = noise.enabled && camera.read_noise_dn > 0;
-  const double read_variance_dn2 = read ? camera.read_noise_dn * camera.read_noise_dn : 0.0;
+  // Per pixel in float (24-bit mantissa: exact to 1e-7 of full scale, far below 1 DN of 16
+  // bits): linear DN = L * dn_per_nit.
+  const float dn_per_nit = static_cast<float>(camera.exposure_s / camera.saturation_nit_s * max_dn);
+  const float electrons_per_dn = static_cast<float>(well / max_dn);
+  const float dn_per_electron = static_cast<float>(max_dn / well);
+  const float read_dn = static_cast<float>(camera.read_noise_dn);
+  const float read_variance_dn2 = read ? read_dn * read_dn : 0.0f;
+  // Shot noise variance in DN^2 of a signal of `dn` DN: electrons dn e/DN, Poisson variance
+  // = electrons, times (DN/e)^2 = dn * max_dn / well.
+  const float shot_variance_per_dn = shot ? dn_per_electron : 0.0f;
+  const float max_dn_f = static_cast<float>(max_dn);
+  const bool linear = camera.gamma == 1.0;
+  const double inverse_gamma = 1.0 / camera.gamma;
+  // Below this many expected electrons the Gaussian limit of Poisson is poor: exact Poisson.
+  constexpr float kSmallPoissonElectrons = 32.0f;
+  const float small_poisson_dn = kSmallPoissonElectrons * dn_per_electron;
+  // Per row, in passes that the compiler vectorises except the draws themselves:
+  //   1. linear DN of every pixel;
+  //   2. one standard normal per pixel (a tight loop: the ziggurat's fast path);
+  //   3. noise: pixels below the small-Poisson limit draw an exact Poisson count (+ read
+  //      noise from their normal), the others add sigma(dn) times their normal;
+  //   4. clamp, encode, round, store.
+  // The draws of a row come in a fixed order from the row's own generator, so the image is
+  // deterministic for a seed whatever the thread count.
+  std::vector<float> dn_row(width), normal_row(width);
   for (int y = 0; y < height; ++y) {
-    Rng rng(noise.seed * 0x100000001B3ull + static_cast<uint64_t>(y) + 1);
     const float* l = &luminance[static_cast<size_t>(y) * width];
-    for (int x = 0; x < width; ++x) {
-      const double s = l[x] * scale;  // linear, full scale = 1
-      double dn_linear = s * max_dn;
-      if (shot) {
-        const double electrons = s * well;
-        if (electrons < 32.0) {
-          dn_linear = rng.SmallPoisson(electrons) / well * max_dn;
-          if (read) dn_linear += camera.read_noise_dn * rng.Gaussian();
-        } else {
-          // Poisson (Gaussian limit, variance = electrons) and read noise are independent
-          // Gaussians: one draw with the summed variance, in DN.
-          const double shot_dn = std::sqrt(electrons) / well * max_dn;
-          dn_linear += std::sqrt(shot_dn * shot_dn + read_variance_dn2) * rng.Gaussian();
-        }
-      } else if (read) {
-        dn_linear += camera.read_noise_dn * rng.Gaussian();
+    float* dn = dn_row.data();
+    for (int x = 0; x < width; ++x) dn[x] = l[x] * dn_per_nit;
+    if (shot || read) {
+      NoiseRng rng(noise.seed * 0x100000001B3ull + static_cast<uint64_t>(y) + 1);
+      float* z = normal_row.data();
+      for (int x = 0; x < width; ++x) z[x] = rng.Normal();
+      for (int x = 0; x < width; ++x) {
+        // Poisson (Gaussian limit, variance = electrons) and read noise are independent
+        // Gaussians: one draw with the summed variance, in DN.
+        const float sigma =
+            std::sqrt(std::max(0.0f, dn[x]) * shot_variance_per_dn + read_variance_dn2);
+        dn[x] += sigma * z[x];
       }
-      double encoded = std::clamp(dn_linear / max_dn, 0.0, 1.0);
-      if (!linear) encoded = std::pow(encoded, inverse_gamma);
-      const double dn = std::nearbyint(encoded * max_dn);
+      if (shot) {
+        for (int x = 0; x < width; ++x) {
+          const float signal_dn = l[x] * dn_per_nit;
+          if (signal_dn >= small_poisson_dn) continue;
+          dn[x] =
+              static_cast<float>(rng.SmallPoisson(std::max(0.0f, signal_dn) * electrons_per_dn)) *
+                  dn_per_electron +
+              read_dn * z[x];
+        }
+      }
+    }
+    uint8_t* row8 = eight_bit ? out.ptr<uint8_t>(y) : nullptr;
+    uint16_t* row16 = eight_bit ? nullptr : out.ptr<uint16_t>(y);
+    for (int x = 0; x < width; ++x) {
+      float v = std::clamp(dn[x], 0.0f, max_dn_f);
+      if (!linear) v = static_cast<float>(std::pow(v / max_dn, inverse_gamma) * max_dn);
+      // Round to nearest (v >= 0, so truncating v + 0.5 rounds halves up).
+      const int rounded = static_cast<int>(v + 0.5f);
       if (eight_bit) {
-        out.at<uint8_t>(y, x) = static_cast<uint8_t>(dn);
+        row8[x] = static_cast<uint8_t>(rounded);
       } else {
-        out.at<uint16_t>(y, x) = static_cast<uint16_t>(dn);
+        row16[x] = static_cast<uint16_t>(rounded);
       }
     }
   }

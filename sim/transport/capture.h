@@ -29,6 +29,10 @@ struct LinearFrame {
   // pixel (x, y) is at (y + pad) * padded_width() + x + pad.
   std::vector<float> emission;
   int padded_width() const { return width_px + 2 * kFramePadding_px; }
+  // One extra zero row at the bottom: a 4 x 4 kernel whose box ends in the last row starts
+  // at most at row height - 1 and reads rows up to height + 2 (its unused rows have weight 0,
+  // but are still read).
+  int padded_height() const { return height_px + 2 * kFramePadding_px + 1; }
   float At(int x, int y) const {
     return emission[static_cast<size_t>(y + kFramePadding_px) * padded_width() + x +
                     kFramePadding_px];

@@ -62,7 +62,7 @@ struct TransportMap {
   std::vector<float> albedo;                         // per pixel
   std::vector<Eigen::Vector3f> point_in_table_m;     // per pixel (zero where no hit)
   std::vector<Eigen::Vector3f> normal_in_table;      // per pixel, facing the view
-  std::vector<std::vector<TransportEntry>> entries;  // per site unit (site.units order)
+  std::vector<std::vector<TransportEntry>> entries;  // per site unit, in view pixel order
   size_t NumEntries() const;
 };
 

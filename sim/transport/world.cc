@@ -77,14 +77,18 @@ Expected<const TransportMap*> World::CameraTransport(NodeId unit) {
   return &it->second;
 }
 
-Expected<cv::Mat> World::Capture(NodeId unit, const CaptureNoise& noise) {
+Expected<cv::Mat> World::Capture(NodeId unit, const CaptureNoise& noise, double exposure_s) {
+  if (!std::isfinite(exposure_s) || exposure_s < 0.0) {
+    return InvalidArgumentError("capture: exposure_s = " + std::to_string(exposure_s) +
+                                " must be finite and >= 0 (0 = the camera's own)");
+  }
   Expected<const TransportMap*> map = CameraTransport(unit);
   if (!map.ok()) return map.status();
-  std::vector<float> luminance;
   ST_RETURN_IF_ERROR(
-      GatherLuminance(**map, CurrentFrames(), site_.ambient_luminance_nits, &luminance));
-  return SynthesizeCapture(*site_.FindUnit(unit)->camera, (*map)->width_px, (*map)->height_px,
-                           luminance, noise);
+      GatherLuminance(**map, CurrentFrames(), site_.ambient_luminance_nits, &luminance_scratch_));
+  CameraSpec camera = *site_.FindUnit(unit)->camera;
+  if (exposure_s > 0.0) camera.exposure_s = exposure_s;
+  return SynthesizeCapture(camera, (*map)->width_px, (*map)->height_px, luminance_scratch_, noise);
 }
 
 Expected<std::vector<float>> World::RenderLuminance(const View& view) {
@@ -124,6 +128,28 @@ Expected<SurfaceTruth> World::TruthAlongRay(const Eigen::Vector3d& origin,
     truth.projectors.push_back(p);
   }
   return truth;
+}
+
+Expected<ProjectorTruth> World::ProjectorTruthAtPoint(NodeId unit, const Eigen::Vector3d& point,
+                                                      double tolerance_m) const {
+  Expected<size_t> index = UnitIndex(unit);
+  if (!index.ok()) return index.status();
+  const ProjectorSpec& projector = site_.units[*index].projector;
+  const Eigen::Vector3d centre = projector.table_from_projector.translation;
+  ProjectorTruth out;
+  out.unit = unit;
+  // The first surface on the projector's ray towards the point: if it is the point itself,
+  // the full truth there (visibility includes facing and the image bounds).
+  Expected<SurfaceTruth> truth = TruthAlongRay(centre, point - centre);
+  if (truth.ok() && (truth->point_in_table_m - point).norm() <= tolerance_m) {
+    return truth->projectors[*index];
+  }
+  // Shadowed (or not on a surface): not lit, but the true pixel is still the projection.
+  const std::optional<Eigen::Vector2d> pixel =
+      projector.model.Project(projector.table_from_projector.Inverse() * point);
+  if (pixel) out.sample.pixel_px = *pixel;
+  out.sample.distance_m = (point - centre).norm();
+  return out;
 }
 
 Expected<SurfaceTruth> World::TruthAtTableXY(const Eigen::Vector2d& xy) const {

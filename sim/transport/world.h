@@ -61,8 +61,10 @@ class World {
 
   // The static transport map of a unit's camera (built on first use).
   Expected<const TransportMap*> CameraTransport(NodeId unit);
-  // One camera frame under the current projector frames (see capture.h).
-  Expected<cv::Mat> Capture(NodeId unit, const CaptureNoise& noise);
+  // One camera frame under the current projector frames (see capture.h). `exposure_s` > 0
+  // replaces the camera's exposure for this capture (0 = the site's); INVALID_ARGUMENT when
+  // it is negative or not finite.
+  Expected<cv::Mat> Capture(NodeId unit, const CaptureNoise& noise, double exposure_s = 0.0);
   // Surface luminance (nits) a view sees under the current frames; builds a map each call.
   Expected<std::vector<float>> RenderLuminance(const View& view);
 
@@ -72,6 +74,14 @@ class World {
                                        const Eigen::Vector3d& direction) const;
   // The surface seen from straight above table point (x, y).
   Expected<SurfaceTruth> TruthAtTableXY(const Eigen::Vector2d& xy_in_table_m) const;
+  // What projector `unit` does at a surface point: its true pixel (the projection of the
+  // point, also when shadowed; zero when behind the projector), whether it lights the point
+  // (the projector's ray towards the point first meets the surface within `tolerance_m` of
+  // it), gain, and its luminance contribution under the current frame. NOT_FOUND for an
+  // unknown unit.
+  Expected<ProjectorTruth> ProjectorTruthAtPoint(NodeId unit,
+                                                 const Eigen::Vector3d& point_in_table_m,
+                                                 double tolerance_m = 1e-4) const;
 
  private:
   World() = default;
@@ -85,6 +95,7 @@ class World {
   std::vector<LinearFrame> frames_;  // per unit
   std::vector<bool> on_;
   std::map<NodeId, TransportMap> camera_maps_;
+  std::vector<float> luminance_scratch_;  // reused by Capture (no allocation per frame)
 };
 
 // Tone-maps luminance for a person: v = 255 (L / white_nits)^(1/2.2), clamped. CV_8UC1.

@@ -1,0 +1,268 @@
+#include "sim/app/world_server.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <random>
+
+#include <opencv2/imgproc.hpp>
+
+#include "common/base/log.h"
+
+namespace sandtable::sim {
+namespace {
+
+int64_t NowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+uint64_t NewIncarnation() {
+  std::random_device device;
+  return (uint64_t{device()} << 32) ^ device() ^ static_cast<uint64_t>(NowNs());
+}
+
+uint64_t Mix(uint64_t z) {  // splitmix64 finaliser
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+}  // namespace
+
+uint64_t CaptureSeed(uint64_t noise_seed, uint32_t camera_id, uint64_t capture_index) {
+  return Mix(Mix(noise_seed + 0x9E3779B97F4A7C15ull * (camera_id + 1)) + capture_index);
+}
+
+Status WorldServerOptions::Check() const {
+  if (bind_endpoint.empty()) return InvalidArgumentError("world server: empty bind endpoint");
+  return limits.Check();
+}
+
+WorldServer::WorldServer(std::unique_ptr<World> world, WorldServerOptions options)
+    : world_(std::move(world)), options_(std::move(options)) {
+  ST_CHECK(world_ != nullptr) << "WorldServer needs a World";
+}
+
+WorldServer::~WorldServer() { channel_.reset(); }
+
+Status WorldServer::Start() {
+  ST_RETURN_IF_ERROR(options_.Check());
+  net::SocketOptions socket_options;
+  socket_options.max_message_bytes = static_cast<int64_t>(options_.limits.max_message_bytes);
+  Expected<std::unique_ptr<net::Socket>> router =
+      net::Socket::Create(&context_, net::SocketType::kRouter, socket_options);
+  if (!router.ok()) return router.status();
+  Expected<std::string> endpoint = (*router)->Bind(options_.bind_endpoint);
+  if (!endpoint.ok()) return endpoint.status().WithContext("world: bind");
+  endpoint_ = *endpoint;
+  channel_ = std::make_unique<net::Channel>(std::move(*router), kWorldSenderId, NewIncarnation(),
+                                            &counters_, options_.limits);
+  return OkStatus();
+}
+
+Status WorldServer::Step(std::chrono::milliseconds max_wait) {
+  ST_CHECK(channel_ != nullptr) << "WorldServer::Step before a successful Start()";
+  std::vector<bool> readable;
+  ST_RETURN_IF_ERROR(net::Socket::Poll({&channel_->socket()}, max_wait, &readable));
+  for (int drained = 0; readable[0] && drained < 1000; ++drained) {
+    // Received here rather than with Channel::TryReceive so that a sender whose message is
+    // rejected still gets an answer (the channel drops the routing id of a bad message).
+    Expected<std::optional<std::vector<std::string>>> frames = channel_->socket().TryReceive();
+    if (!frames.ok()) return frames.status();
+    if (!frames->has_value()) break;
+    HandleMessage(std::move(**frames));
+  }
+  return OkStatus();
+}
+
+Status WorldServer::Run(const std::atomic<bool>& stop) {
+  while (!stop.load()) ST_RETURN_IF_ERROR(Step(std::chrono::milliseconds(50)));
+  return OkStatus();
+}
+
+void WorldServer::HandleMessage(std::vector<std::string> frames) {
+  if (frames.size() != 2) {
+    // ROUTER always prepends the identity; anything else is malformed.
+    counters_.CountRejected(proto::RejectReason::kMalformed);
+    ++stats_.rejected;
+    if (!frames.empty()) Reject(frames[0], 0, "expected one envelope frame");
+    return;
+  }
+  const std::string& routing_id = frames[0];
+  Expected<wire::Envelope> decoded = proto::DecodeEnvelope(frames[1], options_.limits, &counters_);
+  if (!decoded.ok()) {
+    ++stats_.rejected;
+    ST_LOG(kDebug) << "rejected message: " << decoded.status().ToString();
+    Reject(routing_id, 0, decoded.status().ToString());
+    return;
+  }
+  const wire::Envelope& in = *decoded;
+  const Status in_order = tracker_.Accept(in, &counters_);
+  if (!in_order.ok()) {
+    ++stats_.rejected;
+    Reject(routing_id, in.sequence(), in_order.ToString());
+    return;
+  }
+  switch (in.body_case()) {
+    case wire::Envelope::kSetFrameRequest:
+      Reply(routing_id, SetFrame(in.set_frame_request()));
+      break;
+    case wire::Envelope::kCaptureRequest:
+      Reply(routing_id, Capture(in.capture_request()));
+      break;
+    case wire::Envelope::kGroundTruthRequest:
+      Reply(routing_id, GroundTruth(in.ground_truth_request()));
+      break;
+    default:
+      counters_.CountRejected(proto::RejectReason::kWrongType);
+      ++stats_.rejected;
+      Reject(routing_id, in.sequence(),
+             "the world does not serve " + proto::BodyName(in) +
+                 " (set_frame_request, capture_request, ground_truth_request)");
+      return;
+  }
+  counters_.CountAccepted();
+}
+
+void WorldServer::Reply(const std::string& routing_id, wire::Envelope reply) {
+  const Status sent = channel_->Send(std::move(reply), routing_id);
+  if (!sent.ok()) ST_LOG(kDebug) << "reply not sent: " << sent.ToString();
+}
+
+void WorldServer::Reject(const std::string& routing_id, uint64_t sequence,
+                         const std::string& reason) {
+  wire::Envelope reply;
+  reply.mutable_rejected()->set_rejected_sequence(sequence);
+  reply.mutable_rejected()->set_reason(reason);
+  Reply(routing_id, std::move(reply));
+}
+
+wire::Envelope WorldServer::SetFrame(const wire::SetFrameRequest& request) {
+  wire::Envelope envelope;
+  wire::SetFrameReply* reply = envelope.mutable_set_frame_reply();
+  auto fail = [&](const std::string& message) {
+    ++stats_.bad_requests;
+    counters_.CountRejected(proto::RejectReason::kInvalidContent);
+    reply->set_ok(false);
+    reply->set_message("set_frame projector " + std::to_string(request.projector_id()) + ": " +
+                       message);
+    return envelope;
+  };
+  int channels = 0;
+  switch (request.encoding()) {
+    case wire::PIXEL_ENCODING_GRAY8:
+      channels = 1;
+      break;
+    case wire::PIXEL_ENCODING_RGB8:
+      channels = 3;
+      break;
+    default:
+      return fail("encoding must be GRAY8 or RGB8");
+  }
+  const UnitSpec* unit = world_->site().FindUnit(request.projector_id());
+  if (!unit) return fail("no such projector in site '" + world_->site().name + "'");
+  const uint64_t expected_bytes =
+      uint64_t{request.width_px()} * request.height_px() * static_cast<uint64_t>(channels);
+  if (request.pixels().size() != expected_bytes) {
+    return fail(std::to_string(request.pixels().size()) + " pixel bytes for " +
+                std::to_string(request.width_px()) + "x" + std::to_string(request.height_px()) +
+                " x " + std::to_string(channels) + " (expected " + std::to_string(expected_bytes) +
+                ")");
+  }
+  if (static_cast<int>(request.width_px()) != unit->projector.model.width_px ||
+      static_cast<int>(request.height_px()) != unit->projector.model.height_px) {
+    return fail("frame is " + std::to_string(request.width_px()) + "x" +
+                std::to_string(request.height_px()) + ", projector is " +
+                std::to_string(unit->projector.model.width_px) + "x" +
+                std::to_string(unit->projector.model.height_px));
+  }
+  // Wraps the bytes (no copy); RGB on the wire, BGR for OpenCV.
+  cv::Mat frame(static_cast<int>(request.height_px()), static_cast<int>(request.width_px()),
+                channels == 1 ? CV_8UC1 : CV_8UC3, const_cast<char*>(request.pixels().data()));
+  cv::Mat bgr;
+  if (channels == 3) cv::cvtColor(frame, bgr, cv::COLOR_RGB2BGR);
+  const Status set = world_->SetProjectorFrame(request.projector_id(), channels == 3 ? bgr : frame);
+  if (!set.ok()) return fail(set.message());
+  ++stats_.frames_set;
+  reply->set_ok(true);
+  return envelope;
+}
+
+wire::Envelope WorldServer::Capture(const wire::CaptureRequest& request) {
+  wire::Envelope envelope;
+  wire::CaptureReply* reply = envelope.mutable_capture_reply();
+  reply->set_camera_id(request.camera_id());
+  auto fail = [&](const std::string& message) {
+    ++stats_.bad_requests;
+    counters_.CountRejected(proto::RejectReason::kInvalidContent);
+    reply->set_ok(false);
+    reply->set_message("capture camera " + std::to_string(request.camera_id()) + ": " + message);
+    return envelope;
+  };
+  const UnitSpec* unit = world_->site().FindUnit(request.camera_id());
+  if (!unit || !unit->camera) return fail("no such camera in site '" + world_->site().name + "'");
+  if (!std::isfinite(request.exposure_s()) || request.exposure_s() < 0.0 ||
+      request.exposure_s() > 60.0) {
+    return fail("exposure_s must be in [0, 60] (0 = the camera's own)");
+  }
+  uint64_t& index = captures_per_camera_[request.camera_id()];
+  const CaptureNoise noise{.enabled = options_.noise,
+                           .seed = CaptureSeed(options_.noise_seed, request.camera_id(), index)};
+  Expected<cv::Mat> image = world_->Capture(request.camera_id(), noise, request.exposure_s());
+  if (!image.ok()) return fail(image.status().message());
+  ++index;
+  ++stats_.captures;
+  const bool eight_bit = image->depth() == CV_8U;
+  reply->set_ok(true);
+  reply->set_width_px(static_cast<uint32_t>(image->cols));
+  reply->set_height_px(static_cast<uint32_t>(image->rows));
+  reply->set_bit_depth(static_cast<uint32_t>(unit->camera->bit_depth));
+  reply->set_encoding(eight_bit ? wire::PIXEL_ENCODING_GRAY8 : wire::PIXEL_ENCODING_GRAY16);
+  reply->set_capture_time_ns(NowNs());
+  std::string* pixels = reply->mutable_pixels();
+  const size_t row_bytes = image->cols * image->elemSize();
+  pixels->resize(row_bytes * image->rows);
+  for (int y = 0; y < image->rows; ++y) {
+    // GRAY16 is little endian on the wire; so is every machine this runs on (x86-64, arm64).
+    std::memcpy(pixels->data() + y * row_bytes, image->ptr(y), row_bytes);
+  }
+  return envelope;
+}
+
+wire::Envelope WorldServer::GroundTruth(const wire::GroundTruthRequest& request) {
+  wire::Envelope envelope;
+  wire::GroundTruthReply* reply = envelope.mutable_ground_truth_reply();
+  reply->set_projector_id(request.projector_id());
+  auto fail = [&](const std::string& message) {
+    ++stats_.bad_requests;
+    counters_.CountRejected(proto::RejectReason::kInvalidContent);
+    reply->clear_samples();
+    reply->set_ok(false);
+    reply->set_message("ground_truth projector " + std::to_string(request.projector_id()) + ": " +
+                       message);
+    return envelope;
+  };
+  if (!world_->site().FindUnit(request.projector_id())) {
+    return fail("no such projector in site '" + world_->site().name + "'");
+  }
+  for (int i = 0; i < request.points_in_table_m_size(); ++i) {
+    const wire::Vector3& p = request.points_in_table_m(i);
+    const Eigen::Vector3d point(p.x(), p.y(), p.z());
+    if (!point.allFinite())
+      return fail("points_in_table_m[" + std::to_string(i) + "] is not finite");
+    Expected<ProjectorTruth> truth = world_->ProjectorTruthAtPoint(request.projector_id(), point);
+    if (!truth.ok()) return fail(truth.status().message());
+    wire::GroundTruthSample* sample = reply->add_samples();
+    sample->mutable_projector_px()->set_x(truth->sample.pixel_px.x());
+    sample->mutable_projector_px()->set_y(truth->sample.pixel_px.y());
+    sample->set_visible(truth->sample.visible);
+    sample->set_luminance_cd_per_m2(truth->luminance_nits);
+  }
+  ++stats_.truth_queries;
+  reply->set_ok(true);
+  return envelope;
+}
+
+}  // namespace sandtable::sim

@@ -1,0 +1,97 @@
+// WorldServer: the simulated world behind the project protocol (proto/world.proto in the
+// Envelope, docs/protocol.md). One ROUTER socket serves any number of nodes; every request is
+// answered to the identity that sent it, in arrival order (requests are serialised: the World
+// is not thread-safe).
+//
+// Requests and replies:
+//   SetFrameRequest    -> SetFrameReply      (GRAY8 or RGB8 frame at the projector's size)
+//   CaptureRequest     -> CaptureReply       (GRAY8 for bit_depth <= 8, else GRAY16 LE)
+//   GroundTruthRequest -> GroundTruthReply   (per point: true pixel, lit, luminance)
+//   anything else      -> Rejected           (counted wrong_type)
+// Bad requests never crash the server: an unknown projector or camera, a frame of the wrong
+// size or encoding, pixels that do not match the announced size, non-finite points all get
+// their reply with ok = false and a message naming the cause, and are counted (stats()
+// .bad_requests, and MessageCounters kInvalidContent). A message that is not a valid Envelope
+// (garbage, wrong version, out of order) is counted by reason and answered with Rejected when
+// the sender's identity is known.
+// Noise: capture k (0, 1, 2, ...) of camera c uses the seed CaptureSeed(noise_seed, c, k), so a
+// server run is reproducible for a request sequence.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+
+#include <zmq.hpp>
+
+#include "net/channel.h"
+#include "proto/codec.h"
+#include "proto/envelope.pb.h"
+#include "proto/message_counters.h"
+#include "proto/sequence_tracker.h"
+#include "sim/transport/world.h"
+
+namespace sandtable::sim {
+
+// The world's sender id on the wire (the coordinator is 0xFFFFFFF0).
+constexpr uint32_t kWorldSenderId = 0xFFFFFFF1u;
+
+struct WorldServerOptions {
+  std::string bind_endpoint = "tcp://127.0.0.1:*";
+  bool noise = true;
+  uint64_t noise_seed = 1;
+  proto::CodecLimits limits;
+  Status Check() const;
+};
+
+struct WorldServerStats {
+  uint64_t frames_set = 0;
+  uint64_t captures = 0;
+  uint64_t truth_queries = 0;
+  uint64_t bad_requests = 0;  // well-formed envelopes whose content was refused
+  uint64_t rejected = 0;      // not a valid envelope, or a body the world does not serve
+};
+
+uint64_t CaptureSeed(uint64_t noise_seed, uint32_t camera_id, uint64_t capture_index);
+
+class WorldServer {
+ public:
+  WorldServer(std::unique_ptr<World> world, WorldServerOptions options);
+  ~WorldServer();
+
+  // Binds the ROUTER; endpoint() then names the real port.
+  Status Start();
+  const std::string& endpoint() const { return endpoint_; }
+
+  // Serves what arrives within `max_wait` (at most 1000 messages).
+  Status Step(std::chrono::milliseconds max_wait);
+  // Steps until `stop` becomes true (checked at least every 50 ms).
+  Status Run(const std::atomic<bool>& stop);
+
+  const WorldServerStats& stats() const { return stats_; }
+  const proto::MessageCounters& counters() const { return counters_; }
+  World& world() { return *world_; }
+
+ private:
+  void HandleMessage(std::vector<std::string> frames);
+  void Reply(const std::string& routing_id, wire::Envelope reply);
+  void Reject(const std::string& routing_id, uint64_t sequence, const std::string& reason);
+  wire::Envelope SetFrame(const wire::SetFrameRequest& request);
+  wire::Envelope Capture(const wire::CaptureRequest& request);
+  wire::Envelope GroundTruth(const wire::GroundTruthRequest& request);
+
+  std::unique_ptr<World> world_;
+  WorldServerOptions options_;
+  zmq::context_t context_;
+  proto::MessageCounters counters_;
+  proto::SequenceTracker tracker_;
+  std::unique_ptr<net::Channel> channel_;  // sends; receives are decoded here (see .cc)
+  std::string endpoint_;
+  std::map<uint32_t, uint64_t> captures_per_camera_;
+  WorldServerStats stats_;
+};
+
+}  // namespace sandtable::sim
