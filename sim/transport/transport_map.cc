@@ -28,17 +28,33 @@ int BoxWeights(double centre, double half, double weights[4]) {
 
 }  // namespace
 
-ProjectorSample SampleProjector(const ProjectorSpec& projector, const RayCaster& caster,
-                                const Eigen::Vector3d& point, const Eigen::Vector3d& normal) {
+namespace {
+
+// A projector's pose, precomputed once per map: the rotation as a matrix (a quaternion
+// rotation costs about twice as much, and this runs for every pixel and projector).
+struct ProjectorPose {
+  Eigen::Matrix3d projector_from_table_rotation;
+  Eigen::Vector3d centre_in_table_m;
+  explicit ProjectorPose(const ProjectorSpec& projector)
+      : projector_from_table_rotation(
+            projector.table_from_projector.rotation.conjugate().toRotationMatrix()),
+        centre_in_table_m(projector.table_from_projector.translation) {}
+  Eigen::Vector3d ToProjector(const Eigen::Vector3d& point_in_table_m) const {
+    return projector_from_table_rotation * (point_in_table_m - centre_in_table_m);
+  }
+};
+
+ProjectorSample SampleProjectorAt(const ProjectorSpec& projector, const ProjectorPose& pose,
+                                  const RayCaster& caster, const Eigen::Vector3d& point,
+                                  const Eigen::Vector3d& normal) {
   ProjectorSample out;
-  const Eigen::Vector3d centre = projector.table_from_projector.translation;
+  const Eigen::Vector3d& centre = pose.centre_in_table_m;
   const Eigen::Vector3d to_projector = centre - point;
   const double d = to_projector.norm();
   if (!(d > 0)) return out;
   const double cos_theta = normal.dot(to_projector) / d;
   if (cos_theta <= 0.0) return out;
-  const Eigen::Vector3d x_in_projector =
-      projector.table_from_projector.rotation.conjugate() * (point - centre);
+  const Eigen::Vector3d x_in_projector = pose.ToProjector(point);
   const std::optional<Eigen::Vector2d> pixel = projector.model.Project(x_in_projector);
   if (!pixel || !projector.model.InImage(*pixel)) return out;
   if (caster.Occluded(point, centre, kShadowEpsilon_m)) return out;
@@ -55,6 +71,13 @@ ProjectorSample SampleProjector(const ProjectorSpec& projector, const RayCaster&
     out.blur_px = projector.model.fx_px * projector.aperture_diameter_m * std::abs(z - s) / (z * s);
   }
   return out;
+}
+
+}  // namespace
+
+ProjectorSample SampleProjector(const ProjectorSpec& projector, const RayCaster& caster,
+                                const Eigen::Vector3d& point, const Eigen::Vector3d& normal) {
+  return SampleProjectorAt(projector, ProjectorPose(projector), caster, point, normal);
 }
 
 size_t TransportMap::NumEntries() const {
@@ -98,9 +121,14 @@ Expected<TransportMap> BuildTransportMap(const Site& site, const RayCaster& cast
       threads, std::vector<std::vector<TransportEntry>>(num_units));
   Eigen::Vector3d origin_step_x, direction_step_x, origin_step_y, direction_step_y;
   view.RayStep(&origin_step_x, &direction_step_x, &origin_step_y, &direction_step_y);
+  std::vector<ProjectorPose> poses;
+  for (const UnitSpec& unit : site.units) poses.emplace_back(unit.projector);
   auto work = [&](int band) {
     const int y0 = static_cast<int>(static_cast<int64_t>(height) * band / threads);
     const int y1 = static_cast<int>(static_cast<int64_t>(height) * (band + 1) / threads);
+    // At most one entry per pixel and projector: reserving that (untouched pages cost
+    // nothing) avoids regrowing and copying the lists.
+    for (auto& list : band_entries[band]) list.reserve(static_cast<size_t>(y1 - y0) * width);
     for (int y = y0; y < y1; ++y) {
       for (int x = 0; x < width; ++x) {
         const size_t pixel = static_cast<size_t>(y) * width + x;
@@ -134,19 +162,22 @@ Expected<TransportMap> BuildTransportMap(const Site& site, const RayCaster& cast
         }
         for (size_t p = 0; p < num_units; ++p) {
           const ProjectorSpec& projector = site.units[p].projector;
-          const ProjectorSample s = SampleProjector(projector, caster, point, normal);
+          const ProjectorPose& pose = poses[p];
+          const ProjectorSample s = SampleProjectorAt(projector, pose, caster, point, normal);
           if (!s.visible) continue;
           // Half extents of the footprint box in projector pixels: twice the half-pixel
           // displacements give the per-pixel Jacobian; the box covers |du/dx| + |du/dy|.
           double half_u = 0.0, half_v = 0.0;
           if (has_footprint) {
-            const Rigid3d projector_from_table = projector.table_from_projector.Inverse();
             for (int axis = 0; axis < 2; ++axis) {
-              const std::optional<Eigen::Vector2d> q =
-                  projector.model.Project(projector_from_table * footprint[axis]);
-              if (!q) continue;
-              half_u += std::abs(q->x() - s.pixel_px.x());  // = 0.5 |du/d(axis)|
-              half_v += std::abs(q->y() - s.pixel_px.y());
+              // The footprint points are within a pixel of the (in-domain, in-front) sample
+              // point, so they are projected without Project()'s domain test.
+              const Eigen::Vector3d f = pose.ToProjector(footprint[axis]);
+              if (!(f.z() > 0.0)) continue;
+              const Eigen::Vector2d q =
+                  projector.model.PixelFromNormalized(projector.model.Distort(f.head<2>() / f.z()));
+              half_u += std::abs(q.x() - s.pixel_px.x());  // = 0.5 |du/d(axis)|
+              half_v += std::abs(q.y() - s.pixel_px.y());
             }
           }
           // Defocus widens the box to the blur circle's diameter.
@@ -179,6 +210,10 @@ Expected<TransportMap> BuildTransportMap(const Site& site, const RayCaster& cast
   }
   map.entries.resize(num_units);
   for (size_t p = 0; p < num_units; ++p) {
+    if (threads == 1) {
+      map.entries[p] = std::move(band_entries[0][p]);
+      continue;
+    }
     size_t total = 0;
     for (int b = 0; b < threads; ++b) total += band_entries[b][p].size();
     map.entries[p].reserve(total);
