@@ -207,8 +207,11 @@ Expected<ResectionResult> EstimateResection(std::span<const Eigen::Vector3d> poi
         consider(internal::CameraFromWorldDltKnownK(points_in_world, normalized),
                  "dlt_known_intrinsics");
       }
-      if (ratio < options.homography_init_ratio || n < 6) {
+      if (ratio < options.homography_init_ratio) {
         consider(internal::CameraFromWorldPlanar(points_in_world, normalized), "homography");
+      }
+      if (n < 6 && !coplanar) {
+        consider(internal::CameraFromWorldP3p(points_in_world, normalized), "p3p");
       }
       if (report.initializer.empty()) {
         // Every candidate failed or left points behind the camera.

@@ -28,7 +28,8 @@
 //       cloud is (near-)coplanar (ratio < options.homography_init_ratio), a homography from
 //       the fitted plane gives the pose (CameraFromPlaneHomography); (b) when n >= 6 and the
 //       ratio is >= coplanar_ratio_threshold, a DLT with known K gives it (R projected onto
-//       SO(3)). The candidate with the lower reprojection rms is refined.
+//       SO(3)); (c) when n is 4 or 5 and the cloud is not coplanar, P3P on every triple,
+//       scored on all points. The candidate with the lowest reprojection rms is refined.
 //     - pose fixed: options.initial_camera_from_world is used as given.
 //  3. Ceres Levenberg-Marquardt on the reprojection error in px with the options' robust
 //     loss; fixed groups are constant parameter blocks. Rotation as angle-axis.
@@ -109,7 +110,7 @@ struct ResectionReport {
   bool converged = false;   // Ceres CONVERGENCE
   std::string termination;  // Ceres termination type ("CONVERGENCE", "NO_CONVERGENCE", ...)
   std::string message;      // Ceres message
-  std::string initializer;  // "dlt", "dlt_known_intrinsics", "homography", "given_pose"
+  std::string initializer;  // "dlt", "dlt_known_intrinsics", "homography", "p3p", "given_pose"
   int num_points = 0;
   int iterations = 0;               // Ceres iterations
   int num_free_parameters = 0;      // p in the noise-floor formula at the top of the file

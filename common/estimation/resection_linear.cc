@@ -2,11 +2,15 @@
 // measure, and the known-intrinsics initialisers.
 #include "common/estimation/resection_linear.h"
 
+#include <array>
 #include <cmath>
+#include <limits>
 #include <numbers>
+#include <optional>
 #include <sstream>
 #include <vector>
 
+#include <Eigen/Geometry>
 #include <Eigen/QR>
 #include <Eigen/SVD>
 
@@ -119,6 +123,127 @@ Expected<Rigid3d> CameraFromWorldPlanar(std::span<const Eigen::Vector3d> points_
       CameraFromPlaneHomography(*h, Eigen::Matrix3d::Identity(), on_plane);
   if (!camera_from_plane.ok()) return camera_from_plane.status();
   return *camera_from_plane * plane_from_world;
+}
+
+namespace {
+
+// All solutions of P3P for one triple. Unknown depths s1, s2, s3 > 0 along unit bearings
+// f1, f2, f3 satisfy the law of cosines for the three world distances:
+//   s1^2 + s2^2 - 2 s1 s2 cos_12 = d12^2,  s1^2 + s3^2 - 2 s1 s3 cos_13 = d13^2,
+//   s2^2 + s3^2 - 2 s2 s3 cos_23 = d23^2.
+// For a given s1 the first two give s2 = s1 cos_12 +- sqrt(d12^2 - s1^2 sin^2_12) and likewise
+// s3 (two branches each); the third equation is then a function of s1 alone on four branches,
+// whose roots are bracketed on a grid over the admissible s1 and bisected. Roots where the
+// function only touches zero can be missed; the caller tries every triple, so one miss is
+// covered by another triple.
+std::vector<Rigid3d> SolveP3p(const std::array<Eigen::Vector3d, 3>& world,
+                              const std::array<Eigen::Vector3d, 3>& bearing) {
+  const double d12 = (world[0] - world[1]).norm();
+  const double d13 = (world[0] - world[2]).norm();
+  const double d23 = (world[1] - world[2]).norm();
+  const double c12 = bearing[0].dot(bearing[1]);
+  const double c13 = bearing[0].dot(bearing[2]);
+  const double c23 = bearing[1].dot(bearing[2]);
+  const double sin12_sq = std::max(0.0, 1.0 - c12 * c12);
+  const double sin13_sq = std::max(0.0, 1.0 - c13 * c13);
+  // s1 is limited by the discriminants (s1 sin <= d) when the sines are not zero.
+  double s1_max = std::numeric_limits<double>::infinity();
+  if (sin12_sq > 0.0) s1_max = std::min(s1_max, d12 / std::sqrt(sin12_sq));
+  if (sin13_sq > 0.0) s1_max = std::min(s1_max, d13 / std::sqrt(sin13_sq));
+  if (!std::isfinite(s1_max) || !(s1_max > 0.0)) return {};
+
+  // Returns the residual of the third equation on `branch` (bit 0: sign for s2, bit 1: s3),
+  // or NaN where a depth is not real or not positive.
+  auto depths = [&](double s1, int branch, double* s2, double* s3) {
+    const double r2 = d12 * d12 - s1 * s1 * sin12_sq;
+    const double r3 = d13 * d13 - s1 * s1 * sin13_sq;
+    if (r2 < 0.0 || r3 < 0.0) return false;
+    *s2 = s1 * c12 + ((branch & 1) ? -1.0 : 1.0) * std::sqrt(r2);
+    *s3 = s1 * c13 + ((branch & 2) ? -1.0 : 1.0) * std::sqrt(r3);
+    return *s2 > 0.0 && *s3 > 0.0;
+  };
+  auto f = [&](double s1, int branch) {
+    double s2, s3;
+    if (!depths(s1, branch, &s2, &s3)) return std::numeric_limits<double>::quiet_NaN();
+    return (s2 * s2 + s3 * s3 - 2.0 * s2 * s3 * c23 - d23 * d23) / (d23 * d23);
+  };
+
+  constexpr int kGrid = 2000;
+  constexpr int kBisections = 100;
+  std::vector<Rigid3d> poses;
+  for (int branch = 0; branch < 4; ++branch) {
+    double prev_s1 = 0.0, prev_f = std::numeric_limits<double>::quiet_NaN();
+    for (int g = 1; g <= kGrid; ++g) {
+      const double s1 = s1_max * g / kGrid;
+      const double value = f(s1, branch);
+      if (std::isfinite(prev_f) && std::isfinite(value) && (prev_f < 0.0) != (value < 0.0)) {
+        double lo = prev_s1, hi = s1, f_lo = prev_f;
+        for (int b = 0; b < kBisections; ++b) {
+          const double mid = 0.5 * (lo + hi);
+          const double f_mid = f(mid, branch);
+          if (!std::isfinite(f_mid)) break;
+          if ((f_mid < 0.0) == (f_lo < 0.0)) {
+            lo = mid;
+            f_lo = f_mid;
+          } else {
+            hi = mid;
+          }
+        }
+        const double root = 0.5 * (lo + hi);
+        double s2, s3;
+        if (depths(root, branch, &s2, &s3)) {
+          // Camera-frame points, then the rigid alignment camera_from_world (Kabsch/Umeyama
+          // without scale) of the triple.
+          Eigen::Matrix3d in_camera, in_world;
+          in_camera << root * bearing[0], s2 * bearing[1], s3 * bearing[2];
+          in_world << world[0], world[1], world[2];
+          const Eigen::Matrix4d t = Eigen::umeyama(in_world, in_camera, false);
+          poses.emplace_back(Eigen::Matrix3d(t.topLeftCorner<3, 3>()),
+                             Eigen::Vector3d(t.topRightCorner<3, 1>()));
+        }
+      }
+      prev_s1 = s1;
+      prev_f = value;
+    }
+  }
+  return poses;
+}
+
+}  // namespace
+
+Expected<Rigid3d> CameraFromWorldP3p(std::span<const Eigen::Vector3d> points_in_world,
+                                     std::span<const Eigen::Vector2d> normalized) {
+  const int n = static_cast<int>(points_in_world.size());
+  double best_error = std::numeric_limits<double>::infinity();
+  std::optional<Rigid3d> best;
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n; ++j) {
+      for (int k = j + 1; k < n; ++k) {
+        const std::array<Eigen::Vector3d, 3> world = {points_in_world[i], points_in_world[j],
+                                                      points_in_world[k]};
+        const std::array<Eigen::Vector3d, 3> bearing = {normalized[i].homogeneous().normalized(),
+                                                        normalized[j].homogeneous().normalized(),
+                                                        normalized[k].homogeneous().normalized()};
+        for (const Rigid3d& pose : SolveP3p(world, bearing)) {
+          double error = 0.0;
+          for (int m = 0; m < n && std::isfinite(error); ++m) {
+            const Eigen::Vector3d x = pose * points_in_world[m];
+            error = x.z() > 0.0 ? error + (x.head<2>() / x.z() - normalized[m]).squaredNorm()
+                                : std::numeric_limits<double>::infinity();
+          }
+          if (error < best_error) {
+            best_error = error;
+            best = pose;
+          }
+        }
+      }
+    }
+  }
+  if (!best) {
+    return DegenerateError(
+        "P3P: no triple of points has a real solution with all points in front of the camera");
+  }
+  return *best;
 }
 
 }  // namespace internal

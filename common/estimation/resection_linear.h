@@ -23,6 +23,14 @@ Expected<Rigid3d> CameraFromWorldDltKnownK(std::span<const Eigen::Vector3d> poin
 Expected<Rigid3d> CameraFromWorldPlanar(std::span<const Eigen::Vector3d> points_in_world,
                                         std::span<const Eigen::Vector2d> normalized);
 
+// Minimal-solver start for 4 or 5 points in general 3D position: every triple is solved as a
+// P3P problem (the depth equations reduced to one unknown, roots bracketed on a dense grid and
+// bisected; no closed-form quartic), each candidate pose is scored by its reprojection error
+// (normalised units) over all points, and the best is returned. DEGENERATE if no triple has a
+// real solution with all points in front.
+Expected<Rigid3d> CameraFromWorldP3p(std::span<const Eigen::Vector3d> points_in_world,
+                                     std::span<const Eigen::Vector2d> normalized);
+
 // The similarity that moves the centroid to the origin with mean distance sqrt(3) (Hartley's
 // 3D normalisation), as a 4x4 matrix; ok = false when all points coincide.
 struct Hartley3d {
