@@ -239,6 +239,12 @@ TEST_F(WorldAppTest, ServeAnswersNodesAndSurvivesBadRequests) {
   std::optional<wire::Envelope> reply = node0.Ask(SetFrame(0, 1280, 800, 255));
   ASSERT_TRUE(reply && reply->has_set_frame_reply());
   EXPECT_TRUE(reply->set_frame_reply().ok()) << reply->set_frame_reply().message();
+  // An RGB frame is accepted too (projector 3 stays on for the rest of the test).
+  wire::Envelope rgb = SetFrame(3, 1280, 800, 255, 1280 * 800 * 3);
+  rgb.mutable_set_frame_request()->set_encoding(wire::PIXEL_ENCODING_RGB8);
+  reply = node1.Ask(rgb);
+  ASSERT_TRUE(reply && reply->has_set_frame_reply());
+  EXPECT_TRUE(reply->set_frame_reply().ok()) << reply->set_frame_reply().message();
   // Two nodes ask at once: each gets its own camera's picture.
   ASSERT_TRUE(node1.channel().Send(Capture(1)).ok());
   reply = node0.Ask(Capture(0));
@@ -260,6 +266,8 @@ TEST_F(WorldAppTest, ServeAnswersNodesAndSurvivesBadRequests) {
   auto world = World::Create(*LoadSiteFile(Path("site.json")), *LoadGltfScene(Path("scene.gltf")));
   ASSERT_TRUE(world.ok());
   ASSERT_TRUE((*world)->SetProjectorUniform(0, 255).ok());
+  ASSERT_TRUE(
+      (*world)->SetProjectorFrame(3, cv::Mat(800, 1280, CV_8UC3, cv::Scalar(255, 255, 255))).ok());
   const cv::Mat clean = *(*world)->Capture(0, {.enabled = false});
   EXPECT_GT(cv::mean(clean)[0], 20.0) << "the camera sees the white frame";
   EXPECT_NEAR(cv::mean(served)[0], cv::mean(clean)[0], kMeanLevelTolerance_dn);
@@ -307,6 +315,12 @@ TEST_F(WorldAppTest, ServeAnswersNodesAndSurvivesBadRequests) {
   reply = node0.Ask(SetFrame(0, 100000, 100000, 255, 10));  // absurd size, few bytes
   ASSERT_TRUE(reply && reply->has_set_frame_reply());
   EXPECT_FALSE(reply->set_frame_reply().ok());
+  wire::Envelope nan_point;
+  nan_point.mutable_ground_truth_request()->set_projector_id(0);
+  nan_point.mutable_ground_truth_request()->add_points_in_table_m()->set_x(std::nan(""));
+  reply = node0.Ask(nan_point);
+  ASSERT_TRUE(reply && reply->has_ground_truth_reply());
+  EXPECT_FALSE(reply->ground_truth_reply().ok());
   reply = node0.Ask(Capture(42));
   ASSERT_TRUE(reply && reply->has_capture_reply());
   EXPECT_FALSE(reply->capture_reply().ok());
