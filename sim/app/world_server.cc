@@ -105,6 +105,8 @@ void WorldServer::HandleMessage(std::vector<std::string> frames) {
     Reject(routing_id, in.sequence(), in_order.ToString());
     return;
   }
+  // Each message is counted once: accepted, or (inside the handlers) invalid_content.
+  const uint64_t bad_before = stats_.bad_requests;
   switch (in.body_case()) {
     case wire::Envelope::kSetFrameRequest:
       Reply(routing_id, SetFrame(in.set_frame_request()));
@@ -123,7 +125,7 @@ void WorldServer::HandleMessage(std::vector<std::string> frames) {
                  " (set_frame_request, capture_request, ground_truth_request)");
       return;
   }
-  counters_.CountAccepted();
+  if (stats_.bad_requests == bad_before) counters_.CountAccepted();
 }
 
 void WorldServer::Reply(const std::string& routing_id, wire::Envelope reply) {
