@@ -4,6 +4,9 @@
 //   sandtable-node --id N --coordinator REQUESTS_ENDPOINT,EVENTS_ENDPOINT
 //                  [--bind tcp://127.0.0.1:*] [--curve-keys site.key] [--heartbeat-ms 100]
 //
+//   sandtable-node calibrate-unit --poses DIR -o unit.json [--report report.json] ...
+//     the unit (factory) calibration; see node/calibration/calibrate_unit_command.h.
+//
 // On start it prints one line on stdout, for operators and tests:
 //   sandtable-node id=3 peer=tcp://127.0.0.1:40123
 // SIGINT/SIGTERM: says Goodbye to the coordinator and exits 0.
@@ -11,8 +14,10 @@
 #include <cstdlib>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include "common/base/log.h"
+#include "node/calibration/calibrate_unit_command.h"
 #include "node/net/node_runtime.h"
 
 namespace {
@@ -21,9 +26,11 @@ std::atomic<bool> g_stop{false};
 void OnSignal(int) { g_stop = true; }
 
 int Usage(const std::string& why) {
-  std::cerr << "sandtable-node: " << why << "\n"
-            << "usage: sandtable-node --id N --coordinator REQUESTS,EVENTS [--bind ENDPOINT]\n"
-            << "         [--curve-keys FILE] [--heartbeat-ms N]\n";
+  std::cerr
+      << "sandtable-node: " << why << "\n"
+      << "usage: sandtable-node --id N --coordinator REQUESTS,EVENTS [--bind ENDPOINT]\n"
+      << "         [--curve-keys FILE] [--heartbeat-ms N]\n"
+      << "       sandtable-node calibrate-unit --poses DIR -o unit.json [--report FILE] ...\n";
   return 2;
 }
 
@@ -31,6 +38,9 @@ int Usage(const std::string& why) {
 
 int main(int argc, char** argv) {
   using namespace sandtable;
+  if (argc >= 2 && std::string(argv[1]) == "calibrate-unit") {
+    return node::RunCalibrateUnit(std::vector<std::string>(argv + 2, argv + argc));
+  }
   node::NodeOptions options;
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
