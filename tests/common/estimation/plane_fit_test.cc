@@ -153,25 +153,36 @@ TEST(FitPlaneRansac, OutlierSweepUpTo90Percent) {
 }
 
 TEST(FitPlaneRansac, BreaksDownGracefullyPast90Percent) {
-  // At 97% and 99% clutter in this box the true plane still has the most support (30 and 10
-  // points within 3 mm, against ~0.5% of the clutter), so RANSAC either finds it or reports a
-  // low inlier ratio; with min_inlier_ratio set, a ratio below it is an error, never a silent
-  // wrong plane.
+  // Past 90% clutter the 10 000-sample budget no longer makes a clean 3-point sample likely
+  // (w = 0.03: 1 - (1 - w^3)^10000 = 0.24). RANSAC then either still returns the right plane
+  // or refuses with NOT_CONVERGED; at 99% (before the achieved-confidence check it returned a
+  // plane 0.81 rad off as OK) it must refuse. Never a silent wrong plane.
   constexpr double kSigma_m = 1e-3;
+  constexpr double kWrongPlane_rad = 1e-2;
   for (double outlier_ratio : {0.95, 0.97, 0.99}) {
     const Scene scene = MakeScene(15, 1000, 1.2, kSigma_m, outlier_ratio);
     PlaneFitOptions options;
     options.inlier_threshold_m = 3.0 * kSigma_m;
     auto fit = FitPlaneRansac(scene.points_m, options);
-    ASSERT_TRUE(fit.ok()) << fit.status().ToString();
-    const double angle_rad = NormalAngle_rad(fit->plane.normal, scene.truth.normal);
-    std::printf(
-        "[ measured ] outliers %.0f%%: normal error %.2e rad, inlier ratio %.3f, "
-        "%d iterations\n",
-        100 * outlier_ratio, angle_rad, fit->inlier_ratio, fit->ransac_iterations);
+    if (fit.ok()) {
+      const double angle_rad = NormalAngle_rad(fit->plane.normal, scene.truth.normal);
+      std::printf(
+          "[ measured ] outliers %.0f%%: normal error %.2e rad, inlier ratio %.3f, "
+          "%d iterations\n",
+          100 * outlier_ratio, angle_rad, fit->inlier_ratio, fit->ransac_iterations);
+      EXPECT_LT(angle_rad, kWrongPlane_rad) << outlier_ratio;
+      EXPECT_LT(outlier_ratio, 0.99) << "99% clutter must be refused";
+    } else {
+      std::printf("[ measured ] outliers %.0f%%: %s\n", 100 * outlier_ratio,
+                  fit.status().ToString().c_str());
+      EXPECT_EQ(fit.status().code(), StatusCode::kNotConverged) << fit.status().ToString();
+    }
     options.min_inlier_ratio = 0.2;
     auto strict = FitPlaneRansac(scene.points_m, options);
-    EXPECT_EQ(strict.status().code(), StatusCode::kDegenerate);
+    ASSERT_FALSE(strict.ok());
+    EXPECT_TRUE(strict.status().code() == StatusCode::kDegenerate ||
+                strict.status().code() == StatusCode::kNotConverged)
+        << strict.status().ToString();
   }
 }
 

@@ -203,5 +203,29 @@ TEST(RansacTest, TinyInlierRatioDoesNotStopTheSearch) {
   }
 }
 
+TEST(RansacTest, BudgetTooSmallForTheOutliersIsNotConverged) {
+  // 99 % outliers and a budget of 50 samples: the chance of ever drawing two inliers is
+  // 1 - (1 - 0.01^2)^50 = 0.5 %, so whatever "best" line was found is not trusted.
+  const std::vector<Eigen::Vector2d> points = LineData(1000, 990, 5);
+  RansacOptions options;
+  options.max_error = 0.05;
+  options.min_iterations = 50;
+  options.max_iterations = 50;
+  const auto starved = Ransac(LineEstimator(points), options);
+  ASSERT_FALSE(starved.ok());
+  EXPECT_EQ(starved.status().code(), StatusCode::kNotConverged);
+  EXPECT_NE(starved.status().message().find("raise max_iterations"), std::string::npos)
+      << starved.status().message();
+  // With a clean majority the same small budget converges and says how sure it is.
+  const auto easy = Ransac(LineEstimator(LineData(1000, 300, 5)), options);
+  ASSERT_TRUE(easy.ok()) << easy.status().ToString();
+  constexpr double kMinConfidence = 0.999;
+  EXPECT_GT(easy->achieved_confidence, kMinConfidence);
+  EXPECT_NEAR(easy->model.x(), 2.0, kLineTolerance);
+  // Disabling the check returns the unreliable model (callers that want it, e.g. sweeps).
+  options.min_achieved_confidence = 0.0;
+  EXPECT_TRUE(Ransac(LineEstimator(points), options).ok());
+}
+
 }  // namespace
 }  // namespace sandtable
