@@ -4,6 +4,7 @@
 //                         [--curve-keys site.key] [--heartbeat-ms 100] [--misses 5]
 //                         [--annotations FILE.db] [--annotation-sync full|normal]
 //                         [--export-session FILE.jsonl] [--import-session FILE.jsonl]
+//                         [--timeline TRACKS.csv] [--status PORT|IPv4:PORT]
 //   sandtable-coordinator --generate-curve-keys site.key
 //
 // --annotations: the SQLite database of annotation events (created when absent). Without it
@@ -11,9 +12,16 @@
 // refuses to start and says why (exit code 1). --export-session / --import-session work on the
 // database and exit (docs/coordinator.md).
 //
+// --timeline: personnel tracks (CSV, docs/coordinator.md) replayed with play/pause/seek/rate
+// requests and a timeline_clock on the PUB. --status: JSON at http://HOST:PORT/status (port 0:
+// any free port; a bare PORT binds loopback).
+//
 // On start it prints one line on stdout, for operators and tests:
 //   sandtable-coordinator requests=tcp://127.0.0.1:40001 events=tcp://127.0.0.1:40002
+// with " status=http://127.0.0.1:PORT/status" appended when --status is given.
 // SIGINT/SIGTERM stop it cleanly.
+#include <algorithm>
+#include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
@@ -25,6 +33,9 @@
 #include "coordinator/annotations/annotation_service.h"
 #include "coordinator/annotations/session_file.h"
 #include "coordinator/membership/coordinator_server.h"
+#include "coordinator/status/http_status_server.h"
+#include "coordinator/status/status_service.h"
+#include "coordinator/timeline/timeline_service.h"
 
 namespace {
 
@@ -37,6 +48,7 @@ int Usage(const char* why) {
             << "         [--curve-keys FILE] [--heartbeat-ms N] [--misses N]\n"
             << "         [--annotations FILE.db] [--annotation-sync full|normal]\n"
             << "         [--export-session FILE.jsonl] [--import-session FILE.jsonl]\n"
+            << "         [--timeline TRACKS.csv] [--status PORT|IPv4:PORT]\n"
             << "       sandtable-coordinator --generate-curve-keys FILE\n";
   return 2;
 }
@@ -49,7 +61,7 @@ int main(int argc, char** argv) {
   coordinator::CoordinatorOptions options;
   std::string annotations_path = ":memory:";
   coordinator::AnnotationStoreOptions store_options;
-  std::string export_path, import_path;
+  std::string export_path, import_path, timeline_path, status_address;
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
     if (i + 1 >= argc) return Usage(("missing value after " + flag).c_str());
@@ -85,6 +97,10 @@ int main(int argc, char** argv) {
       export_path = value;
     } else if (flag == "--import-session") {
       import_path = value;
+    } else if (flag == "--timeline") {
+      timeline_path = value;
+    } else if (flag == "--status") {
+      status_address = value;
     } else {
       return Usage(("unknown flag " + flag).c_str());
     }
@@ -115,6 +131,33 @@ int main(int argc, char** argv) {
     return 0;
   }
   coordinator::AnnotationService annotations(store->get());
+  std::unique_ptr<coordinator::TimelineService> timeline;
+  if (!timeline_path.empty()) {
+    Expected<coordinator::PersonnelTracks> tracks =
+        coordinator::PersonnelTracks::Load(timeline_path);
+    if (!tracks.ok()) {
+      std::cerr << "sandtable-coordinator: --timeline: " << tracks.status().ToString() << "\n";
+      return 1;
+    }
+    ST_LOG(kInfo) << "timeline: " << timeline_path << ", " << tracks->tracks().size() << " tracks, "
+                  << tracks->sample_count() << " samples, " << tracks->duration_s() << " s";
+    timeline = std::make_unique<coordinator::TimelineService>(std::move(*tracks));
+    // The clock goes out at 30 Hz: the server must step at least that often.
+    options.step_period = std::min(options.step_period, std::chrono::milliseconds(10));
+  }
+  std::unique_ptr<coordinator::HttpStatusServer> http;
+  std::unique_ptr<coordinator::StatusService> status;
+  if (!status_address.empty()) {
+    Expected<std::unique_ptr<coordinator::HttpStatusServer>> started =
+        coordinator::HttpStatusServer::Start(status_address);
+    if (!started.ok()) {
+      std::cerr << "sandtable-coordinator: --status: " << started.status().ToString() << "\n";
+      return 1;
+    }
+    http = std::move(*started);
+    status = std::make_unique<coordinator::StatusService>(
+        http.get(), coordinator::StatusSources{&annotations, timeline.get()});
+  }
 
   struct sigaction action {};
   action.sa_handler = OnSignal;
@@ -123,13 +166,20 @@ int main(int argc, char** argv) {
 
   coordinator::CoordinatorServer server(options);
   server.AddService(&annotations);
+  if (timeline) server.AddService(timeline.get());
+  if (status) server.AddService(status.get());
   Status started = server.Start();
   if (!started.ok()) {
     ST_LOG(kError) << "cannot start: " << started.ToString();
     return 1;
   }
   std::cout << "sandtable-coordinator requests=" << server.request_endpoint()
-            << " events=" << server.event_endpoint() << std::endl;
+            << " events=" << server.event_endpoint();
+  if (http) {
+    http->Publish(status->BuildJson(server));  // served before the first step
+    std::cout << " status=" << http->url();
+  }
+  std::cout << std::endl;
   Status ran = server.Run(g_stop);
   ST_LOG(kInfo) << "stopping; messages " << server.counters().ToString();
   if (!ran.ok()) {
