@@ -211,7 +211,7 @@ int Run(const Args& args) {
     }
     const double peer_fraction =
         cv::countNonZero(peer->valid) / static_cast<double>(peer->valid.total());
-    std::printf("%-5d %-16s %9.2f %10.1f %9.2f %10s %10s\n", pose, "opencv(40,5)",
+    std::printf("%-5d %-16s %9.2f %10.1f %9.2f %10s %10s\n", pose, "opencv_40_5",
                 100 * peer_fraction, opencv_ms, mpx / (opencv_ms / 1e3), "-", "-");
     peer_csv << pose << ",opencv_40_5," << peer_fraction << "," << opencv_ms << ","
              << mpx / (opencv_ms / 1e3) << ",,,,\n";
@@ -224,10 +224,10 @@ int Run(const Args& args) {
     strict.max_weak_bits_per_axis = 0;
     DecoderOptions upstream_weak1 = upstream;  // OpenCV's thresholds, one weak bit tolerated
     upstream_weak1.max_weak_bits_per_axis = 1;
-    const Variant variants[] = {{"ours(40,5)", upstream},
-                                {"ours(defaults)", defaults},
-                                {"ours(10,6,weak0)", strict},
-                                {"ours(40,5,weak1)", upstream_weak1}};
+    const Variant variants[] = {{"ours_40_5", upstream},
+                                {"ours_defaults", defaults},
+                                {"ours_10_6_weak0", strict},
+                                {"ours_40_5_weak1", upstream_weak1}};
     std::vector<Decoding> ours;
     for (const Variant& v : variants) {
       DecodeReport r;
@@ -250,7 +250,7 @@ int Run(const Args& args) {
       std::fprintf(stderr, "pose %d: %s\n", pose, region.status().ToString().c_str());
       continue;
     }
-    std::vector<std::pair<const char*, const Decoding*>> decoders = {{"opencv(40,5)", &*peer}};
+    std::vector<std::pair<const char*, const Decoding*>> decoders = {{"opencv_40_5", &*peer}};
     for (size_t i = 0; i < ours.size(); ++i) decoders.emplace_back(variants[i].name, &ours[i]);
     for (const auto& [name, decoding] : decoders) {
       PlaneMappingOptions fit_options;

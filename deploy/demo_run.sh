@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# The main job's steps, run by deploy/demo.sh after the build:
+#   deploy/demo_run.sh BUILD_DIR OUT_DIR
+# Each step prints what it does and how long it took; deploy/demo_report.py then writes
+# OUT_DIR/report.md from the files the steps left. A failing step is reported, not hidden:
+# the script exits non-zero after writing the report.
+set -uo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+build="$1"
+out="$2"
+cd "$root"
+mkdir -p "$out"
+: > "$out/steps.tsv"
+failed=0
+
+step() {  # step NAME COMMAND... ; logs to OUT/NAME.log, records status and seconds
+  local name="$1"; shift
+  echo "demo: [$name] $*"
+  local start end rc
+  start=$(date +%s.%N)
+  "$@" > "$out/$name.log" 2>&1
+  rc=$?
+  end=$(date +%s.%N)
+  local secs
+  secs=$(python3 -c "print(f'{$end - $start:.1f}')")
+  printf '%s\t%s\t%s\n' "$name" "$rc" "$secs" >> "$out/steps.tsv"
+  if [ "$rc" -ne 0 ]; then
+    echo "demo: [$name] FAILED (exit $rc), log: $out/$name.log"
+    failed=1
+  else
+    echo "demo: [$name] ok in ${secs} s"
+  fi
+}
+
+world="$build/sim/app/sandtable-world"
+node="$build/node/sandtable-node"
+bench="$build/tests/bench"
+
+# 1. The simulated world: a TR09-017 sand table lit white by three projectors.
+step scene "$world" make-scene --preset sandtable --seed 1 -o "$out/scene.gltf"
+step site "$world" make-site --preset sandtable-3 --seed 1 -o "$out/site.json"
+step render_top "$world" render --site "$out/site.json" --scene "$out/scene.gltf" --white \
+  --view top -o "$out/world_top_white.png"
+step render_camera0 "$world" render --site "$out/site.json" --scene "$out/scene.gltf" --white \
+  --view camera:0 -o "$out/world_camera0_white.png"
+
+# 2. Structured light and unit calibration on the real procam captures.
+step structured_light "$bench/bench_structured_light" --data ../shared/data/procam-kamino410 \
+  --out "$out" --repeats 5
+step calibrate_unit "$node" calibrate-unit --poses ../shared/data/procam-kamino410 \
+  -o "$out/unit.json" --report "$out/unit_report.json"
+
+# 3. Geometry core: run time against error and breakdown sweeps, plotted.
+step numerics "$bench/sandtable_numerics_sweep" --out "$out/numerics"
+step numerics_plots bash tests/bench/plot_sweeps.sh "$out/numerics"
+
+# 4. Protocol: event fan-out latency coordinator -> 3 nodes at 120 Hz over loopback.
+step event_latency "$bench/bench_event_latency" 1200 120 3
+
+python3 "$root/deploy/demo_report.py" "$out"
+echo "demo: report written to $out/report.md"
+exit "$failed"
