@@ -113,28 +113,65 @@ RayHit RayCaster::Intersect(const Eigen::Vector3d& origin, const Eigen::Vector3d
   return out;
 }
 
-bool RayCaster::Occluded(const Eigen::Vector3d& from, const Eigen::Vector3d& to,
-                         double epsilon_m) const {
+namespace {
+
+// The shadow ray of Occluded() from `from` to `to`; false when the segment is too short to
+// be occluded.
+bool MakeShadowRay(const Eigen::Vector3d& from, const Eigen::Vector3d& to, double epsilon_m,
+                   RTCRay* ray) {
   const Eigen::Vector3d delta = to - from;
   const double length = delta.norm();
   if (!(length > 2 * epsilon_m)) return false;
   const Eigen::Vector3d d = delta / length;
+  ray->org_x = static_cast<float>(from.x());
+  ray->org_y = static_cast<float>(from.y());
+  ray->org_z = static_cast<float>(from.z());
+  ray->dir_x = static_cast<float>(d.x());
+  ray->dir_y = static_cast<float>(d.y());
+  ray->dir_z = static_cast<float>(d.z());
+  ray->tnear = static_cast<float>(epsilon_m);
+  ray->tfar = static_cast<float>(length - epsilon_m);
+  ray->mask = 0xFFFFFFFFu;
+  ray->flags = 0;
+  ray->time = 0.0f;
+  ray->id = 0;
+  return true;
+}
+
+}  // namespace
+
+bool RayCaster::Occluded(const Eigen::Vector3d& from, const Eigen::Vector3d& to,
+                         double epsilon_m) const {
+  RTCRay ray;
+  if (!MakeShadowRay(from, to, epsilon_m, &ray)) return false;
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
-  RTCRay ray;
-  ray.org_x = static_cast<float>(from.x());
-  ray.org_y = static_cast<float>(from.y());
-  ray.org_z = static_cast<float>(from.z());
-  ray.dir_x = static_cast<float>(d.x());
-  ray.dir_y = static_cast<float>(d.y());
-  ray.dir_z = static_cast<float>(d.z());
-  ray.tnear = static_cast<float>(epsilon_m);
-  ray.tfar = static_cast<float>(length - epsilon_m);
-  ray.mask = 0xFFFFFFFFu;
-  ray.flags = 0;
-  ray.time = 0.0f;
   rtcOccluded1(impl_->scene, &context, &ray);
   return ray.tfar == -std::numeric_limits<float>::infinity();
+}
+
+void RayCaster::OccludedToPoint(const std::vector<Eigen::Vector3d>& from, const Eigen::Vector3d& to,
+                                double epsilon_m, std::vector<uint8_t>* occluded) const {
+  occluded->assign(from.size(), 0);
+  std::vector<RTCRay> rays;
+  std::vector<size_t> index;
+  rays.reserve(from.size());
+  index.reserve(from.size());
+  for (size_t i = 0; i < from.size(); ++i) {
+    RTCRay ray;
+    if (!MakeShadowRay(from[i], to, epsilon_m, &ray)) continue;
+    rays.push_back(ray);
+    index.push_back(i);
+  }
+  if (rays.empty()) return;
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  rtcOccluded1M(impl_->scene, &context, rays.data(), static_cast<unsigned>(rays.size()),
+                sizeof(RTCRay));
+  for (size_t k = 0; k < rays.size(); ++k) {
+    (*occluded)[index[k]] = rays[k].tfar == -std::numeric_limits<float>::infinity();
+  }
 }
 
 }  // namespace sandtable::sim

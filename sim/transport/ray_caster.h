@@ -7,8 +7,10 @@
 // empty scene.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -41,6 +43,13 @@ class RayCaster {
   // at both ends (so a surface point is not shadowed by its own triangle).
   bool Occluded(const Eigen::Vector3d& from_in_table_m, const Eigen::Vector3d& to_in_table_m,
                 double epsilon_m = 1e-5) const;
+
+  // Occluded(from[i], to, epsilon_m) for every i, as one coherent batch (rays that share an
+  // end point, e.g. shadow rays to a projector centre, traverse the tree together). Same
+  // result as the single-ray calls. (*occluded)[i] is 1 when occluded.
+  void OccludedToPoint(const std::vector<Eigen::Vector3d>& from_in_table_m,
+                       const Eigen::Vector3d& to_in_table_m, double epsilon_m,
+                       std::vector<uint8_t>* occluded) const;
 
   const Scene& scene() const { return scene_; }
 

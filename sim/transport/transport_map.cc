@@ -44,34 +44,55 @@ struct ProjectorPose {
   }
 };
 
-ProjectorSample SampleProjectorAt(const ProjectorSpec& projector, const ProjectorPose& pose,
-                                  const RayCaster& caster, const Eigen::Vector3d& point,
-                                  const Eigen::Vector3d& normal) {
-  ProjectorSample out;
+// Everything of SampleProjector except the shadow ray: false when the projector cannot light
+// the point (behind the surface or the projector, outside its image). On true, *out holds the
+// sample of a visible point.
+bool ProjectorGeometryAt(const ProjectorSpec& projector, const ProjectorPose& pose,
+                         const Eigen::Vector3d& point, const Eigen::Vector3d& normal,
+                         ProjectorSample* out) {
   const Eigen::Vector3d& centre = pose.centre_in_table_m;
   const Eigen::Vector3d to_projector = centre - point;
   const double d = to_projector.norm();
-  if (!(d > 0)) return out;
+  if (!(d > 0)) return false;
   const double cos_theta = normal.dot(to_projector) / d;
-  if (cos_theta <= 0.0) return out;
+  if (cos_theta <= 0.0) return false;
   const Eigen::Vector3d x_in_projector = pose.ToProjector(point);
   const std::optional<Eigen::Vector2d> pixel = projector.model.Project(x_in_projector);
-  if (!pixel || !projector.model.InImage(*pixel)) return out;
-  if (caster.Occluded(point, centre, kShadowEpsilon_m)) return out;
-  out.visible = true;
-  out.pixel_px = *pixel;
-  out.distance_m = d;
-  out.gain_per_m2 = cos_theta / (d * d);
+  if (!pixel || !projector.model.InImage(*pixel)) return false;
+  out->visible = true;
+  out->pixel_px = *pixel;
+  out->distance_m = d;
+  out->gain_per_m2 = cos_theta / (d * d);
+  out->blur_px = 0.0;
   if (projector.aperture_diameter_m > 0 && projector.focus_distance_m > 0) {
     // Thin lens focused at s: the blur circle of a point at depth z (along the axis) on the
     // image side is A f |z - s| / (z (s - f)); in pixels (f / pitch = fx_px, s >> f) that is
     // fx_px A |z - s| / (z s).
     const double z = x_in_projector.z();
     const double s = projector.focus_distance_m;
-    out.blur_px = projector.model.fx_px * projector.aperture_diameter_m * std::abs(z - s) / (z * s);
+    out->blur_px =
+        projector.model.fx_px * projector.aperture_diameter_m * std::abs(z - s) / (z * s);
   }
+  return true;
+}
+
+ProjectorSample SampleProjectorAt(const ProjectorSpec& projector, const ProjectorPose& pose,
+                                  const RayCaster& caster, const Eigen::Vector3d& point,
+                                  const Eigen::Vector3d& normal) {
+  ProjectorSample out;
+  if (!ProjectorGeometryAt(projector, pose, point, normal, &out)) return ProjectorSample();
+  if (caster.Occluded(point, pose.centre_in_table_m, kShadowEpsilon_m)) return ProjectorSample();
   return out;
 }
+
+// One view pixel's surface point and footprint (see BuildTransportMap).
+struct PixelSurface {
+  int x = 0;
+  Eigen::Vector3d point, normal;
+  double albedo = 0.0;
+  Eigen::Vector3d footprint[2];
+  bool has_footprint = false;
+};
 
 }  // namespace
 
@@ -129,50 +150,75 @@ Expected<TransportMap> BuildTransportMap(const Site& site, const RayCaster& cast
     // At most one entry per pixel and projector: reserving that (untouched pages cost
     // nothing) avoids regrowing and copying the lists.
     for (auto& list : band_entries[band]) list.reserve(static_cast<size_t>(y1 - y0) * width);
+    // Per row: first every pixel's surface point (primary rays), then per projector the
+    // candidates' shadow rays as one coherent batch (they all end at the projector centre),
+    // then the entries in pixel order.
+    std::vector<PixelSurface> surfaces;
+    std::vector<ProjectorSample> samples;
+    std::vector<Eigen::Vector3d> shadow_from;
+    std::vector<uint8_t> occluded;
+    surfaces.reserve(width);
     for (int y = y0; y < y1; ++y) {
+      surfaces.clear();
       for (int x = 0; x < width; ++x) {
         const size_t pixel = static_cast<size_t>(y) * width + x;
         Eigen::Vector3d origin, direction;
         if (!view.Ray(x, y, &origin, &direction)) continue;
         const RayHit hit = caster.Intersect(origin, direction);
         if (!hit.hit) continue;
-        const Eigen::Vector3d point = origin + hit.distance_m * direction.normalized();
+        PixelSurface surface;
+        surface.x = x;
+        surface.point = origin + hit.distance_m * direction.normalized();
         // (direction keeps the scale of View::Ray so the ray steps above apply to it.)
-        Eigen::Vector3d normal = scene.FaceNormal(hit.triangle);
-        if (normal.dot(direction) > 0) normal = -normal;  // two-sided: face the viewer
-        const double albedo = scene.AlbedoAt(hit.triangle, hit.u, hit.v);
+        surface.normal = scene.FaceNormal(hit.triangle);
+        if (surface.normal.dot(direction) > 0) surface.normal = -surface.normal;  // face the view
+        surface.albedo = scene.AlbedoAt(hit.triangle, hit.u, hit.v);
         map.hit[pixel] = 1;
-        map.albedo[pixel] = static_cast<float>(albedo);
-        map.point_in_table_m[pixel] = point.cast<float>();
-        map.normal_in_table[pixel] = normal.cast<float>();
+        map.albedo[pixel] = static_cast<float>(surface.albedo);
+        map.point_in_table_m[pixel] = surface.point.cast<float>();
+        map.normal_in_table[pixel] = surface.normal.cast<float>();
         // The pixel's footprint on the surface's tangent plane: where the rays of the pixel's
         // edge midpoints (half a pixel step) meet the plane through `point` with `normal`.
-        Eigen::Vector3d footprint[2];
-        bool has_footprint = true;
+        surface.has_footprint = true;
         for (int axis = 0; axis < 2; ++axis) {
           const Eigen::Vector3d o = origin + 0.5 * (axis == 0 ? origin_step_x : origin_step_y);
           const Eigen::Vector3d d =
               direction + 0.5 * (axis == 0 ? direction_step_x : direction_step_y);
-          const double denominator = normal.dot(d);
+          const double denominator = surface.normal.dot(d);
           if (std::abs(denominator) < 1e-12) {
-            has_footprint = false;
+            surface.has_footprint = false;
             break;
           }
-          footprint[axis] = o + normal.dot(point - o) / denominator * d;
+          surface.footprint[axis] = o + surface.normal.dot(surface.point - o) / denominator * d;
         }
-        for (size_t p = 0; p < num_units; ++p) {
-          const ProjectorSpec& projector = site.units[p].projector;
-          const ProjectorPose& pose = poses[p];
-          const ProjectorSample s = SampleProjectorAt(projector, pose, caster, point, normal);
-          if (!s.visible) continue;
+        surfaces.push_back(surface);
+      }
+      for (size_t p = 0; p < num_units; ++p) {
+        const ProjectorSpec& projector = site.units[p].projector;
+        const ProjectorPose& pose = poses[p];
+        samples.assign(surfaces.size(), ProjectorSample());
+        shadow_from.clear();
+        for (size_t i = 0; i < surfaces.size(); ++i) {
+          if (ProjectorGeometryAt(projector, pose, surfaces[i].point, surfaces[i].normal,
+                                  &samples[i])) {
+            shadow_from.push_back(surfaces[i].point);
+          }
+        }
+        caster.OccludedToPoint(shadow_from, pose.centre_in_table_m, kShadowEpsilon_m, &occluded);
+        size_t next_shadow = 0;
+        for (size_t i = 0; i < surfaces.size(); ++i) {
+          const ProjectorSample& s = samples[i];
+          if (!s.visible || occluded[next_shadow++]) continue;
+          const PixelSurface& surface = surfaces[i];
+          const size_t pixel = static_cast<size_t>(y) * width + surface.x;
           // Half extents of the footprint box in projector pixels: twice the half-pixel
           // displacements give the per-pixel Jacobian; the box covers |du/dx| + |du/dy|.
           double half_u = 0.0, half_v = 0.0;
-          if (has_footprint) {
+          if (surface.has_footprint) {
             for (int axis = 0; axis < 2; ++axis) {
               // The footprint points are within a pixel of the (in-domain, in-front) sample
               // point, so they are projected without Project()'s domain test.
-              const Eigen::Vector3d f = pose.ToProjector(footprint[axis]);
+              const Eigen::Vector3d f = pose.ToProjector(surface.footprint[axis]);
               if (!(f.z() > 0.0)) continue;
               const Eigen::Vector2d q =
                   projector.model.PixelFromNormalized(projector.model.Distort(f.head<2>() / f.z()));
@@ -191,10 +237,10 @@ Expected<TransportMap> BuildTransportMap(const Site& site, const RayCaster& cast
           e.pixel = static_cast<uint32_t>(pixel);
           e.frame_offset =
               static_cast<uint32_t>((v0 + kFramePadding_px) * padded_width + x0 + kFramePadding_px);
-          const double gain = albedo * projector.peak_luminance_at_1m_nits * s.gain_per_m2;
-          for (int i = 0; i < 4; ++i) {
-            e.wu[i] = static_cast<uint16_t>(std::lround(wu[i] * 65535.0));
-            e.wv[i] = static_cast<float>(wv[i] * gain);
+          const double gain = surface.albedo * projector.peak_luminance_at_1m_nits * s.gain_per_m2;
+          for (int i4 = 0; i4 < 4; ++i4) {
+            e.wu[i4] = static_cast<uint16_t>(std::lround(wu[i4] * 65535.0));
+            e.wv[i4] = static_cast<float>(wv[i4] * gain);
           }
           band_entries[band][p].push_back(e);
         }

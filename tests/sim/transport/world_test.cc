@@ -361,6 +361,42 @@ TEST(WorldPhysics, DeterministicForSeedAndThreadCount) {
   EXPECT_GT(partially_lit, 0);
 }
 
+TEST(WorldPhysics, TransportMapAgreesWithPerPointTruth) {
+  // The map's batched shadow rays give the same visibility as the single-ray ground truth
+  // along each camera pixel's ray, on the default scene with real shadows.
+  Site site = *MakeSitePreset("sandtable-3");
+  for (UnitSpec& u : site.units)
+    u.camera->model = CameraModel(96, 72, 90, 90, 47.5, 35.5, u.camera->model.distortion);
+  ProceduralSceneOptions options;
+  options.seed = 3;
+  auto world = MakeWorld(site, MakeProceduralScene(options)->scene);
+  ASSERT_TRUE(world);
+  const UnitSpec& unit = site.units[2];
+  const TransportMap& map = **world->CameraTransport(unit.id);
+  std::vector<std::vector<bool>> lit(site.units.size(), std::vector<bool>(96 * 72, false));
+  for (size_t p = 0; p < map.entries.size(); ++p)
+    for (const TransportEntry& e : map.entries[p]) lit[p][e.pixel] = true;
+  const Rigid3d table_from_camera = site.TableFromCamera(unit);
+  int checked = 0, shadowed = 0;
+  for (int y = 0; y < 72; ++y) {
+    for (int x = 0; x < 96; ++x) {
+      const Eigen::Vector3d ray =
+          table_from_camera.rotation * *unit.camera->model.Unproject(Eigen::Vector2d(x, y));
+      Expected<SurfaceTruth> truth = world->TruthAlongRay(table_from_camera.translation, ray);
+      ASSERT_EQ(truth.ok(), map.hit[y * 96 + x] != 0) << x << "," << y;
+      if (!truth.ok()) continue;
+      for (size_t p = 0; p < site.units.size(); ++p) {
+        EXPECT_EQ(truth->projectors[p].sample.visible, lit[p][y * 96 + x])
+            << "pixel " << x << "," << y << " projector " << p;
+        shadowed += !truth->projectors[p].sample.visible;
+        ++checked;
+      }
+    }
+  }
+  EXPECT_GT(checked, 10000);
+  EXPECT_GT(shadowed, 100) << "the check must include unlit points";
+}
+
 TEST(WorldPhysics, NoiseStatisticsMatchTheModel) {
   // Uniform grey: the spread of a flat patch matches Poisson + read noise.
   Site site = OneUnitSite({0.0, 0.0, 1.0}, 64, 48);
