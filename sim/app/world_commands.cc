@@ -71,7 +71,7 @@ std::string WorldUsage() {
          "                        [--factory-dir DIR] -o site.json\n"
          "       sandtable-world render --site S --scene G [--white | --frame ID=FILE.png ...]\n"
          "                        --view top|camera:ID [--width W] [--height H]\n"
-         "                        [--white-nits L] -o out.png\n"
+         "                        [--white-nits L] [--threads N] -o out.png\n"
          "       sandtable-world serve --site S --scene G [--bind tcp://127.0.0.1:0]\n"
          "                        [--no-noise] [--noise-seed N] [--threads N] [--prebuild]\n";
 }

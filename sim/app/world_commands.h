@@ -3,7 +3,7 @@
 //   make-scene --preset sandtable|city|flat [--seed N] [--buildings N] -o scene.gltf|.glb
 //   make-site  --preset sandtable-3|grid-N|flat-4 [--seed N] [--factory-dir DIR] -o site.json
 //   render     --site S --scene G [--white | --frame ID=FILE.png ...] --view top|camera:ID
-//              [--width W] [--height H] [--white-nits L] -o out.png
+//              [--width W] [--height H] [--white-nits L] [--threads N] -o out.png
 //   serve      --site S --scene G [--bind tcp://127.0.0.1:0] [--no-noise] [--noise-seed N]
 //              [--threads N] [--prebuild]
 //
