@@ -51,7 +51,7 @@ plot "$(sel period)" using 4:12 with linespoints lw 2 title "rms", \
 unset logscale x
 
 set title "Camera noise (preset: 0.5 DN read noise, 10000 e- full well)"
-set xlabel "camera read noise, DN (photon-noise variance scaled by the same factor; 0 = noise off)"
+set xlabel "read noise, DN (photon-noise variance x same factor; 0 = noise off)"
 plot "$(sel noise '$3 == 0 && $8 >= 0.005')" using 6:12 with linespoints lw 2 title "Gray only", \
      "$(sel noise '$3 == 4 && $8 >= 0.005')" using 6:12 with linespoints lw 2 title "Gray + 4-step", \
      "$(sel noise '$3 == 8 && $8 >= 0.005')" using 6:12 with linespoints lw 2 title "Gray + 8-step"
