@@ -30,9 +30,20 @@ CoordinatorServer::CoordinatorServer(CoordinatorOptions options)
     : options_(std::move(options)), members_(options_.membership) {}
 
 CoordinatorServer::~CoordinatorServer() {
+  for (auto& monitor : handshake_monitors_) monitor->Stop();
   requests_.reset();
   events_.reset();
   if (zap_) zap_->Stop();
+}
+
+Status CoordinatorServer::MonitorHandshakes(net::Socket* socket, const char* name) {
+  // Only with CURVE: a client without keys is dropped in the ZMTP greeting and never reaches
+  // ZAP, so the monitor is what logs its refusal.
+  if (!options_.curve) return OkStatus();
+  auto monitor = std::make_unique<net::HandshakeMonitor>();
+  ST_RETURN_IF_ERROR(monitor->Attach(&context_, socket, name));
+  handshake_monitors_.push_back(std::move(monitor));
+  return OkStatus();
 }
 
 Status CoordinatorServer::Start() {
@@ -49,6 +60,7 @@ Status CoordinatorServer::Start() {
   Expected<std::unique_ptr<net::Socket>> router =
       net::Socket::Create(&context_, net::SocketType::kRouter, socket_options);
   if (!router.ok()) return router.status();
+  ST_RETURN_IF_ERROR(MonitorHandshakes(router->get(), "coordinator requests"));
   Expected<std::string> request_endpoint = (*router)->Bind(options_.request_endpoint);
   if (!request_endpoint.ok()) return request_endpoint.status().WithContext("requests");
   request_endpoint_ = *request_endpoint;
@@ -58,6 +70,7 @@ Status CoordinatorServer::Start() {
   Expected<std::unique_ptr<net::Socket>> pub =
       net::Socket::Create(&context_, net::SocketType::kPub, socket_options);
   if (!pub.ok()) return pub.status();
+  ST_RETURN_IF_ERROR(MonitorHandshakes(pub->get(), "coordinator events"));
   Expected<std::string> event_endpoint = (*pub)->Bind(options_.event_endpoint);
   if (!event_endpoint.ok()) return event_endpoint.status().WithContext("events");
   event_endpoint_ = *event_endpoint;

@@ -20,6 +20,7 @@
 #include "coordinator/membership/membership_table.h"
 #include "net/channel.h"
 #include "net/curve.h"
+#include "net/handshake_monitor.h"
 
 namespace sandtable::coordinator {
 
@@ -83,10 +84,13 @@ class CoordinatorServer {
  private:
   void HandleRequest(net::Incoming request);
   Status PublishMemberList();
+  // With CURVE, logs and counts refused handshakes on `socket` (net/handshake_monitor.h).
+  Status MonitorHandshakes(net::Socket* socket, const char* name);
 
   CoordinatorOptions options_;
   zmq::context_t context_;
   std::unique_ptr<net::ZapHandler> zap_;
+  std::vector<std::unique_ptr<net::HandshakeMonitor>> handshake_monitors_;
   proto::MessageCounters counters_;
   std::unique_ptr<net::Channel> requests_;
   std::unique_ptr<net::Channel> events_;
