@@ -7,6 +7,7 @@
 #include <ceres/sphere_manifold.h>
 
 #include "common/estimation/homography.h"
+#include "common/estimation/ceres_solver_options.h"
 #include "common/estimation/homography_hartley.h"
 
 namespace sandtable {
@@ -96,14 +97,7 @@ Expected<RefinedHomography> RefineHomography(std::span<const Eigen::Vector2d> po
   }
   problem.SetManifold(h, new ceres::SphereManifold<9>());
 
-  ceres::Solver::Options solver;
-  solver.linear_solver_type = ceres::DENSE_QR;
-  solver.max_num_iterations = options.max_iterations;
-  solver.function_tolerance = options.function_tolerance;
-  solver.parameter_tolerance = options.parameter_tolerance;
-  solver.gradient_tolerance = options.gradient_tolerance;
-  solver.logging_type = ceres::SILENT;
-  solver.num_threads = 1;
+  const ceres::Solver::Options solver = internal::SmallDenseSolverOptions(options);
   ceres::Solver::Summary summary;
   ceres::Solve(solver, &problem, &summary);
 

@@ -1,4 +1,5 @@
 #include "common/estimation/resection_refine.h"
+#include "common/estimation/ceres_solver_options.h"
 
 #include <algorithm>
 #include <cmath>
@@ -98,14 +99,7 @@ Expected<ResectionRefineOutput> RefineResection(std::span<const Eigen::Vector3d>
     problem.SetParameterBlockConstant(translation);
   }
 
-  ceres::Solver::Options solver;
-  solver.linear_solver_type = ceres::DENSE_QR;
-  solver.max_num_iterations = options.max_iterations;
-  solver.function_tolerance = options.function_tolerance;
-  solver.parameter_tolerance = options.parameter_tolerance;
-  solver.gradient_tolerance = options.gradient_tolerance;
-  solver.logging_type = ceres::SILENT;
-  solver.num_threads = 1;
+  const ceres::Solver::Options solver = internal::SmallDenseSolverOptions(options);
   ceres::Solver::Summary summary;
   ceres::Solve(solver, &problem, &summary);
 
