@@ -5,6 +5,7 @@
 //                         [--annotations FILE.db] [--annotation-sync full|normal]
 //                         [--export-session FILE.jsonl] [--import-session FILE.jsonl]
 //                         [--timeline TRACKS.csv] [--status PORT|IPv4:PORT]
+//                         [--tracker-replay FILE.traj|FILE.csv] [--table-from-tracker FILE.json]
 //   sandtable-coordinator --generate-curve-keys site.key
 //
 // --annotations: the SQLite database of annotation events (created when absent). Without it
@@ -15,6 +16,11 @@
 // --timeline: personnel tracks (CSV, docs/coordinator.md) replayed with play/pause/seek/rate
 // requests and a timeline_clock on the PUB. --status: JSON at http://HOST:PORT/status (port 0:
 // any free port; a bare PORT binds loopback).
+//
+// --tracker-replay: replays a recorded tracker trajectory (FASTRAK .traj at 100 Hz, or the CSV
+// of docs/tracker-formats.md) in real time from the start, publishing tracker_pose and cursor
+// events per sample (coordinator/wand/wand_service.h); --table-from-tracker: the calibration
+// as JSON {"rotation_wxyz": [...], "translation_m": [...]} (identity without it).
 //
 // On start it prints one line on stdout, for operators and tests:
 //   sandtable-coordinator requests=tcp://127.0.0.1:40001 events=tcp://127.0.0.1:40002
@@ -36,6 +42,8 @@
 #include "coordinator/status/http_status_server.h"
 #include "coordinator/status/status_service.h"
 #include "coordinator/timeline/timeline_service.h"
+#include "coordinator/tracker/replay_source.h"
+#include "coordinator/wand/wand_service.h"
 
 namespace {
 
@@ -49,6 +57,7 @@ int Usage(const char* why) {
             << "         [--annotations FILE.db] [--annotation-sync full|normal]\n"
             << "         [--export-session FILE.jsonl] [--import-session FILE.jsonl]\n"
             << "         [--timeline TRACKS.csv] [--status PORT|IPv4:PORT]\n"
+            << "         [--tracker-replay FILE.traj|FILE.csv] [--table-from-tracker FILE.json]\n"
             << "       sandtable-coordinator --generate-curve-keys FILE\n";
   return 2;
 }
@@ -62,6 +71,7 @@ int main(int argc, char** argv) {
   std::string annotations_path = ":memory:";
   coordinator::AnnotationStoreOptions store_options;
   std::string export_path, import_path, timeline_path, status_address;
+  std::string tracker_replay_path, table_from_tracker_path;
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
     if (i + 1 >= argc) return Usage(("missing value after " + flag).c_str());
@@ -101,6 +111,10 @@ int main(int argc, char** argv) {
       timeline_path = value;
     } else if (flag == "--status") {
       status_address = value;
+    } else if (flag == "--tracker-replay") {
+      tracker_replay_path = value;
+    } else if (flag == "--table-from-tracker") {
+      table_from_tracker_path = value;
     } else {
       return Usage(("unknown flag " + flag).c_str());
     }
@@ -145,6 +159,40 @@ int main(int argc, char** argv) {
     // The clock goes out at 30 Hz: the server must step at least that often.
     options.step_period = std::min(options.step_period, std::chrono::milliseconds(10));
   }
+  std::unique_ptr<coordinator::WandService> wand;
+  if (!table_from_tracker_path.empty() && tracker_replay_path.empty()) {
+    return Usage("--table-from-tracker needs a tracker source (--tracker-replay)");
+  }
+  if (!tracker_replay_path.empty()) {
+    const bool csv = tracker_replay_path.size() >= 4 &&
+                     tracker_replay_path.compare(tracker_replay_path.size() - 4, 4, ".csv") == 0;
+    Expected<std::vector<coordinator::TrackerSample>> samples =
+        csv ? coordinator::LoadTrackerCsv(tracker_replay_path)
+            : coordinator::LoadFastrakTraj(tracker_replay_path);
+    if (!samples.ok()) {
+      std::cerr << "sandtable-coordinator: --tracker-replay: " << samples.status().ToString()
+                << "\n";
+      return 1;
+    }
+    coordinator::WandServiceOptions wand_options;
+    if (!table_from_tracker_path.empty()) {
+      Expected<Rigid3d> table_from_tracker =
+          coordinator::LoadTableFromTracker(table_from_tracker_path);
+      if (!table_from_tracker.ok()) {
+        std::cerr << "sandtable-coordinator: --table-from-tracker: "
+                  << table_from_tracker.status().ToString() << "\n";
+        return 1;
+      }
+      wand_options.table_from_tracker = *table_from_tracker;
+    }
+    auto source =
+        std::make_unique<coordinator::ReplaySource>(tracker_replay_path, std::move(*samples));
+    ST_LOG(kInfo) << "tracker: " << source->Describe();
+    wand = std::make_unique<coordinator::WandService>(std::move(source), wand_options);
+    // Samples go out when due, at most one step late: step at least twice per sample period
+    // (5 ms for 100 Hz).
+    options.step_period = std::min(options.step_period, std::chrono::milliseconds(5));
+  }
   std::unique_ptr<coordinator::HttpStatusServer> http;
   std::unique_ptr<coordinator::StatusService> status;
   if (!status_address.empty()) {
@@ -156,7 +204,7 @@ int main(int argc, char** argv) {
     }
     http = std::move(*started);
     status = std::make_unique<coordinator::StatusService>(
-        http.get(), coordinator::StatusSources{&annotations, timeline.get()});
+        http.get(), coordinator::StatusSources{&annotations, timeline.get(), wand.get()});
   }
 
   struct sigaction action {};
@@ -167,6 +215,7 @@ int main(int argc, char** argv) {
   coordinator::CoordinatorServer server(options);
   server.AddService(&annotations);
   if (timeline) server.AddService(timeline.get());
+  if (wand) server.AddService(wand.get());
   if (status) server.AddService(status.get());
   Status started = server.Start();
   if (!started.ok()) {

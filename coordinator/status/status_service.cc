@@ -81,8 +81,23 @@ std::string StatusService::BuildJson(const CoordinatorServer& server) const {
   } else {
     doc["timeline"] = nullptr;
   }
-  // The tracker does not run inside the coordinator process yet (docs/coordinator.md).
-  doc["tracker"] = {{"state", "not_running"}};
+  if (sources_.tracker != nullptr) {
+    // "replaying" while a replay streams, "finished" at its end; other sources: the state.
+    const WandService& w = *sources_.tracker;
+    const TrackerState state = w.source().state();
+    const char* name = state == TrackerState::kStreaming ? "replaying"
+                       : state == TrackerState::kEnded   ? "finished"
+                                                         : TrackerStateName(state);
+    doc["tracker"] = {{"state", name},
+                      {"source", w.source().Describe()},
+                      {"rate_hz", w.source().rate_hz()},
+                      {"samples", w.counters().samples},
+                      {"poses_published", w.counters().poses_published},
+                      {"cursors_published", w.counters().cursors_published},
+                      {"cursor_hits", w.counters().cursor_hits}};
+  } else {
+    doc["tracker"] = {{"state", "not_running"}};  // no --tracker-replay
+  }
   const HttpStatusCounters& h = http_->counters();
   doc["http"] = {{"ok", h.ok.load()},
                  {"not_found", h.not_found.load()},

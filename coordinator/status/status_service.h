@@ -5,8 +5,10 @@
 // Document (JSON): {"time_ns", "members": [{"node_id", "incarnation", "joined_time_ns",
 // "peer_router", "calibration": null}], "member_list_version", "messages": {"accepted",
 // "rejected": {reason: count}, "rejected_total"}, "annotations": {...} or null,
-// "timeline": {...} or null, "tracker": {...}, "http": {"ok", "not_found", "bad_request"}}.
-// calibration is null: nodes do not report calibration state to the coordinator yet.
+// "timeline": {...} or null, "tracker": {"state": "replaying" | "finished" | ... |
+// "not_running", "source", "rate_hz", "samples", "poses_published", ...}, "http": {"ok",
+// "not_found", "bad_request"}}. calibration is null: nodes do not report calibration state to the
+// coordinator yet.
 #pragma once
 
 #include <chrono>
@@ -15,12 +17,14 @@
 #include "coordinator/membership/coordinator_server.h"
 #include "coordinator/status/http_status_server.h"
 #include "coordinator/timeline/timeline_service.h"
+#include "coordinator/wand/wand_service.h"
 
 namespace sandtable::coordinator {
 
 struct StatusSources {
   const AnnotationService* annotations = nullptr;  // null: not running
   const TimelineService* timeline = nullptr;
+  const WandService* tracker = nullptr;  // null: "tracker": {"state": "not_running"}
 };
 
 class StatusService : public CoordinatorService {

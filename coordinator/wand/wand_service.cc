@@ -1,0 +1,159 @@
+#include "coordinator/wand/wand_service.h"
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <utility>
+
+#include <nlohmann/json.hpp>
+
+#include "common/base/log.h"
+#include "proto/convert.h"
+#include "proto/envelope_stamper.h"
+
+namespace sandtable::coordinator {
+namespace {
+
+constexpr double kQuaternionNormTolerance = 1e-3;
+
+RayCaster BuildScene(double half_extent_m, std::vector<Eigen::Vector3d> positions,
+                     std::vector<Eigen::Vector3i> triangles) {
+  AppendTablePlane(half_extent_m, &positions, &triangles);
+  return RayCaster(std::move(positions), std::move(triangles));
+}
+
+// `n` finite numbers from a JSON array field, or a PARSE_ERROR naming file and field.
+Expected<std::vector<double>> Numbers(const nlohmann::json& j, const std::string& field, size_t n,
+                                      const std::string& path) {
+  if (!j.contains(field) || !j[field].is_array() || j[field].size() != n) {
+    return ParseError(path + ": field " + field + ": expected an array of " + std::to_string(n) +
+                      " numbers");
+  }
+  std::vector<double> out;
+  for (const nlohmann::json& v : j[field]) {
+    if (!v.is_number() || !std::isfinite(v.get<double>())) {
+      return ParseError(path + ": field " + field + ": " + v.dump() + " is not a finite number");
+    }
+    out.push_back(v.get<double>());
+  }
+  return out;
+}
+
+}  // namespace
+
+Status WandServiceOptions::Check() const {
+  if (!(scene_half_extent_m > 0.0) || !std::isfinite(scene_half_extent_m)) {
+    return InvalidArgumentError("WandServiceOptions: scene_half_extent_m must be finite and > 0");
+  }
+  if (!(wand.ray_in_sensor.norm() > 0.0)) {
+    return InvalidArgumentError("WandServiceOptions: wand.ray_in_sensor must be non-zero");
+  }
+  return OkStatus();
+}
+
+void AppendTablePlane(double half_extent_m, std::vector<Eigen::Vector3d>* positions,
+                      std::vector<Eigen::Vector3i>* triangles) {
+  const int base = static_cast<int>(positions->size());
+  const double h = half_extent_m;
+  positions->push_back({-h, -h, 0.0});
+  positions->push_back({h, -h, 0.0});
+  positions->push_back({h, h, 0.0});
+  positions->push_back({-h, h, 0.0});
+  triangles->push_back({base, base + 1, base + 2});  // counter-clockwise seen from +z
+  triangles->push_back({base, base + 2, base + 3});
+}
+
+Expected<Rigid3d> LoadTableFromTracker(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return IoError(path + ": cannot open table_from_tracker file");
+  nlohmann::json j = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded() || !j.is_object()) {
+    return ParseError(path +
+                      ": not a JSON object (expected {\"rotation_wxyz\": [w, x, y, z], "
+                      "\"translation_m\": [x, y, z]})");
+  }
+  Expected<std::vector<double>> q = Numbers(j, "rotation_wxyz", 4, path);
+  if (!q.ok()) return q.status();
+  Expected<std::vector<double>> t = Numbers(j, "translation_m", 3, path);
+  if (!t.ok()) return t.status();
+  Eigen::Quaterniond rotation((*q)[0], (*q)[1], (*q)[2], (*q)[3]);
+  const double norm = rotation.norm();
+  if (std::abs(norm - 1.0) > kQuaternionNormTolerance) {
+    return ParseError(path + ": field rotation_wxyz: norm " + std::to_string(norm) +
+                      " is not 1 (within 1e-3); write a unit quaternion (w, x, y, z)");
+  }
+  rotation.normalize();
+  return Rigid3d(rotation, Eigen::Vector3d((*t)[0], (*t)[1], (*t)[2]));
+}
+
+WandService::WandService(std::unique_ptr<TrackerSource> source, WandServiceOptions options,
+                         std::vector<Eigen::Vector3d> extra_positions_in_table_m,
+                         std::vector<Eigen::Vector3i> extra_triangles)
+    : source_(std::move(source)),
+      options_(std::move(options)),
+      scene_(BuildScene(options_.scene_half_extent_m, std::move(extra_positions_in_table_m),
+                        std::move(extra_triangles))) {
+  ST_CHECK(source_ != nullptr) << "WandService needs a tracker source";
+  ST_CHECK(options_.Check().ok()) << options_.Check().ToString();
+  last_state_ = source_->state();
+}
+
+std::vector<wire::Envelope> WandService::PollEvents(int64_t now_ns) {
+  batch_.clear();
+  const TrackerClock::time_point now{std::chrono::nanoseconds(now_ns)};
+  const Status polled = source_->Poll(now, &batch_);
+  if (!polled.ok()) ST_LOG(kWarning) << "tracker: " << polled.ToString();
+  const TrackerState state = source_->state();
+  if (state != last_state_) {
+    ST_LOG(kInfo) << "tracker " << TrackerStateName(last_state_) << " -> "
+                  << TrackerStateName(state) << " (" << source_->Describe() << ", "
+                  << counters_.samples + batch_.size() << " samples)";
+    last_state_ = state;
+  }
+  std::vector<wire::Envelope> events;
+  events.reserve(2 * batch_.size());
+  for (const TrackerSample& sample : batch_) {
+    if (!anchored_) {
+      // The first sample is due on the Poll that returns it; later ones keep their spacing.
+      anchored_ = true;
+      anchor_ns_ = now_ns;
+      anchor_source_s_ = sample.source_time_s;
+    }
+    const int64_t sample_time_ns =
+        anchor_ns_ + std::llround((sample.source_time_s - anchor_source_s_) * 1e9);
+    ++counters_.samples;
+    wire::Envelope pose;
+    wire::TrackerPose* p = pose.mutable_tracker_pose();
+    p->set_sensor_index(sample.sensor_index);
+    *p->mutable_table_from_sensor() =
+        proto::ToWire(options_.table_from_tracker * sample.tracker_from_sensor);
+    p->set_sample_time_ns(sample_time_ns);
+    p->set_button_pressed(sample.button_pressed);
+    events.push_back(std::move(pose));
+
+    const CursorState cursor =
+        ComputeCursor(sample, options_.table_from_tracker, scene_, options_.wand);
+    if (cursor.hit) ++counters_.cursor_hits;
+    wire::Envelope cursor_event;
+    *cursor_event.mutable_cursor() = ToWire(cursor, sample_time_ns);
+    events.push_back(std::move(cursor_event));
+  }
+  return events;
+}
+
+Status WandService::OnStep(CoordinatorServer& server) {
+  for (wire::Envelope& event : PollEvents(proto::SteadyNowNs())) {
+    const bool is_pose = event.has_tracker_pose();
+    const Status published = server.Publish(std::move(event));
+    if (!published.ok()) {
+      // A slow subscriber must not stop the tracker: count, log at debug, go on.
+      ++counters_.publish_failures;
+      ST_LOG(kDebug) << "tracker event not published: " << published.ToString();
+      continue;
+    }
+    ++(is_pose ? counters_.poses_published : counters_.cursors_published);
+  }
+  return OkStatus();
+}
+
+}  // namespace sandtable::coordinator
