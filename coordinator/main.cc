@@ -6,6 +6,7 @@
 //                         [--export-session FILE.jsonl] [--import-session FILE.jsonl]
 //                         [--timeline TRACKS.csv] [--status PORT|IPv4:PORT]
 //                         [--tracker-replay FILE.traj|FILE.csv] [--table-from-tracker FILE.json]
+//                         [--virtual-wand SCRIPT.txt]
 //   sandtable-coordinator --generate-curve-keys site.key
 //
 // --annotations: the SQLite database of annotation events (created when absent). Without it
@@ -21,6 +22,10 @@
 // of docs/tracker-formats.md) in real time from the start, publishing tracker_pose and cursor
 // events per sample (coordinator/wand/wand_service.h); --table-from-tracker: the calibration
 // as JSON {"rotation_wxyz": [...], "translation_m": [...]} (identity without it).
+// --virtual-wand: plays a scripted wand (coordinator/tracker/virtual_wand.h, format in
+// docs/tracker-formats.md) written in the table frame (so no --table-from-tracker); exclusive
+// with --tracker-replay. With either source the wand button paints: strokes, the rim palette,
+// spot eraser and clear go through the annotation service (persisted before published).
 //
 // On start it prints one line on stdout, for operators and tests:
 //   sandtable-coordinator requests=tcp://127.0.0.1:40001 events=tcp://127.0.0.1:40002
@@ -43,6 +48,7 @@
 #include "coordinator/status/status_service.h"
 #include "coordinator/timeline/timeline_service.h"
 #include "coordinator/tracker/replay_source.h"
+#include "coordinator/tracker/virtual_wand.h"
 #include "coordinator/wand/wand_service.h"
 
 namespace {
@@ -58,6 +64,7 @@ int Usage(const char* why) {
             << "         [--export-session FILE.jsonl] [--import-session FILE.jsonl]\n"
             << "         [--timeline TRACKS.csv] [--status PORT|IPv4:PORT]\n"
             << "         [--tracker-replay FILE.traj|FILE.csv] [--table-from-tracker FILE.json]\n"
+            << "         [--virtual-wand SCRIPT.txt]\n"
             << "       sandtable-coordinator --generate-curve-keys FILE\n";
   return 2;
 }
@@ -71,7 +78,7 @@ int main(int argc, char** argv) {
   std::string annotations_path = ":memory:";
   coordinator::AnnotationStoreOptions store_options;
   std::string export_path, import_path, timeline_path, status_address;
-  std::string tracker_replay_path, table_from_tracker_path;
+  std::string tracker_replay_path, table_from_tracker_path, virtual_wand_path;
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
     if (i + 1 >= argc) return Usage(("missing value after " + flag).c_str());
@@ -113,6 +120,8 @@ int main(int argc, char** argv) {
       status_address = value;
     } else if (flag == "--tracker-replay") {
       tracker_replay_path = value;
+    } else if (flag == "--virtual-wand") {
+      virtual_wand_path = value;
     } else if (flag == "--table-from-tracker") {
       table_from_tracker_path = value;
     } else {
@@ -160,8 +169,27 @@ int main(int argc, char** argv) {
     options.step_period = std::min(options.step_period, std::chrono::milliseconds(10));
   }
   std::unique_ptr<coordinator::WandService> wand;
+  if (!virtual_wand_path.empty() && !tracker_replay_path.empty()) {
+    return Usage("--virtual-wand and --tracker-replay are exclusive (one tracker source)");
+  }
+  if (!virtual_wand_path.empty() && !table_from_tracker_path.empty()) {
+    return Usage("--virtual-wand scripts are in the table frame: no --table-from-tracker");
+  }
   if (!table_from_tracker_path.empty() && tracker_replay_path.empty()) {
     return Usage("--table-from-tracker needs a tracker source (--tracker-replay)");
+  }
+  if (!virtual_wand_path.empty()) {
+    Expected<coordinator::VirtualWandScript> script =
+        coordinator::LoadVirtualWandScript(virtual_wand_path);
+    if (!script.ok()) {
+      std::cerr << "sandtable-coordinator: --virtual-wand: " << script.status().ToString() << "\n";
+      return 1;
+    }
+    auto source = std::make_unique<coordinator::VirtualWandSource>(virtual_wand_path, *script);
+    ST_LOG(kInfo) << "tracker: " << source->Describe();
+    wand = std::make_unique<coordinator::WandService>(std::move(source),
+                                                      coordinator::WandServiceOptions{});
+    options.step_period = std::min(options.step_period, std::chrono::milliseconds(5));
   }
   if (!tracker_replay_path.empty()) {
     const bool csv = tracker_replay_path.size() >= 4 &&
@@ -193,6 +221,7 @@ int main(int argc, char** argv) {
     // (5 ms for 100 Hz).
     options.step_period = std::min(options.step_period, std::chrono::milliseconds(5));
   }
+  if (wand) wand->EnablePainting(coordinator::WandPainterOptions{}, &annotations);
   std::unique_ptr<coordinator::HttpStatusServer> http;
   std::unique_ptr<coordinator::StatusService> status;
   if (!status_address.empty()) {

@@ -134,11 +134,33 @@ std::vector<wire::Envelope> WandService::PollEvents(int64_t now_ns) {
     const CursorState cursor =
         ComputeCursor(sample, options_.table_from_tracker, scene_, options_.wand);
     if (cursor.hit) ++counters_.cursor_hits;
+    if (painter_) {
+      for (wire::AnnotationEvent& e : painter_->OnCursor(cursor, next_id_floor_())) {
+        ++counters_.annotation_events;
+        submit_(std::move(e));
+      }
+    }
     wire::Envelope cursor_event;
     *cursor_event.mutable_cursor() = ToWire(cursor, sample_time_ns);
     events.push_back(std::move(cursor_event));
   }
   return events;
+}
+
+void WandService::EnablePainting(WandPainterOptions options, AnnotationSubmit submit,
+                                 std::function<uint64_t()> next_id_floor) {
+  ST_CHECK(submit && next_id_floor) << "EnablePainting needs a sink and an id floor";
+  painter_.emplace(std::move(options));
+  submit_ = std::move(submit);
+  next_id_floor_ = std::move(next_id_floor);
+}
+
+void WandService::EnablePainting(WandPainterOptions options, AnnotationService* annotations) {
+  ST_CHECK(annotations != nullptr) << "EnablePainting needs the AnnotationService";
+  EnablePainting(
+      std::move(options),
+      [annotations](wire::AnnotationEvent e) { annotations->Submit(std::move(e)); },
+      [annotations] { return annotations->store().last_sequence() + 1; });
 }
 
 Status WandService::OnStep(CoordinatorServer& server) {

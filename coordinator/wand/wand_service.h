@@ -17,17 +17,21 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include <Eigen/Core>
 
 #include "common/geometry/rigid3.h"
+#include "coordinator/annotations/annotation_service.h"
 #include "coordinator/membership/coordinator_server.h"
 #include "coordinator/tracker/tracker_source.h"
 #include "coordinator/wand/ray_caster.h"
 #include "coordinator/wand/wand.h"
+#include "coordinator/wand/wand_painter.h"
 
 namespace sandtable::coordinator {
 
@@ -44,6 +48,7 @@ struct WandCounters {
   uint64_t cursors_published = 0;  // Cursor events
   uint64_t cursor_hits = 0;        // of which the ray hit the scene
   uint64_t publish_failures = 0;
+  uint64_t annotation_events = 0;  // painted events handed to the annotation sink
 };
 
 // The table plane z = 0 as two counter-clockwise triangles over [-h, h]^2, appended.
@@ -71,6 +76,18 @@ class WandService : public CoordinatorService {
   // order (TrackerPose, Cursor per sample). OnStep() publishes these. For tests.
   std::vector<wire::Envelope> PollEvents(int64_t now_ns);
 
+  // Painting (docs/coordinator.md): every cursor also goes through a WandPainter and its
+  // annotation events (strokes, spot erase, clear) go to `submit`, in order, during
+  // PollEvents(). `next_id_floor` returns one more than the newest event sequence in the log
+  // (wand stroke ids stay above it). Call before the first step.
+  using AnnotationSubmit = std::function<void(wire::AnnotationEvent)>;
+  void EnablePainting(WandPainterOptions options, AnnotationSubmit submit,
+                      std::function<uint64_t()> next_id_floor);
+  // The same through the AnnotationService's Submit(): the events are persisted (SQLite) and
+  // only then published, like client requests. `annotations` must outlive this service.
+  void EnablePainting(WandPainterOptions options, AnnotationService* annotations);
+
+  const WandPainter* painter() const { return painter_ ? &*painter_ : nullptr; }
   const TrackerSource& source() const { return *source_; }
   const WandCounters& counters() const { return counters_; }
   const RayCaster& scene() const { return scene_; }
@@ -85,6 +102,9 @@ class WandService : public CoordinatorService {
   double anchor_source_s_ = 0.0;
   TrackerState last_state_ = TrackerState::kNoDevice;
   std::vector<TrackerSample> batch_;
+  std::optional<WandPainter> painter_;
+  AnnotationSubmit submit_;
+  std::function<uint64_t()> next_id_floor_;
 };
 
 }  // namespace sandtable::coordinator
