@@ -6,7 +6,7 @@
 //                         [--export-session FILE.jsonl] [--import-session FILE.jsonl]
 //                         [--timeline TRACKS.csv] [--status PORT|IPv4:PORT]
 //                         [--tracker-replay FILE.traj|FILE.csv] [--table-from-tracker FILE.json]
-//                         [--virtual-wand SCRIPT.txt]
+//                         [--virtual-wand SCRIPT.txt] [--scene SCENE.gltf|SCENE.glb]
 //   sandtable-coordinator --generate-curve-keys site.key
 //
 // --annotations: the SQLite database of annotation events (created when absent). Without it
@@ -26,6 +26,8 @@
 // docs/tracker-formats.md) written in the table frame (so no --table-from-tracker); exclusive
 // with --tracker-replay. With either source the wand button paints: strokes, the rim palette,
 // spot eraser and clear go through the annotation service (persisted before published).
+// --scene: the glTF scene (table frame after the +y-up -> +z-up conversion, docs/frames.md) the
+// wand ray is cast against, in addition to the table plane z = 0.
 //
 // On start it prints one line on stdout, for operators and tests:
 //   sandtable-coordinator requests=tcp://127.0.0.1:40001 events=tcp://127.0.0.1:40002
@@ -41,6 +43,7 @@
 #include <string>
 
 #include "common/base/log.h"
+#include "common/scene/gltf_loader.h"
 #include "coordinator/annotations/annotation_service.h"
 #include "coordinator/annotations/session_file.h"
 #include "coordinator/membership/coordinator_server.h"
@@ -78,7 +81,7 @@ int main(int argc, char** argv) {
   std::string annotations_path = ":memory:";
   coordinator::AnnotationStoreOptions store_options;
   std::string export_path, import_path, timeline_path, status_address;
-  std::string tracker_replay_path, table_from_tracker_path, virtual_wand_path;
+  std::string tracker_replay_path, table_from_tracker_path, virtual_wand_path, scene_path;
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
     if (i + 1 >= argc) return Usage(("missing value after " + flag).c_str());
@@ -124,6 +127,8 @@ int main(int argc, char** argv) {
       virtual_wand_path = value;
     } else if (flag == "--table-from-tracker") {
       table_from_tracker_path = value;
+    } else if (flag == "--scene") {
+      scene_path = value;
     } else {
       return Usage(("unknown flag " + flag).c_str());
     }
@@ -169,6 +174,27 @@ int main(int argc, char** argv) {
     options.step_period = std::min(options.step_period, std::chrono::milliseconds(10));
   }
   std::unique_ptr<coordinator::WandService> wand;
+  // The wand's scene: the table plane (always) plus the glTF scene's triangles.
+  std::vector<Eigen::Vector3d> scene_positions_in_table_m;
+  std::vector<Eigen::Vector3i> scene_triangles;
+  if (!scene_path.empty()) {
+    Expected<Scene> scene = LoadGltfScene(scene_path);
+    if (!scene.ok()) {
+      std::cerr << "sandtable-coordinator: --scene: " << scene.status().ToString() << "\n";
+      return 1;
+    }
+    for (const Eigen::Vector3f& p : scene->positions_in_table_m) {
+      scene_positions_in_table_m.push_back(p.cast<double>());
+    }
+    scene_triangles = scene->triangles;
+    ST_LOG(kInfo) << "scene: " << scene_path << ", " << scene->NumTriangles() << " triangles";
+  }
+  auto make_wand = [&](std::unique_ptr<coordinator::TrackerSource> source,
+                       coordinator::WandServiceOptions wand_options) {
+    return std::make_unique<coordinator::WandService>(std::move(source), wand_options,
+                                                      scene_positions_in_table_m,
+                                                      scene_triangles);
+  };
   if (!virtual_wand_path.empty() && !tracker_replay_path.empty()) {
     return Usage("--virtual-wand and --tracker-replay are exclusive (one tracker source)");
   }
@@ -187,8 +213,7 @@ int main(int argc, char** argv) {
     }
     auto source = std::make_unique<coordinator::VirtualWandSource>(virtual_wand_path, *script);
     ST_LOG(kInfo) << "tracker: " << source->Describe();
-    wand = std::make_unique<coordinator::WandService>(std::move(source),
-                                                      coordinator::WandServiceOptions{});
+    wand = make_wand(std::move(source), coordinator::WandServiceOptions{});
     options.step_period = std::min(options.step_period, std::chrono::milliseconds(5));
   }
   if (!tracker_replay_path.empty()) {
@@ -216,7 +241,7 @@ int main(int argc, char** argv) {
     auto source =
         std::make_unique<coordinator::ReplaySource>(tracker_replay_path, std::move(*samples));
     ST_LOG(kInfo) << "tracker: " << source->Describe();
-    wand = std::make_unique<coordinator::WandService>(std::move(source), wand_options);
+    wand = make_wand(std::move(source), wand_options);
     // Samples go out when due, at most one step late: step at least twice per sample period
     // (5 ms for 100 Hz).
     options.step_period = std::min(options.step_period, std::chrono::milliseconds(5));

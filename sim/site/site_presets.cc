@@ -5,7 +5,7 @@
 #include <string>
 
 #include "common/base/units.h"
-#include "sim/scene/procedural_scene.h"
+#include "common/scene/procedural_scene.h"
 
 namespace sandtable::sim {
 

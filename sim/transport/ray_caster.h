@@ -15,7 +15,7 @@
 #include <Eigen/Core>
 
 #include "common/base/status.h"
-#include "sim/scene/scene.h"
+#include "common/scene/scene.h"
 
 namespace sandtable::sim {
 

@@ -15,7 +15,7 @@
 
 #include "common/base/ids.h"
 #include "common/base/status.h"
-#include "sim/scene/scene.h"
+#include "common/scene/scene.h"
 #include "sim/site/site.h"
 #include "sim/transport/capture.h"
 #include "sim/transport/ray_caster.h"

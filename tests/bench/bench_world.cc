@@ -3,7 +3,7 @@
 //   taskset -c 0 build/tests/bench/bench_world
 #include <benchmark/benchmark.h>
 
-#include "sim/scene/procedural_scene.h"
+#include "common/scene/procedural_scene.h"
 #include "sim/site/site_presets.h"
 #include "sim/transport/world.h"
 

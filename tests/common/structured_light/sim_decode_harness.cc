@@ -6,7 +6,7 @@
 #include <limits>
 #include <sstream>
 
-#include "sim/scene/procedural_scene.h"
+#include "common/scene/procedural_scene.h"
 #include "sim/site/site_presets.h"
 #include "sim/transport/transport_map.h"
 
@@ -55,12 +55,12 @@ Expected<SimDecodeWorld> MakeSimDecodeWorld(const SimDecodeSetup& setup) {
     unit.camera->full_well_e = 0.0;
   unit.camera->exposure_s *= setup.exposure_scale;
 
-  Expected<sim::ScenePreset> preset = sim::ParseScenePreset(setup.scene_preset);
+  Expected<ScenePreset> preset = ParseScenePreset(setup.scene_preset);
   if (!preset.ok()) return preset.status();
-  sim::ProceduralSceneOptions scene_options;
+  ProceduralSceneOptions scene_options;
   scene_options.preset = *preset;
   scene_options.seed = setup.scene_seed;
-  Expected<sim::ProceduralScene> scene = sim::MakeProceduralScene(scene_options);
+  Expected<ProceduralScene> scene = MakeProceduralScene(scene_options);
   if (!scene.ok()) return scene.status();
 
   SimDecodeWorld w;

@@ -169,5 +169,14 @@ TEST(WandReplayAcceptanceTest, BadTableFromTrackerFileStopsTheProgramWithExitCod
   fs::remove(json);
 }
 
+TEST(WandReplayAcceptanceTest, MalformedSceneStopsTheProgramWithExitCode1) {
+  // --scene loads the glTF the wand ray is cast against; a file that fails the loader's checks
+  // (data README: a bufferView length of 1e300) must stop the program with a message, not crash.
+  ChildProcess coordinator(
+      {SANDTABLE_COORDINATOR_BIN, "--tracker-replay", kTraj, "--scene",
+       "../shared/data/gltf/tinygltf/BoundsChecking/integer-out-of-bounds.gltf"});
+  EXPECT_EQ(coordinator.Wait(), 1);
+}
+
 }  // namespace
 }  // namespace sandtable

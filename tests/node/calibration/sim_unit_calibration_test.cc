@@ -24,7 +24,7 @@
 #include "common/structured_light/pattern_sequence.h"
 #include "node/calibration/board_observation.h"
 #include "node/calibration/unit_calibrator.h"
-#include "sim/scene/scene.h"
+#include "common/scene/scene.h"
 #include "sim/site/site_presets.h"
 #include "sim/transport/world.h"
 
@@ -70,8 +70,8 @@ Rigid3d ProjectorFromBoard(const BoardPose& p, const BoardSpec& board) {
 }
 
 // The white board as a two-triangle scene in the table frame, facing the unit (board -z).
-sim::Scene BoardScene(const Rigid3d& table_from_board, const BoardSpec& board) {
-  sim::Scene scene;
+Scene BoardScene(const Rigid3d& table_from_board, const BoardSpec& board) {
+  Scene scene;
   const double x1 = (board.inner_cols - 1) * board.square_m + kBoardMargin_m;
   const double y1 = (board.inner_rows - 1) * board.square_m + kBoardMargin_m;
   const double x0 = -kBoardMargin_m, y0 = -kBoardMargin_m;
@@ -82,7 +82,7 @@ sim::Scene BoardScene(const Rigid3d& table_from_board, const BoardSpec& board) {
   // (p1 - p0) x (p2 - p0) = -z_board for these windings: the front faces the devices.
   scene.triangles = {{0, 2, 1}, {0, 3, 2}};
   scene.triangle_material = {0, 0};
-  sim::Material white;
+  Material white;
   white.name = "board";
   white.base_color_factor = Eigen::Vector4d(0.8, 0.8, 0.8, 1.0);
   scene.materials.push_back(white);

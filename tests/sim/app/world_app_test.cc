@@ -13,9 +13,9 @@
 
 #include "net/channel.h"
 #include "sim/app/world_server.h"
-#include "sim/scene/gltf_loader.h"
-#include "sim/scene/gltf_writer.h"
-#include "sim/scene/procedural_scene.h"
+#include "common/scene/gltf_loader.h"
+#include "common/scene/gltf_writer.h"
+#include "common/scene/procedural_scene.h"
 #include "sim/site/site_json.h"
 #include "sim/site/site_presets.h"
 #include "sim/transport/world.h"

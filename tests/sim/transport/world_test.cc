@@ -11,7 +11,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common/base/units.h"
-#include "sim/scene/procedural_scene.h"
+#include "common/scene/procedural_scene.h"
 #include "sim/site/site_presets.h"
 
 namespace sandtable::sim {

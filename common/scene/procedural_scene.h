@@ -17,9 +17,9 @@
 #include <vector>
 
 #include "common/base/status.h"
-#include "sim/scene/scene.h"
+#include "common/scene/scene.h"
 
-namespace sandtable::sim {
+namespace sandtable {
 
 enum class ScenePreset { kSandtable, kCity, kFlat };
 Expected<ScenePreset> ParseScenePreset(std::string_view name);
@@ -67,4 +67,4 @@ Scene MakeRectangleMesh(const Eigen::Vector2d& size_m, int material);
 constexpr double kSandtableTableDiameter_m = 5 * 0.3048;    // 5 ft (TR09-017)
 constexpr double kSandtableDisplayDiameter_m = 4 * 0.3048;  // 4 ft display area
 
-}  // namespace sandtable::sim
+}  // namespace sandtable

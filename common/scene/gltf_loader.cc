@@ -1,4 +1,4 @@
-#include "sim/scene/gltf_loader.h"
+#include "common/scene/gltf_loader.h"
 
 #include <cmath>
 #include <cstring>
@@ -8,7 +8,7 @@
 
 #include <tiny_gltf.h>
 
-namespace sandtable::sim {
+namespace sandtable {
 
 namespace {
 
@@ -433,4 +433,4 @@ Expected<Scene> LoadGltfScene(const std::string& path, const GltfLoadOptions& op
   return scene;
 }
 
-}  // namespace sandtable::sim
+}  // namespace sandtable

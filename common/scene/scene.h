@@ -16,7 +16,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
-namespace sandtable::sim {
+namespace sandtable {
 
 // An 8-bit RGBA image (sRGB-encoded colour, linear alpha), row-major, top row first.
 struct Texture {
@@ -68,4 +68,4 @@ struct Scene {
 double SrgbToLinear(double encoded);
 double LinearToSrgb(double linear);
 
-}  // namespace sandtable::sim
+}  // namespace sandtable

@@ -9,10 +9,10 @@
 #include <string>
 
 #include "common/base/status.h"
-#include "sim/scene/scene.h"
+#include "common/scene/scene.h"
 
-namespace sandtable::sim {
+namespace sandtable {
 
 Status WriteGltfScene(const Scene& scene, const std::string& path);
 
-}  // namespace sandtable::sim
+}  // namespace sandtable

@@ -1,4 +1,4 @@
-#include "sim/scene/procedural_scene.h"
+#include "common/scene/procedural_scene.h"
 
 #include <cstdio>
 #include <filesystem>
@@ -6,8 +6,8 @@
 
 #include <gtest/gtest.h>
 
-#include "sim/scene/gltf_loader.h"
-#include "sim/scene/gltf_writer.h"
+#include "common/scene/gltf_loader.h"
+#include "common/scene/gltf_writer.h"
 
 namespace sandtable::sim {
 namespace {

@@ -17,9 +17,9 @@
 #include <string>
 
 #include "common/base/status.h"
-#include "sim/scene/scene.h"
+#include "common/scene/scene.h"
 
-namespace sandtable::sim {
+namespace sandtable {
 
 struct GltfLoadOptions {
   double scale_m_per_unit = 1.0;  // glTF units to metres
@@ -39,4 +39,4 @@ Expected<Scene> LoadGltfScene(const std::string& path, const GltfLoadOptions& op
 // The fixed rotation between the frames: x_in_table = kTableFromGltf * x_in_gltf.
 Eigen::Matrix3d TableFromGltfRotation();
 
-}  // namespace sandtable::sim
+}  // namespace sandtable

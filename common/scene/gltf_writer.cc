@@ -1,13 +1,13 @@
-#include "sim/scene/gltf_writer.h"
+#include "common/scene/gltf_writer.h"
 
 #include <cstring>
 #include <limits>
 
 #include <tiny_gltf.h>
 
-#include "sim/scene/gltf_loader.h"
+#include "common/scene/gltf_loader.h"
 
-namespace sandtable::sim {
+namespace sandtable {
 
 namespace {
 
@@ -125,4 +125,4 @@ Status WriteGltfScene(const Scene& scene, const std::string& path) {
   return OkStatus();
 }
 
-}  // namespace sandtable::sim
+}  // namespace sandtable

@@ -1,10 +1,10 @@
-#include "sim/scene/procedural_scene.h"
+#include "common/scene/procedural_scene.h"
 
 #include <cmath>
 #include <numbers>
 #include <random>
 
-namespace sandtable::sim {
+namespace sandtable {
 
 namespace {
 
@@ -267,4 +267,4 @@ Expected<ProceduralScene> MakeProceduralScene(const ProceduralSceneOptions& opti
   return out;
 }
 
-}  // namespace sandtable::sim
+}  // namespace sandtable

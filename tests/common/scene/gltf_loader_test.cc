@@ -1,4 +1,4 @@
-#include "sim/scene/gltf_loader.h"
+#include "common/scene/gltf_loader.h"
 
 #include <string>
 

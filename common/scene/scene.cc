@@ -1,9 +1,9 @@
-#include "sim/scene/scene.h"
+#include "common/scene/scene.h"
 
 #include <algorithm>
 #include <cmath>
 
-namespace sandtable::sim {
+namespace sandtable {
 
 double SrgbToLinear(double encoded) {
   return encoded <= 0.04045 ? encoded / 12.92 : std::pow((encoded + 0.055) / 1.055, 2.4);
@@ -115,4 +115,4 @@ void Scene::Append(const Scene& other) {
   textures.insert(textures.end(), other.textures.begin(), other.textures.end());
 }
 
-}  // namespace sandtable::sim
+}  // namespace sandtable
