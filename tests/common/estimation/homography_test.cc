@@ -12,6 +12,7 @@
 #include <Eigen/Geometry>
 
 #include "common/base/units.h"
+#include "tests/common/estimation/estimation_test_util.h"
 
 namespace sandtable {
 namespace {
@@ -52,24 +53,8 @@ PlaneScene MakePlaneScene(int n, uint64_t seed, double tilt_deg = 25.0) {
   return s;
 }
 
-std::vector<Eigen::Vector2d> AddNoise(const std::vector<Eigen::Vector2d>& points, double sigma,
-                                      uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::normal_distribution<double> noise(0.0, sigma);
-  std::vector<Eigen::Vector2d> out = points;
-  for (Eigen::Vector2d& p : out) p += Eigen::Vector2d(noise(rng), noise(rng));
-  return out;
-}
-
-// Sweep tables go to stdout only when SANDTABLE_SWEEP_LOG is set, so that the numbers quoted
-// in the comments can be reproduced: SANDTABLE_SWEEP_LOG=1 common_estimation_homography_test.
-void SweepLog(const char* format, ...) {
-  if (std::getenv("SANDTABLE_SWEEP_LOG") == nullptr) return;
-  va_list args;
-  va_start(args, format);
-  std::vprintf(format, args);
-  va_end(args);
-}
+using test_util::AddNoise;
+using test_util::SweepLog;
 
 // RMS over the true points of |H x - H_true x|: the error of the estimate itself, not of the
 // fit to noisy data.

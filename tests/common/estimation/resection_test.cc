@@ -12,6 +12,7 @@
 #include <Eigen/Geometry>
 
 #include "common/base/units.h"
+#include "tests/common/estimation/estimation_test_util.h"
 
 namespace sandtable {
 namespace {
@@ -58,24 +59,8 @@ Scene MakeScene(int n, uint64_t seed, double half_thickness_m, double view_deg =
   return s;
 }
 
-std::vector<Eigen::Vector2d> AddNoise(const std::vector<Eigen::Vector2d>& pixels, double sigma_px,
-                                      uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::normal_distribution<double> noise(0.0, 1.0);
-  std::vector<Eigen::Vector2d> out = pixels;
-  for (Eigen::Vector2d& p : out) p += sigma_px * Eigen::Vector2d(noise(rng), noise(rng));
-  return out;
-}
-
-// Sweep tables go to stdout only when SANDTABLE_SWEEP_LOG is set, so that the numbers quoted
-// in the comments can be reproduced: SANDTABLE_SWEEP_LOG=1 common_estimation_resection_test.
-void SweepLog(const char* format, ...) {
-  if (std::getenv("SANDTABLE_SWEEP_LOG") == nullptr) return;
-  va_list args;
-  va_start(args, format);
-  std::vprintf(format, args);
-  va_end(args);
-}
+using test_util::AddNoise;
+using test_util::SweepLog;
 
 // Error of the estimated model itself: rms over the points of |u_hat - u_true| in px.
 double ModelError_px(const ResectionResult& r, const Scene& s) {
