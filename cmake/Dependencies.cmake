@@ -15,6 +15,9 @@ find_package(cppzmq REQUIRED)                         # cppzmq (brings libzmq)
 find_package(SQLite3 REQUIRED)                        # SQLite::SQLite3
 find_package(ZLIB REQUIRED)                           # ZLIB::ZLIB
 find_package(OpenGL REQUIRED COMPONENTS OpenGL EGL)   # OpenGL::OpenGL, OpenGL::EGL
+find_package(CLI11 REQUIRED CONFIG)                  # CLI11::CLI11 (command lines)
+find_package(httplib REQUIRED)                        # httplib::httplib (status endpoint)
+find_package(nanoflann REQUIRED)                      # nanoflann::nanoflann (k-d trees)
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(LIBUSB REQUIRED IMPORTED_TARGET libusb-1.0)   # PkgConfig::LIBUSB
 

@@ -21,6 +21,8 @@ PACKAGES=(
   libprotobuf-dev protobuf-compiler libzmq3-dev cppzmq-dev zlib1g-dev
   # storage, devices
   libsqlite3-dev sqlite3 libusb-1.0-0-dev
+  # command lines, HTTP, k-d trees
+  libcli11-dev libcpp-httplib-dev libnanoflann-dev
   # tests, benchmarks, plots
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox python3
 )

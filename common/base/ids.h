@@ -10,6 +10,14 @@ namespace sandtable {
 using NodeId = uint32_t;
 constexpr NodeId kInvalidNodeId = std::numeric_limits<NodeId>::max();
 
+// Sender ids reserved on the wire for the site's services (every Envelope names its sender).
+// A node's id must be below kFirstReservedSenderId: a node refuses an id that collides.
+constexpr uint32_t kFirstReservedSenderId = 0xFFFFFFF0u;
+constexpr uint32_t kCoordinatorSenderId = 0xFFFFFFF0u;
+constexpr uint32_t kWorldSenderId = 0xFFFFFFF1u;
+constexpr uint32_t kLabSenderId = 0xFFFFFFF2u;
+constexpr bool IsValidNodeId(NodeId id) { return id < kFirstReservedSenderId; }
+
 // A projector within a site; today equal to its unit's NodeId.
 using ProjectorId = uint32_t;
 constexpr ProjectorId kInvalidProjectorId = std::numeric_limits<ProjectorId>::max();

@@ -24,8 +24,6 @@
 
 namespace sandtable::coordinator {
 
-// The coordinator's sender id on the wire (nodes use their NodeId).
-constexpr uint32_t kCoordinatorSenderId = 0xFFFFFFF0u;
 
 class CoordinatorServer;
 

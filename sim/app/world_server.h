@@ -36,8 +36,6 @@
 
 namespace sandtable::sim {
 
-// The world's sender id on the wire (the coordinator is 0xFFFFFFF0).
-constexpr uint32_t kWorldSenderId = 0xFFFFFFF1u;
 
 struct WorldServerOptions {
   std::string bind_endpoint = "tcp://127.0.0.1:*";
