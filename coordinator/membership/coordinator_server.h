@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "common/base/ids.h"
 #include "coordinator/membership/membership_table.h"
 #include "net/channel.h"
 #include "net/curve.h"

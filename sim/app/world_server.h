@@ -27,6 +27,7 @@
 
 #include <zmq.hpp>
 
+#include "common/base/ids.h"
 #include "net/channel.h"
 #include "proto/codec.h"
 #include "proto/envelope.pb.h"
