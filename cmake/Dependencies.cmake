@@ -16,10 +16,14 @@ find_package(SQLite3 REQUIRED)                        # SQLite::SQLite3
 find_package(ZLIB REQUIRED)                           # ZLIB::ZLIB
 find_package(OpenGL REQUIRED COMPONENTS OpenGL EGL)   # OpenGL::OpenGL, OpenGL::EGL
 find_package(CLI11 REQUIRED CONFIG)                  # CLI11::CLI11 (command lines)
-find_package(httplib REQUIRED)                        # httplib::httplib (status endpoint)
 find_package(nanoflann REQUIRED)                      # nanoflann::nanoflann (k-d trees)
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(LIBUSB REQUIRED IMPORTED_TARGET libusb-1.0)   # PkgConfig::LIBUSB
+# cpp-httplib ships only a pkg-config file (Debian libcpp-httplib-dev): httplib::httplib.
+pkg_check_modules(HTTPLIB REQUIRED IMPORTED_TARGET GLOBAL cpp-httplib)
+if(NOT TARGET httplib::httplib)
+  add_library(httplib::httplib ALIAS PkgConfig::HTTPLIB)
+endif()
 
 if(SANDTABLE_BUILD_TESTS)
   find_package(GTest REQUIRED)                        # GTest::gtest, GTest::gmock
