@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Checks that #include directives respect Sandtable's layers (docs/architecture.md).
 
-Layers point one way: common <- proto <- net <- {node, coordinator, sim}. The programs do not
+Layers point one way: common <- proto <- net <- cluster <- {node, coordinator, sim}. The programs do not
 include each other. Inside common/: base <- geometry <- camera <- the rest (estimation,
 structured_light, scene, ...). Exits 1 and names every offending line otherwise.
 Usage: check_layering.py PROJECT_ROOT
@@ -23,6 +23,8 @@ def layer_of(rel_parts):
         return ("proto", 10)
     if top == "net":
         return ("net", 11)
+    if top == "cluster":
+        return ("cluster", 12)
     if top in PROGRAMS:
         return (top, 20)
     return None
@@ -42,7 +44,7 @@ def main():
     include = re.compile(r'^\s*#\s*include\s+"([^"]+)"')
     bad = []
     checked = 0
-    for top in ["common", "proto", "net", *sorted(PROGRAMS)]:
+    for top in ["common", "proto", "net", "cluster", *sorted(PROGRAMS)]:
         for path in sorted((root / top).rglob("*")):
             if path.suffix not in {".h", ".cc", ".hpp", ".cpp"}:
                 continue
@@ -55,7 +57,7 @@ def main():
                 target = m.group(1)
                 parts = target.split("/")
                 # Generated protobuf headers live in the build tree as proto/<name>.pb.h.
-                dst = layer_of(parts) if parts[0] in {"common", "proto", "net", *PROGRAMS} else None
+                dst = layer_of(parts) if parts[0] in {"common", "proto", "net", "cluster", *PROGRAMS} else None
                 if dst is None:
                     continue
                 checked += 1

@@ -159,7 +159,7 @@ Expected<CommitReport> AnnotationStore::Commit(std::vector<wire::AnnotationEvent
   // the state is rebuilt from disk below, so it never runs ahead of what is durable.
   auto fail = [&](Status error) -> Status {
     (void)Exec("ROLLBACK");
-    state_ = AnnotationState();
+    state_ = cluster::AnnotationState();
     events_loaded_ = 0;
     Status replayed = Replay();
     if (!replayed.ok()) return replayed.WithContext(error.message() + "; then");

@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "common/base/status.h"
-#include "coordinator/annotations/annotation_state.h"
+#include "cluster/annotation_state.h"
 #include "proto/events.pb.h"
 
 struct sqlite3;
@@ -62,7 +62,7 @@ class AnnotationStore {
   Expected<std::vector<wire::AnnotationEvent>> EventsAfter(SequenceNumber after,
                                                            size_t limit) const;
 
-  const AnnotationState& state() const { return state_; }
+  const cluster::AnnotationState& state() const { return state_; }
   SequenceNumber last_sequence() const { return state_.last_sequence(); }
   const std::string& path() const { return path_; }
   uint64_t events_loaded() const { return events_loaded_; }
@@ -76,7 +76,7 @@ class AnnotationStore {
 
   sqlite3* db_;
   std::string path_;
-  AnnotationState state_;
+  cluster::AnnotationState state_;
   uint64_t events_loaded_ = 0;
 };
 

@@ -172,7 +172,7 @@ Expected<size_t> ImportSession(const std::string& path, AnnotationStore* store) 
     events.push_back(std::move(*event));
   }
   // Check everything on a scratch state first, so that a bad line imports nothing.
-  AnnotationState scratch;
+  cluster::AnnotationState scratch;
   for (size_t i = 0; i < events.size(); ++i) {
     wire::AnnotationEvent e = events[i];
     e.set_event_sequence(i + 1);

@@ -67,7 +67,7 @@ std::string StatusService::BuildJson(const CoordinatorServer& server) const {
 
   if (sources_.timeline != nullptr) {
     const TimelineService& t = *sources_.timeline;
-    const MediaClockState s = t.clock().SampleAt(now_ns);
+    const cluster::MediaClockState s = t.clock().SampleAt(now_ns);
     doc["timeline"] = {{"media_time_s", s.media_time_s},
                        {"rate", s.rate},
                        {"playing", s.playing},

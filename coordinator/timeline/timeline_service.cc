@@ -19,10 +19,10 @@ Status TimelineServiceOptions::Check() const {
 }
 
 namespace {
-MediaClockOptions ClockOptions(const PersonnelTracks& tracks, const TimelineServiceOptions& o) {
+cluster::MediaClockOptions ClockOptions(const PersonnelTracks& tracks, const TimelineServiceOptions& o) {
   const Status ok = o.Check();
   ST_CHECK(ok.ok()) << ok.ToString() << "; check TimelineServiceOptions before constructing";
-  MediaClockOptions clock;
+  cluster::MediaClockOptions clock;
   clock.duration_s = tracks.duration_s();
   clock.max_rate = o.max_rate;
   return clock;
@@ -38,7 +38,7 @@ bool TimelineService::Serves(wire::Envelope::BodyCase body) const {
 }
 
 wire::TimelineClock TimelineService::ClockAt(int64_t now_ns) const {
-  const MediaClockState s = clock_.SampleAt(now_ns);
+  const cluster::MediaClockState s = clock_.SampleAt(now_ns);
   wire::TimelineClock out;
   out.set_media_time_s(s.media_time_s);
   out.set_rate(s.rate);

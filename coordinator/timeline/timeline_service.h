@@ -11,7 +11,7 @@
 #include <cstdint>
 
 #include "coordinator/membership/coordinator_server.h"
-#include "coordinator/timeline/media_clock.h"
+#include "cluster/media_clock.h"
 #include "coordinator/timeline/personnel_tracks.h"
 #include "proto/timeline.pb.h"
 
@@ -41,7 +41,7 @@ class TimelineService : public CoordinatorService {
   wire::TimelineClock ClockAt(int64_t now_ns) const;
 
   const PersonnelTracks& tracks() const { return tracks_; }
-  const MediaClock& clock() const { return clock_; }
+  const cluster::MediaClock& clock() const { return clock_; }
   const TimelineCounters& counters() const { return counters_; }
 
  private:
@@ -49,7 +49,7 @@ class TimelineService : public CoordinatorService {
 
   PersonnelTracks tracks_;
   TimelineServiceOptions options_;
-  MediaClock clock_;
+  cluster::MediaClock clock_;
   TimelineCounters counters_;
   int64_t last_publish_ns_ = 0;
 };

@@ -17,7 +17,7 @@
 #include <map>
 
 #include "net/channel.h"
-#include "tests/coordinator/annotations/annotation_test_util.h"
+#include "tests/cluster/annotation_test_util.h"
 #include "tests/coordinator/membership/child_process.h"
 #include "tests/net/test_wait.h"
 
@@ -25,9 +25,9 @@ namespace sandtable {
 namespace {
 
 namespace fs = std::filesystem;
-using coordinator::testing::Begin;
-using coordinator::testing::LinePoint;
-using coordinator::testing::Points;
+using cluster::testing::Begin;
+using cluster::testing::LinePoint;
+using cluster::testing::Points;
 using std::chrono::milliseconds;
 using testing::ChildProcess;
 using testing::FieldOf;

@@ -7,17 +7,17 @@
 #include <random>
 
 #include "coordinator/annotations/session_file.h"
-#include "tests/coordinator/annotations/annotation_test_util.h"
+#include "tests/cluster/annotation_test_util.h"
 
 namespace sandtable::coordinator {
 namespace {
 
 namespace fs = std::filesystem;
-using testing::Begin;
-using testing::End;
-using testing::LinePoint;
-using testing::Points;
-using testing::SpotErase;
+using cluster::testing::Begin;
+using cluster::testing::End;
+using cluster::testing::LinePoint;
+using cluster::testing::Points;
+using cluster::testing::SpotErase;
 
 class AnnotationStoreTest : public ::testing::Test {
  protected:

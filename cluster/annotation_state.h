@@ -23,7 +23,7 @@
 #include "common/base/status.h"
 #include "proto/events.pb.h"
 
-namespace sandtable::coordinator {
+namespace sandtable::cluster {
 
 constexpr double kMaxStrokeWidth_m = 0.5;
 constexpr double kMaxEraseRadius_m = 2.0;
@@ -61,4 +61,4 @@ class AnnotationState {
   SequenceNumber last_sequence_ = 0;
 };
 
-}  // namespace sandtable::coordinator
+}  // namespace sandtable::cluster

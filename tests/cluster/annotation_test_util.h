@@ -7,7 +7,7 @@
 
 #include "proto/events.pb.h"
 
-namespace sandtable::coordinator::testing {
+namespace sandtable::cluster::testing {
 
 inline wire::AnnotationEvent Begin(uint64_t id, float r = 1.f, float g = 0.f, float b = 0.f,
                                    float width_m = 0.005f) {
@@ -57,4 +57,4 @@ inline Eigen::Vector3f LinePoint(int k, float z_m = 0.f) {
   return Eigen::Vector3f(0.01f * static_cast<float>(k), 0.2f, z_m);
 }
 
-}  // namespace sandtable::coordinator::testing
+}  // namespace sandtable::cluster::testing

@@ -19,7 +19,7 @@
 
 #include "common/base/status.h"
 
-namespace sandtable::coordinator {
+namespace sandtable::cluster {
 
 struct MediaClockOptions {
   double duration_s = 0.0;
@@ -63,4 +63,4 @@ class MediaClock {
   MediaClockState state_;
 };
 
-}  // namespace sandtable::coordinator
+}  // namespace sandtable::cluster

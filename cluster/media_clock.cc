@@ -1,4 +1,4 @@
-#include "coordinator/timeline/media_clock.h"
+#include "cluster/media_clock.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 
 #include "common/base/check.h"
 
-namespace sandtable::coordinator {
+namespace sandtable::cluster {
 
 Status MediaClockOptions::Check() const {
   if (!std::isfinite(duration_s) || duration_s < 0.0) {
@@ -114,4 +114,4 @@ bool MediaClock::Advance(int64_t now_ns) {
   return true;
 }
 
-}  // namespace sandtable::coordinator
+}  // namespace sandtable::cluster

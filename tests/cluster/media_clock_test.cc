@@ -1,11 +1,11 @@
-#include "coordinator/timeline/media_clock.h"
+#include "cluster/media_clock.h"
 
 #include <cmath>
 #include <limits>
 
 #include <gtest/gtest.h>
 
-namespace sandtable::coordinator {
+namespace sandtable::cluster {
 namespace {
 
 constexpr double kTolerance_s = 1e-9;
@@ -116,4 +116,4 @@ TEST(TimelineMediaClockTest, OptionsCheckRefusesBadDuration) {
 }
 
 }  // namespace
-}  // namespace sandtable::coordinator
+}  // namespace sandtable::cluster

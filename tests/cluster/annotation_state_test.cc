@@ -1,12 +1,12 @@
-#include "coordinator/annotations/annotation_state.h"
+#include "cluster/annotation_state.h"
 
 #include <gtest/gtest.h>
 
 #include <limits>
 
-#include "tests/coordinator/annotations/annotation_test_util.h"
+#include "tests/cluster/annotation_test_util.h"
 
-namespace sandtable::coordinator {
+namespace sandtable::cluster {
 namespace {
 
 using testing::Begin;
@@ -109,4 +109,4 @@ TEST(AnnotationStateTest, SpotEraseSplitsStrokesDeterministically) {
 }
 
 }  // namespace
-}  // namespace sandtable::coordinator
+}  // namespace sandtable::cluster

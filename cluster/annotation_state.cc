@@ -1,11 +1,11 @@
-#include "coordinator/annotations/annotation_state.h"
+#include "cluster/annotation_state.h"
 
 #include <cmath>
 #include <string>
 
 #include "proto/convert.h"
 
-namespace sandtable::coordinator {
+namespace sandtable::cluster {
 namespace {
 
 bool InUnitRange(float v) { return std::isfinite(v) && v >= 0.f && v <= 1.f; }
@@ -207,4 +207,4 @@ wire::Snapshot AnnotationState::ToSnapshot() const {
   return snapshot;
 }
 
-}  // namespace sandtable::coordinator
+}  // namespace sandtable::cluster
