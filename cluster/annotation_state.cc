@@ -207,4 +207,42 @@ wire::Snapshot AnnotationState::ToSnapshot() const {
   return snapshot;
 }
 
+Expected<AnnotationState> AnnotationState::FromSnapshot(const wire::Snapshot& snapshot) {
+  AnnotationState state;
+  for (int i = 0; i < snapshot.strokes_size(); ++i) {
+    const wire::Snapshot::Stroke& in = snapshot.strokes(i);
+    const wire::StrokeBegin& b = in.begin();
+    const std::string where = "snapshot stroke " + std::to_string(b.stroke_id()) + ": ";
+    if (b.stroke_id() == 0 || b.stroke_id() == kInvalidStrokeId) {
+      return InvalidArgumentError(where + "invalid stroke id");
+    }
+    if (state.strokes_.count(b.stroke_id())) return InvalidArgumentError(where + "listed twice");
+    if (!(b.width_m() > 0.f && b.width_m() <= kMaxStrokeWidth_m)) {
+      return InvalidArgumentError(where + "width_m out of (0, " + std::to_string(kMaxStrokeWidth_m) +
+                                  "]");
+    }
+    for (float c : {b.color_r(), b.color_g(), b.color_b()}) {
+      if (!(c >= 0.f && c <= 1.f)) return InvalidArgumentError(where + "colour outside [0, 1]");
+    }
+    if (in.points_in_table_m_size() % 3 != 0) {
+      return InvalidArgumentError(where + "points are not whole xyz triples");
+    }
+    Stroke stroke;
+    stroke.id = b.stroke_id();
+    stroke.color_rgb = Eigen::Vector3f(b.color_r(), b.color_g(), b.color_b());
+    stroke.width_m = b.width_m();
+    stroke.ended = in.ended();
+    stroke.points_in_table_m.reserve(static_cast<size_t>(in.points_in_table_m_size() / 3));
+    for (int k = 0; k + 2 < in.points_in_table_m_size(); k += 3) {
+      const Eigen::Vector3f p(in.points_in_table_m(k), in.points_in_table_m(k + 1),
+                              in.points_in_table_m(k + 2));
+      if (!p.allFinite()) return InvalidArgumentError(where + "a point is not finite");
+      stroke.points_in_table_m.push_back(p);
+    }
+    state.strokes_.emplace(stroke.id, std::move(stroke));
+  }
+  state.last_sequence_ = snapshot.last_event_sequence();
+  return state;
+}
+
 }  // namespace sandtable::cluster

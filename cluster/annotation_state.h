@@ -53,6 +53,10 @@ class AnnotationState {
   size_t NumPoints() const;
 
   wire::Snapshot ToSnapshot() const;
+  // The state a snapshot describes (a late joiner's catch-up). Untrusted input: the same
+  // rules as Check() (finite points, width and colour ranges, whole xyz triples, no duplicate
+  // stroke ids), INVALID_ARGUMENT naming the stroke otherwise.
+  static Expected<AnnotationState> FromSnapshot(const wire::Snapshot& snapshot);
 
  private:
   void ApplySpotErase(const wire::SpotErase& erase, SequenceNumber sequence);

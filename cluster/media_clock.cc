@@ -27,13 +27,18 @@ MediaClock::MediaClock(MediaClockOptions options) : options_(options) {
   ST_CHECK(ok.ok()) << ok.ToString() << "; check MediaClockOptions before constructing";
 }
 
-double MediaClock::MediaTimeAt(int64_t now_ns) const {
-  if (!state_.playing) return state_.media_time_s;
+double MediaClock::MediaTimeOf(const MediaClockState& state, double duration_s,
+                               int64_t now_ns) {
+  if (!state.playing) return state.media_time_s;
   // Integer difference first: ns since the anchor are exact in int64, and doubles keep
   // ns precision up to ~104 days of elapsed time.
-  const int64_t elapsed_ns = std::max<int64_t>(0, now_ns - state_.anchor_time_ns);
-  const double t_s = state_.media_time_s + state_.rate * static_cast<double>(elapsed_ns) * 1e-9;
-  return std::clamp(t_s, 0.0, options_.duration_s);
+  const int64_t elapsed_ns = std::max<int64_t>(0, now_ns - state.anchor_time_ns);
+  const double t_s = state.media_time_s + state.rate * static_cast<double>(elapsed_ns) * 1e-9;
+  return std::clamp(t_s, 0.0, duration_s);
+}
+
+double MediaClock::MediaTimeAt(int64_t now_ns) const {
+  return MediaTimeOf(state_, options_.duration_s, now_ns);
 }
 
 MediaClockState MediaClock::SampleAt(int64_t now_ns) const {

@@ -40,6 +40,10 @@ class MediaClock {
  public:
   explicit MediaClock(MediaClockOptions options);
 
+  // The formula above for any published state (a receiver's extrapolation; times on the
+  // clock the state was sampled on).
+  static double MediaTimeOf(const MediaClockState& state, double duration_s, int64_t now_ns);
+
   double MediaTimeAt(int64_t now_ns) const;
   // The state re-sampled at now_ns (anchor moved to now unless it is still ahead), for
   // publishing: a receiver extrapolates with the formula above.

@@ -35,28 +35,51 @@ Status Channel::Send(wire::Envelope envelope, const std::string& routing_id) {
 }
 
 Expected<std::optional<Incoming>> Channel::TryReceive() {
+  Expected<Received> received = Receive();
+  if (!received.ok()) return received.status();
+  if (received->refusal) return received->refusal->status;
+  return std::move(received->message);
+}
+
+Expected<Received> Channel::Receive() {
   Expected<std::optional<std::vector<std::string>>> frames = socket_->TryReceive();
   if (!frames.ok()) return frames.status();
-  if (!frames->has_value()) return std::optional<Incoming>();
+  Received out;
+  if (!frames->has_value()) return out;
   std::vector<std::string>& parts = **frames;
-  Incoming incoming;
-  const size_t expected_frames = socket_->type() == SocketType::kRouter ? 2 : 1;
+  const bool router = socket_->type() == SocketType::kRouter;
+  const size_t expected_frames = router ? 2 : 1;
   for (const std::string& part : parts) stats_.bytes_received += part.size();
+  auto refuse = [&](Status status, uint64_t sequence) {
+    Refusal refusal;
+    // A ROUTER always prepends the routing id, so the first frame names the sender even when
+    // the rest is malformed.
+    if (router && !parts.empty()) refusal.routing_id = parts.front();
+    refusal.sequence = sequence;
+    refusal.status = std::move(status);
+    out.refusal = std::move(refusal);
+    return out;
+  };
   if (parts.size() != expected_frames) {
     counters_->CountRejected(proto::RejectReason::kMalformed);
-    return ParseError("message with " + std::to_string(parts.size()) + " frames, expected " +
-                      std::to_string(expected_frames));
+    return refuse(ParseError("message with " + std::to_string(parts.size()) +
+                             " frames, expected " + std::to_string(expected_frames)),
+                  0);
   }
-  if (expected_frames == 2) incoming.routing_id = std::move(parts[0]);
+  Incoming incoming;
+  if (router) incoming.routing_id = parts[0];
   const std::string& payload = parts.back();
   incoming.wire_bytes = payload.size();
   Expected<wire::Envelope> envelope = proto::DecodeEnvelope(payload, limits_, counters_);
-  if (!envelope.ok()) return envelope.status();
-  ST_RETURN_IF_ERROR(tracker_.Accept(*envelope, counters_));
+  if (!envelope.ok()) return refuse(envelope.status(), 0);
+  if (Status in_order = tracker_.Accept(*envelope, counters_); !in_order.ok()) {
+    return refuse(std::move(in_order), envelope->sequence());
+  }
   counters_->CountAccepted();
   ++stats_.messages_received;
   incoming.envelope = std::move(*envelope);
-  return std::optional<Incoming>(std::move(incoming));
+  out.message = std::move(incoming);
+  return out;
 }
 
 }  // namespace sandtable::net

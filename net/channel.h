@@ -28,6 +28,21 @@ struct Incoming {
   size_t wire_bytes = 0;
 };
 
+// A message the channel refused (malformed, invalid, out of order), with what a server needs
+// to answer the sender: its routing id (ROUTER only; empty when the frames were unusable) and
+// the envelope's sequence when it could be read (0 otherwise).
+struct Refusal {
+  std::string routing_id;
+  uint64_t sequence = 0;
+  Status status;
+};
+
+// One receive: a message, a refusal, or nothing waiting (both empty).
+struct Received {
+  std::optional<Incoming> message;
+  std::optional<Refusal> refusal;
+};
+
 struct ChannelStats {
   uint64_t messages_sent = 0;
   uint64_t bytes_sent = 0;
@@ -48,6 +63,9 @@ class Channel {
   // One message if one is waiting and valid; nullopt when none is waiting. A rejected message
   // returns its Status (already counted); the caller logs it and carries on.
   Expected<std::optional<Incoming>> TryReceive();
+  // As TryReceive, but a refused message comes back with its sender's routing id so that a
+  // server can answer it (net/server_loop.h). Socket failures are the error.
+  Expected<Received> Receive();
 
   // Forget a sender's sequence (it left or restarted).
   void ForgetSender(uint32_t sender_id) { tracker_.Forget(sender_id); }

@@ -1,19 +1,8 @@
 #include "coordinator/membership/coordinator_server.h"
 
-#include <random>
-
 #include "common/base/log.h"
 
 namespace sandtable::coordinator {
-namespace {
-
-uint64_t NewIncarnation() {
-  std::random_device device;
-  return (uint64_t{device()} << 32) ^ device() ^
-         static_cast<uint64_t>(Clock::now().time_since_epoch().count());
-}
-
-}  // namespace
 
 Status CoordinatorOptions::Check() const {
   ST_RETURN_IF_ERROR(membership.Check());
@@ -56,7 +45,7 @@ Status CoordinatorServer::Start() {
     ST_RETURN_IF_ERROR(zap_->Start());
     socket_options.curve = net::ServerCurve(*options_.curve);
   }
-  const uint64_t incarnation = NewIncarnation();
+  const uint64_t incarnation = net::NewIncarnation();
   Expected<std::unique_ptr<net::Socket>> router =
       net::Socket::Create(&context_, net::SocketType::kRouter, socket_options);
   if (!router.ok()) return router.status();
@@ -76,6 +65,9 @@ Status CoordinatorServer::Start() {
   event_endpoint_ = *event_endpoint;
   events_ = std::make_unique<net::Channel>(std::move(*pub), kCoordinatorSenderId, incarnation,
                                            &counters_, options_.limits);
+  loop_.Add(
+      requests_.get(), [this](net::Incoming in) { HandleRequest(std::move(in)); },
+      /*answer_refusals=*/true);
   return OkStatus();
 }
 
@@ -83,17 +75,7 @@ Status CoordinatorServer::Step(std::chrono::milliseconds max_wait) {
   ST_CHECK(requests_ != nullptr) << "CoordinatorServer::Step before a successful Start()";
   // Never sleep past the next expiry check: dead nodes must be found within a period.
   const auto wait = std::min(max_wait, options_.membership.heartbeat_period / 2);
-  std::vector<bool> readable;
-  ST_RETURN_IF_ERROR(net::Socket::Poll({&requests_->socket()}, wait, &readable));
-  for (int drained = 0; readable[0] && drained < 1000; ++drained) {
-    Expected<std::optional<net::Incoming>> in = requests_->TryReceive();
-    if (!in.ok()) {
-      ST_LOG(kDebug) << "rejected request: " << in.status().ToString();
-      continue;
-    }
-    if (!in->has_value()) break;
-    HandleRequest(std::move(**in));
-  }
+  ST_RETURN_IF_ERROR(loop_.RunOnce(wait));
   for (CoordinatorService* service : services_) ST_RETURN_IF_ERROR(service->OnStep(*this));
   const Clock::time_point now = Clock::now();
   for (NodeId id : members_.ExpireSilent(now)) {

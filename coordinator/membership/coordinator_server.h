@@ -5,7 +5,8 @@
 // republish_period for late subscribers; later tracker, cursor, annotation and timeline
 // events through Publish()). Any other request is answered with Rejected and counted as
 // wrong_type, unless a CoordinatorService added with AddService() serves it (annotations,
-// tracker calibration, timeline: issue 6); invalid messages are counted and dropped.
+// tracker calibration, timeline); invalid messages are counted and answered with Rejected
+// (net/server_loop.h).
 // Single-threaded: call Step() in a loop (or Run()). Never throws; failures of sockets come back as
 // Status.
 #pragma once
@@ -22,6 +23,7 @@
 #include "net/channel.h"
 #include "net/curve.h"
 #include "net/handshake_monitor.h"
+#include "net/server_loop.h"
 
 namespace sandtable::coordinator {
 
@@ -93,6 +95,7 @@ class CoordinatorServer {
   proto::MessageCounters counters_;
   std::unique_ptr<net::Channel> requests_;
   std::unique_ptr<net::Channel> events_;
+  net::ServerLoop loop_;
   std::string request_endpoint_, event_endpoint_;
   MembershipTable members_;
   std::vector<CoordinatorService*> services_;

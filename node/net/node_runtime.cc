@@ -1,17 +1,13 @@
 #include "node/net/node_runtime.h"
 
-#include <random>
+#include <algorithm>
 
 #include "common/base/log.h"
 
 namespace sandtable::node {
 namespace {
 
-uint64_t NewIncarnation() {
-  std::random_device device;
-  return (uint64_t{device()} << 32) ^ device() ^
-         static_cast<uint64_t>(Clock::now().time_since_epoch().count());
-}
+constexpr int kMaxPeerDrain = 100;
 
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
@@ -19,6 +15,14 @@ double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).coun
 
 Status NodeOptions::Check() const {
   if (id == kInvalidNodeId) return InvalidArgumentError("node: --id is required");
+  if (!IsValidNodeId(id)) {
+    return InvalidArgumentError("node: --id " + std::to_string(id) +
+                                " collides with the ids reserved for the site's services (>= " +
+                                std::to_string(kFirstReservedSenderId) + ")");
+  }
+  if (worker_threads < 1 || worker_threads > 64) {
+    return InvalidArgumentError("node: worker_threads must be in [1, 64]");
+  }
   if (coordinator_requests.empty() || coordinator_events.empty()) {
     return InvalidArgumentError(
         "node: coordinator endpoints are required (--coordinator REQUESTS,EVENTS)");
@@ -33,7 +37,15 @@ Status NodeOptions::Check() const {
 }
 
 NodeRuntime::NodeRuntime(NodeOptions options)
-    : options_(std::move(options)), incarnation_(NewIncarnation()) {}
+    : options_(std::move(options)),
+      incarnation_(net::NewIncarnation()),
+      workers_(std::clamp(options_.worker_threads, 1, 64)) {}
+
+void NodeRuntime::AddService(NodeService* service) {
+  ST_CHECK(service != nullptr) << "NodeRuntime::AddService needs a service";
+  ST_CHECK(coordinator_ == nullptr) << "add services before NodeRuntime::Start()";
+  services_.push_back(service);
+}
 
 NodeRuntime::~NodeRuntime() {
   peers_.clear();
@@ -89,12 +101,24 @@ Status NodeRuntime::Start() {
   ST_RETURN_IF_ERROR((*sub)->Connect(options_.coordinator_events));
   events_ = std::make_unique<net::Channel>(std::move(*sub), options_.id, incarnation_, &counters_,
                                            options_.limits);
+  loop_.Add(coordinator_.get(),
+            [this](net::Incoming in) { HandleCoordinatorReply(in.envelope); });
+  loop_.Add(events_.get(), [this](net::Incoming in) { HandleEvent(in.envelope); });
+  loop_.Add(
+      peer_router_.get(), [this](net::Incoming in) { HandlePeerMessage(std::move(in)); },
+      /*answer_refusals=*/true);
   return OkStatus();
 }
 
 bool NodeRuntime::coordinator_alive() const {
   return last_coordinator_message_ != Clock::time_point{} &&
          Clock::now() - last_coordinator_message_ < options_.coordinator_timeout;
+}
+
+int64_t NodeRuntime::CoordinatorNowNs() const {
+  const int64_t now_ns = proto::SteadyNowNs();
+  const std::optional<ClockOffsetEstimate> offset = clock_.Estimate();
+  return offset ? now_ns + static_cast<int64_t>(offset->offset_s * 1e9) : now_ns;
 }
 
 wire::Envelope NodeRuntime::MakeHello() const {
@@ -104,12 +128,57 @@ wire::Envelope NodeRuntime::MakeHello() const {
   hello->set_incarnation(incarnation_);
   hello->mutable_endpoints()->set_peer_router(peer_endpoint_);
   hello->set_software_version("sandtable 0.1.0");
+  const NodeCapabilities& c = options_.capabilities;
+  wire::Capabilities* caps = hello->mutable_capabilities();
+  caps->set_has_projector(c.projector_width_px > 0);
+  caps->set_has_camera(c.camera_width_px > 0);
+  caps->set_projector_width_px(static_cast<uint32_t>(std::max(0, c.projector_width_px)));
+  caps->set_projector_height_px(static_cast<uint32_t>(std::max(0, c.projector_height_px)));
+  caps->set_camera_width_px(static_cast<uint32_t>(std::max(0, c.camera_width_px)));
+  caps->set_camera_height_px(static_cast<uint32_t>(std::max(0, c.camera_height_px)));
+  caps->set_camera_bit_depth(static_cast<uint32_t>(std::max(0, c.camera_bit_depth)));
+  caps->set_frame_rate_hz(c.frame_rate_hz);
+  caps->set_projector_output(c.projector_output);
+  caps->set_camera_input(c.camera_input);
   return e;
 }
 
-void NodeRuntime::SendToCoordinator(wire::Envelope envelope) {
+Status NodeRuntime::SendToCoordinator(wire::Envelope envelope) {
   Status sent = coordinator_->Send(std::move(envelope));
   if (!sent.ok()) ST_LOG(kDebug) << "to coordinator: " << sent.ToString();
+  return sent;
+}
+
+Status NodeRuntime::SendToPeer(NodeId peer, wire::Envelope envelope) {
+  auto it = peers_.find(peer);
+  if (it == peers_.end()) {
+    return UnavailableError("node " + std::to_string(peer) + " is not a linked peer");
+  }
+  return it->second.to_peer->Send(std::move(envelope));
+}
+
+Status NodeRuntime::ReplyToPeer(const std::string& routing_id, wire::Envelope envelope) {
+  return peer_router_->Send(std::move(envelope), routing_id);
+}
+
+void NodeRuntime::SetNeighbours(std::optional<std::set<NodeId>> neighbours) {
+  neighbours_ = std::move(neighbours);
+  if (last_member_list_) ApplyMemberList(*last_member_list_);
+}
+
+void NodeRuntime::SetRegistered(bool registered) {
+  if (registered == registered_) return;
+  registered_ = registered;
+  if (!registered) return;
+  ++registrations_;
+  for (NodeService* service : services_) service->OnRegistered(*this);
+}
+
+NodeService* NodeRuntime::CoordinatorServiceFor(wire::Envelope::BodyCase body) const {
+  for (NodeService* service : services_) {
+    if (service->ServesCoordinator(body)) return service;
+  }
+  return nullptr;
 }
 
 void NodeRuntime::SendTimers(Clock::time_point now) {
@@ -131,7 +200,7 @@ void NodeRuntime::SendTimers(Clock::time_point now) {
     }
     // A coordinator that went silent may have restarted: register again.
     if (registered_ && !coordinator_alive()) {
-      registered_ = false;
+      SetRegistered(false);
       ST_LOG(kWarning) << "coordinator silent for more than "
                        << options_.coordinator_timeout.count() << " ms; peers keep running";
     }
@@ -148,29 +217,34 @@ Status NodeRuntime::Step(std::chrono::milliseconds max_wait) {
   ST_CHECK(coordinator_ != nullptr) << "NodeRuntime::Step before a successful Start()";
   SendTimers(Clock::now());
   const auto wait = std::min(max_wait, options_.heartbeat_period / 4);
-  std::vector<bool> readable;
-  ST_RETURN_IF_ERROR(net::Socket::Poll(
-      {&coordinator_->socket(), &events_->socket(), &peer_router_->socket()}, wait, &readable));
-  net::Channel* channels[] = {coordinator_.get(), events_.get(), peer_router_.get()};
-  for (int c = 0; c < 3; ++c) {
-    if (!readable[c]) continue;
-    for (int drained = 0; drained < 1000; ++drained) {
-      Expected<std::optional<net::Incoming>> in = channels[c]->TryReceive();
-      if (!in.ok()) {
-        ST_LOG(kDebug) << "rejected message: " << in.status().ToString();
-        continue;
-      }
-      if (!in->has_value()) break;
-      if (c == 0) {
-        HandleCoordinatorReply((*in)->envelope);
-      } else if (c == 1) {
-        HandleEvent((*in)->envelope);
-      } else {
-        HandlePeerMessage(std::move(**in));
-      }
+  ST_RETURN_IF_ERROR(loop_.RunOnce(wait));
+  DrainPeerDealers();
+  workers_.RunCompletions();
+  for (NodeService* service : services_) {
+    if (Status stepped = service->OnStep(*this); !stepped.ok()) {
+      ST_LOG(kWarning) << service->name() << ": " << stepped.ToString();
     }
   }
   return OkStatus();
+}
+
+void NodeRuntime::DrainPeerDealers() {
+  // Peers answer on their own DEALER to our ROUTER; what arrives on our DEALERs is a Rejected
+  // (or a reply to a routing id) from a peer's ROUTER: hand it to the services like any peer
+  // message, so queues never fill.
+  for (auto& [id, peer] : peers_) {
+    for (int i = 0; i < kMaxPeerDrain; ++i) {
+      Expected<std::optional<net::Incoming>> in = peer.to_peer->TryReceive();
+      if (!in.ok()) continue;
+      if (!in->has_value()) break;
+      if ((*in)->envelope.has_rejected()) {
+        ST_LOG(kDebug) << "peer " << id << " rejected our message: "
+                       << (*in)->envelope.rejected().reason();
+        continue;
+      }
+      HandlePeerMessage(std::move(**in));
+    }
+  }
 }
 
 void NodeRuntime::HandleCoordinatorReply(const wire::Envelope& in) {
@@ -180,14 +254,14 @@ void NodeRuntime::HandleCoordinatorReply(const wire::Envelope& in) {
     case wire::Envelope::kHelloAck:
       if (in.hello_ack().accepted()) {
         if (!registered_) ST_LOG(kInfo) << "registered with the coordinator";
-        registered_ = true;
+        SetRegistered(true);
       } else {
         ST_LOG(kWarning) << "coordinator refused us: " << in.hello_ack().reason();
       }
       break;
     case wire::Envelope::kHeartbeatAck:
       if (!in.heartbeat_ack().known()) {
-        registered_ = false;  // the coordinator restarted or declared us dead: Hello again
+        SetRegistered(false);  // the coordinator restarted or declared us dead: Hello again
         next_hello_ = Clock::now();
       }
       break;
@@ -203,7 +277,11 @@ void NodeRuntime::HandleCoordinatorReply(const wire::Envelope& in) {
       ST_LOG(kWarning) << "coordinator rejected our message: " << in.rejected().reason();
       break;
     default:
-      counters_.CountRejected(proto::RejectReason::kWrongType);
+      if (NodeService* service = CoordinatorServiceFor(in.body_case())) {
+        service->OnCoordinatorMessage(in, *this);
+      } else {
+        counters_.CountRejected(proto::RejectReason::kWrongType);
+      }
   }
 }
 
@@ -213,14 +291,22 @@ void NodeRuntime::HandleEvent(const wire::Envelope& in) {
     ApplyMemberList(in.member_list());
     return;
   }
-  // Tracker, cursor, annotation and timeline events are consumed by later modules.
+  if (NodeService* service = CoordinatorServiceFor(in.body_case())) {
+    service->OnCoordinatorMessage(in, *this);
+  }
+  // Events no service consumes (e.g. tracker poses on a node that renders no cursor) are
+  // accepted and dropped.
 }
 
 void NodeRuntime::ApplyMemberList(const wire::MemberList& list) {
-  member_list_version_ = list.version();
+  if (!last_member_list_ || &list != &*last_member_list_) last_member_list_ = list;
+  const wire::MemberList& members = *last_member_list_;
+  member_list_version_ = members.version();
   std::map<NodeId, const wire::Member*> listed;
-  for (const wire::Member& m : list.members()) {
-    if (m.node_id() != options_.id && !m.endpoints().peer_router().empty()) {
+  for (const wire::Member& m : members.members()) {
+    const bool neighbour = !neighbours_ || neighbours_->count(m.node_id()) > 0;
+    if (m.node_id() != options_.id && IsValidNodeId(m.node_id()) && neighbour &&
+        !m.endpoints().peer_router().empty()) {
       listed[m.node_id()] = &m;
     }
   }
@@ -256,6 +342,14 @@ void NodeRuntime::HandlePeerMessage(net::Incoming in) {
       ++it->second.heartbeats_received;
     }
     return;
+  }
+  if (!e.has_peer_status_request()) {
+    for (NodeService* service : services_) {
+      if (service->ServesPeer(e.body_case())) {
+        service->OnPeerMessage(std::move(in), *this);
+        return;
+      }
+    }
   }
   wire::Envelope reply;
   if (e.has_peer_status_request()) {

@@ -1,11 +1,19 @@
-// NodeRuntime: a node's network side (membership, time, peer mesh).
+// NodeRuntime: a node's network side and the host of its services.
 //
-// Sockets: a DEALER to the coordinator's ROUTER (Hello, Heartbeat, TimeRequest, Goodbye); a
-// SUB to the coordinator's PUB (MemberList and events); a bound ROUTER for peers (peer
-// heartbeats, PeerStatusRequest); one DEALER per peer learnt from the member list (heartbeats
-// to that peer). The peer mesh does not depend on the coordinator: when it is down, peers keep
-// heartbeating each other from the last member list; when it returns the node says Hello again
-// (HeartbeatAck known = false) and membership resumes. Single-threaded: Step() in a loop.
+// Sockets: a DEALER to the coordinator's ROUTER (Hello, Heartbeat, TimeRequest, Goodbye, and
+// the services' requests); a SUB to the coordinator's PUB (MemberList and events); a bound
+// ROUTER for peers; one DEALER per peer it links to. Membership comes from the coordinator's
+// member list; the node links only to its neighbours (SetNeighbours: the nodes whose
+// footprints overlap its own, known once calibrated; until then every member), so peer
+// traffic grows with neighbours, not with the site. The peer mesh does not depend on the
+// coordinator: when it is down, peers keep heartbeating each other from the last member list;
+// when it returns the node says Hello again and membership resumes.
+//
+// Services (node/net/node_service.h) consume coordinator replies and events and serve peer
+// requests; long work runs on workers() and its completions run on the network thread in
+// Step(), so a node busy with a long solve keeps heartbeating.
+// Threading: Start/Step/Run and every service callback on one thread (the network thread);
+// workers() is the only thread-safe entry point.
 #pragma once
 
 #include <atomic>
@@ -13,20 +21,35 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
+#include <vector>
 
 #include "common/base/ids.h"
 #include "net/channel.h"
 #include "net/curve.h"
 #include "net/handshake_monitor.h"
+#include "net/server_loop.h"
 #include "node/net/clock_offset_estimator.h"
+#include "node/net/node_service.h"
+#include "node/net/worker_pool.h"
 
 namespace sandtable::node {
 
 using Clock = std::chrono::steady_clock;
 
+// What a node drives, announced in its Hello (wire::Capabilities).
+struct NodeCapabilities {
+  int projector_width_px = 0, projector_height_px = 0;  // 0: no projector
+  int camera_width_px = 0, camera_height_px = 0;        // 0: no camera
+  int camera_bit_depth = 0;
+  double frame_rate_hz = 60.0;
+  std::string projector_output;  // "world", "window", "none"
+  std::string camera_input;      // "world", "video", "replay", "none"
+};
+
 struct NodeOptions {
-  NodeId id = kInvalidNodeId;
+  NodeId id = kInvalidNodeId;                   // below kFirstReservedSenderId
   std::string coordinator_requests;             // coordinator ROUTER endpoint
   std::string coordinator_events;               // coordinator PUB endpoint
   std::string peer_bind = "tcp://127.0.0.1:*";  // own ROUTER for peers (advertised as bound)
@@ -34,6 +57,8 @@ struct NodeOptions {
   std::chrono::milliseconds coordinator_timeout{500};  // silent this long: coordinator down
   std::chrono::milliseconds peer_timeout{500};         // silent this long: peer down
   std::chrono::milliseconds time_sync_period{100};
+  int worker_threads = 1;
+  NodeCapabilities capabilities;
   std::optional<net::CurveKeyPair> curve;
   proto::CodecLimits limits;
 
@@ -53,7 +78,11 @@ class NodeRuntime {
   explicit NodeRuntime(NodeOptions options);
   ~NodeRuntime();
 
+  // Adds a service (not owned; must outlive the runtime). Before Start().
+  void AddService(NodeService* service);
+
   Status Start();
+  NodeId id() const { return options_.id; }
   const std::string& peer_endpoint() const { return peer_endpoint_; }
 
   Status Step(std::chrono::milliseconds max_wait);
@@ -61,11 +90,24 @@ class NodeRuntime {
   Status Run(const std::atomic<bool>& stop);
   void SayGoodbye(const std::string& reason);
 
+  // For services (network thread). Sends are fire-and-forget: a full queue or a gone peer is
+  // an UNAVAILABLE status, never a block.
+  Status SendToCoordinator(wire::Envelope envelope);
+  Status SendToPeer(NodeId peer, wire::Envelope envelope);
+  Status ReplyToPeer(const std::string& routing_id, wire::Envelope envelope);
+  WorkerPool& workers() { return workers_; }
+
+  // The peers to link to: nullopt = every member (before calibration knows the overlaps).
+  void SetNeighbours(std::optional<std::set<NodeId>> neighbours);
+
   bool registered() const { return registered_; }
   bool coordinator_alive() const;
   std::optional<ClockOffsetEstimate> clock_offset() const { return clock_.Estimate(); }
+  // The coordinator's steady clock now, as this node estimates it (offset 0 until known).
+  int64_t CoordinatorNowNs() const;
   const std::map<NodeId, PeerInfo>& peers() const { return peers_; }
   const proto::MessageCounters& counters() const { return counters_; }
+  uint64_t registrations() const { return registrations_; }
 
  private:
   void HandleCoordinatorReply(const wire::Envelope& in);
@@ -73,7 +115,9 @@ class NodeRuntime {
   void HandlePeerMessage(net::Incoming in);
   void ApplyMemberList(const wire::MemberList& list);
   void SendTimers(Clock::time_point now);
-  void SendToCoordinator(wire::Envelope envelope);
+  void SetRegistered(bool registered);
+  void DrainPeerDealers();
+  NodeService* CoordinatorServiceFor(wire::Envelope::BodyCase body) const;
   wire::Envelope MakeHello() const;
   net::SocketOptions ClientSocketOptions() const;
 
@@ -86,10 +130,16 @@ class NodeRuntime {
   std::unique_ptr<net::Channel> coordinator_;
   std::unique_ptr<net::Channel> events_;
   std::unique_ptr<net::Channel> peer_router_;
+  net::ServerLoop loop_;
   std::string peer_endpoint_;
   std::map<NodeId, PeerInfo> peers_;
+  std::optional<std::set<NodeId>> neighbours_;
+  std::optional<wire::MemberList> last_member_list_;
+  std::vector<NodeService*> services_;
+  WorkerPool workers_;
   ClockOffsetEstimator clock_;
   bool registered_ = false;
+  uint64_t registrations_ = 0;
   uint64_t member_list_version_ = 0;
   Clock::time_point last_coordinator_message_{};
   Clock::time_point next_heartbeat_{}, next_time_sync_{}, next_hello_{};

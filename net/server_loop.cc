@@ -1,0 +1,61 @@
+#include "net/server_loop.h"
+
+#include <random>
+
+#include "common/base/check.h"
+#include "common/base/log.h"
+
+namespace sandtable::net {
+
+uint64_t NewIncarnation() {
+  std::random_device device;
+  const auto now = std::chrono::steady_clock::now().time_since_epoch().count();
+  return (uint64_t{device()} << 32) ^ device() ^ static_cast<uint64_t>(now);
+}
+
+void ServerLoop::Add(Channel* channel, Handler handler, bool answer_refusals,
+                     RefusalHook on_refused) {
+  ST_CHECK(channel != nullptr) << "ServerLoop::Add needs a channel";
+  ST_CHECK(!answer_refusals || channel->socket().type() == SocketType::kRouter)
+      << "only a ROUTER can answer refused requests";
+  entries_.push_back({channel, std::move(handler), answer_refusals, std::move(on_refused)});
+}
+
+Status ServerLoop::RunOnce(std::chrono::milliseconds max_wait) {
+  std::vector<Socket*> sockets;
+  sockets.reserve(entries_.size());
+  for (Entry& e : entries_) sockets.push_back(&e.channel->socket());
+  std::vector<bool> readable;
+  ST_RETURN_IF_ERROR(Socket::Poll(sockets, max_wait, &readable));
+  for (size_t i = 0; i < entries_.size(); ++i) {
+    if (readable[i]) Drain(entries_[i]);
+  }
+  return OkStatus();
+}
+
+void ServerLoop::Drain(Entry& entry) {
+  for (int drained = 0; drained < max_drain_; ++drained) {
+    Expected<Received> received = entry.channel->Receive();
+    if (!received.ok()) {
+      ST_LOG(kWarning) << "receive failed: " << received.status().ToString();
+      return;
+    }
+    if (received->message) {
+      ++handled_;
+      entry.handler(std::move(*received->message));
+      continue;
+    }
+    if (!received->refusal) return;  // nothing more waiting
+    const Refusal& refusal = *received->refusal;
+    ST_LOG(kDebug) << "refused message: " << refusal.status.ToString();
+    if (entry.on_refused) entry.on_refused(refusal);
+    if (entry.answer_refusals && !refusal.routing_id.empty()) {
+      wire::Envelope reply;
+      reply.mutable_rejected()->set_rejected_sequence(refusal.sequence);
+      reply.mutable_rejected()->set_reason(refusal.status.ToString());
+      if (entry.channel->Send(std::move(reply), refusal.routing_id).ok()) ++refusals_answered_;
+    }
+  }
+}
+
+}  // namespace sandtable::net
