@@ -495,6 +495,7 @@ Expected<UnitCalibrationResult> CalibrateUnit(const std::vector<PoseObservation>
   calibration.projector_from_camera = PoseOf(projector_from_camera);
   calibration.camera_rms_px = report.camera_rms_px;
   calibration.projector_rms_px = report.projector_rms_px;
+  calibration.source = kSourceUnitCalibration;
   for (int p = 0; p < n_poses; ++p) {
     calibration.poses_used.push_back(poses[p].name);
     report.camera_from_board.push_back(PoseOf(camera_from_board[p]));
