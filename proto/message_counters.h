@@ -34,6 +34,12 @@ class MessageCounters {
   void CountRejected(RejectReason reason) {
     rejected_[static_cast<size_t>(reason)].fetch_add(1, std::memory_order_relaxed);
   }
+  // A message counted accepted on receipt whose content its handler then refused: moved from
+  // accepted to `reason`, so every message is counted exactly once.
+  void ReclassifyAcceptedAsRejected(RejectReason reason) {
+    accepted_.fetch_sub(1, std::memory_order_relaxed);
+    CountRejected(reason);
+  }
   uint64_t accepted() const { return accepted_.load(std::memory_order_relaxed); }
   uint64_t rejected(RejectReason reason) const {
     return rejected_[static_cast<size_t>(reason)].load(std::memory_order_relaxed);

@@ -18,11 +18,6 @@ int64_t NowNs() {
       .count();
 }
 
-uint64_t NewIncarnation() {
-  std::random_device device;
-  return (uint64_t{device()} << 32) ^ device() ^ static_cast<uint64_t>(NowNs());
-}
-
 uint64_t Mix(uint64_t z) {  // splitmix64 finaliser
   z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
   z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
@@ -57,24 +52,18 @@ Status WorldServer::Start() {
   Expected<std::string> endpoint = (*router)->Bind(options_.bind_endpoint);
   if (!endpoint.ok()) return endpoint.status().WithContext("world: bind");
   endpoint_ = *endpoint;
-  channel_ = std::make_unique<net::Channel>(std::move(*router), kWorldSenderId, NewIncarnation(),
-                                            &counters_, options_.limits);
+  channel_ = std::make_unique<net::Channel>(std::move(*router), kWorldSenderId,
+                                            net::NewIncarnation(), &counters_, options_.limits);
+  // Refused messages are counted by the channel and answered by the loop (net/server_loop.h).
+  loop_.Add(
+      channel_.get(), [this](net::Incoming in) { HandleMessage(std::move(in)); },
+      /*answer_refusals=*/true, [this](const net::Refusal&) { ++stats_.rejected; });
   return OkStatus();
 }
 
 Status WorldServer::Step(std::chrono::milliseconds max_wait) {
   ST_CHECK(channel_ != nullptr) << "WorldServer::Step before a successful Start()";
-  std::vector<bool> readable;
-  ST_RETURN_IF_ERROR(net::Socket::Poll({&channel_->socket()}, max_wait, &readable));
-  for (int drained = 0; readable[0] && drained < 1000; ++drained) {
-    // Received here rather than with Channel::TryReceive so that a sender whose message is
-    // rejected still gets an answer (the channel drops the routing id of a bad message).
-    Expected<std::optional<std::vector<std::string>>> frames = channel_->socket().TryReceive();
-    if (!frames.ok()) return frames.status();
-    if (!frames->has_value()) break;
-    HandleMessage(std::move(**frames));
-  }
-  return OkStatus();
+  return loop_.RunOnce(max_wait);
 }
 
 Status WorldServer::Run(const std::atomic<bool>& stop) {
@@ -82,31 +71,11 @@ Status WorldServer::Run(const std::atomic<bool>& stop) {
   return OkStatus();
 }
 
-void WorldServer::HandleMessage(std::vector<std::string> frames) {
-  if (frames.size() != 2) {
-    // ROUTER always prepends the identity; anything else is malformed.
-    counters_.CountRejected(proto::RejectReason::kMalformed);
-    ++stats_.rejected;
-    if (!frames.empty()) Reject(frames[0], 0, "expected one envelope frame");
-    return;
-  }
-  const std::string& routing_id = frames[0];
-  Expected<wire::Envelope> decoded = proto::DecodeEnvelope(frames[1], options_.limits, &counters_);
-  if (!decoded.ok()) {
-    ++stats_.rejected;
-    ST_LOG(kDebug) << "rejected message: " << decoded.status().ToString();
-    Reject(routing_id, 0, decoded.status().ToString());
-    return;
-  }
-  const wire::Envelope& in = *decoded;
-  const Status in_order = tracker_.Accept(in, &counters_);
-  if (!in_order.ok()) {
-    ++stats_.rejected;
-    Reject(routing_id, in.sequence(), in_order.ToString());
-    return;
-  }
-  // Each message is counted once: accepted, or (inside the handlers) invalid_content.
-  const uint64_t bad_before = stats_.bad_requests;
+void WorldServer::HandleMessage(net::Incoming message) {
+  const std::string& routing_id = message.routing_id;
+  const wire::Envelope& in = message.envelope;
+  // Each message is counted once: accepted by the channel, or moved to invalid_content by
+  // the handler that refuses its content.
   switch (in.body_case()) {
     case wire::Envelope::kSetFrameRequest:
       Reply(routing_id, SetFrame(in.set_frame_request()));
@@ -118,14 +87,13 @@ void WorldServer::HandleMessage(std::vector<std::string> frames) {
       Reply(routing_id, GroundTruth(in.ground_truth_request()));
       break;
     default:
-      counters_.CountRejected(proto::RejectReason::kWrongType);
+      counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kWrongType);
       ++stats_.rejected;
       Reject(routing_id, in.sequence(),
              "the world does not serve " + proto::BodyName(in) +
                  " (set_frame_request, capture_request, ground_truth_request)");
       return;
   }
-  if (stats_.bad_requests == bad_before) counters_.CountAccepted();
 }
 
 void WorldServer::Reply(const std::string& routing_id, wire::Envelope reply) {
@@ -146,7 +114,7 @@ wire::Envelope WorldServer::SetFrame(const wire::SetFrameRequest& request) {
   wire::SetFrameReply* reply = envelope.mutable_set_frame_reply();
   auto fail = [&](const std::string& message) {
     ++stats_.bad_requests;
-    counters_.CountRejected(proto::RejectReason::kInvalidContent);
+    counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kInvalidContent);
     reply->set_ok(false);
     reply->set_message("set_frame projector " + std::to_string(request.projector_id()) + ": " +
                        message);
@@ -198,7 +166,7 @@ wire::Envelope WorldServer::Capture(const wire::CaptureRequest& request) {
   reply->set_camera_id(request.camera_id());
   auto fail = [&](const std::string& message) {
     ++stats_.bad_requests;
-    counters_.CountRejected(proto::RejectReason::kInvalidContent);
+    counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kInvalidContent);
     reply->set_ok(false);
     reply->set_message("capture camera " + std::to_string(request.camera_id()) + ": " + message);
     return envelope;
@@ -239,7 +207,7 @@ wire::Envelope WorldServer::GroundTruth(const wire::GroundTruthRequest& request)
   reply->set_projector_id(request.projector_id());
   auto fail = [&](const std::string& message) {
     ++stats_.bad_requests;
-    counters_.CountRejected(proto::RejectReason::kInvalidContent);
+    counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kInvalidContent);
     reply->clear_samples();
     reply->set_ok(false);
     reply->set_message("ground_truth projector " + std::to_string(request.projector_id()) + ": " +

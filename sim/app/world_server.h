@@ -29,6 +29,7 @@
 
 #include "common/base/ids.h"
 #include "net/channel.h"
+#include "net/server_loop.h"
 #include "proto/codec.h"
 #include "proto/envelope.pb.h"
 #include "proto/message_counters.h"
@@ -75,7 +76,7 @@ class WorldServer {
   World& world() { return *world_; }
 
  private:
-  void HandleMessage(std::vector<std::string> frames);
+  void HandleMessage(net::Incoming message);
   void Reply(const std::string& routing_id, wire::Envelope reply);
   void Reject(const std::string& routing_id, uint64_t sequence, const std::string& reason);
   wire::Envelope SetFrame(const wire::SetFrameRequest& request);
@@ -86,8 +87,8 @@ class WorldServer {
   WorldServerOptions options_;
   zmq::context_t context_;
   proto::MessageCounters counters_;
-  proto::SequenceTracker tracker_;
-  std::unique_ptr<net::Channel> channel_;  // sends; receives are decoded here (see .cc)
+  std::unique_ptr<net::Channel> channel_;
+  net::ServerLoop loop_;
   std::string endpoint_;
   std::map<uint32_t, uint64_t> captures_per_camera_;
   WorldServerStats stats_;
