@@ -1,0 +1,95 @@
+#include "sim/lab/lab_inputs.h"
+
+#include <filesystem>
+#include <fstream>
+
+#include "common/io/json_codec.h"
+#include "common/scene/gltf_loader.h"
+#include "common/scene/gltf_writer.h"
+#include "common/scene/procedural_scene.h"
+#include "sim/site/factory_calibration.h"
+#include "sim/site/site_json.h"
+#include "sim/site/site_presets.h"
+
+namespace sandtable::sim {
+
+namespace {
+
+Status WriteJsonFile(const nlohmann::json& json, const std::filesystem::path& path) {
+  std::ofstream out(path);
+  out << json.dump(2) << "\n";
+  if (!out.good()) return IoError("cannot write " + path.string());
+  return OkStatus();
+}
+
+// A preset name when it names one; a path otherwise (an existing file always wins).
+bool IsFile(const std::string& text) {
+  std::error_code error;
+  return std::filesystem::is_regular_file(text, error);
+}
+
+}  // namespace
+
+Expected<LabInputs> PrepareLabInputs(const std::string& site_arg, const std::string& scene_arg,
+                                     uint64_t seed, const std::string& out_dir) {
+  const std::filesystem::path dir(out_dir);
+  std::error_code error;
+  for (const char* sub : {"", "factory", "truth", "calibration", "logs"}) {
+    std::filesystem::create_directories(dir / sub, error);
+    if (error) return IoError("cannot create " + (dir / sub).string() + ": " + error.message());
+  }
+  LabInputs inputs;
+  inputs.site_label = site_arg;
+  inputs.scene_label = scene_arg;
+
+  Expected<Site> site = IsFile(site_arg) ? LoadSiteFile(site_arg) : MakeSitePreset(site_arg);
+  if (!site.ok())
+    return InvalidArgumentError("--site " + site_arg + ": " + site.status().message());
+  inputs.site = std::move(*site);
+  inputs.site_path = (dir / "site.json").string();
+  ST_RETURN_IF_ERROR(WriteSiteFile(inputs.site, inputs.site_path));
+
+  if (IsFile(scene_arg)) {
+    Expected<Scene> scene = LoadGltfScene(scene_arg);
+    if (!scene.ok()) {
+      return InvalidArgumentError("--scene " + scene_arg + ": " + scene.status().message());
+    }
+    inputs.scene_path = std::filesystem::absolute(scene_arg).string();
+  } else {
+    Expected<ScenePreset> preset = ParseScenePreset(scene_arg);
+    if (!preset.ok()) {
+      return InvalidArgumentError("--scene " + scene_arg + ": not a file, and " +
+                                  preset.status().message());
+    }
+    ProceduralSceneOptions options;
+    options.preset = *preset;
+    options.seed = seed;
+    Expected<ProceduralScene> scene = MakeProceduralScene(options);
+    if (!scene.ok()) return scene.status();
+    inputs.scene_path = (dir / "scene.gltf").string();
+    ST_RETURN_IF_ERROR(WriteGltfScene(scene->scene, inputs.scene_path));
+  }
+
+  for (const UnitSpec& unit : inputs.site.units) {
+    Expected<FactoryCalibration> factory =
+        MakeFactoryCalibration(unit, FactoryCalibrationError{}, seed);
+    if (!factory.ok()) return factory.status();
+    const std::filesystem::path factory_path =
+        dir / "factory" / ("unit-" + std::to_string(unit.id) + ".factory.json");
+    ST_RETURN_IF_ERROR(WriteJsonFile(FactoryCalibrationToJson(*factory), factory_path));
+    inputs.factory_paths[unit.id] = factory_path.string();
+    const nlohmann::json true_pose = {
+        {"format", "sandtable.true_pose"},
+        {"version", 1},
+        {"unit_id", unit.id},
+        {"table_from_projector", io::RigidToJson(unit.projector.table_from_projector)},
+        {"table_from_model", io::RigidToJson(Rigid3d::Identity())}};
+    const std::filesystem::path pose_path =
+        dir / "truth" / ("unit-" + std::to_string(unit.id) + ".true_pose.json");
+    ST_RETURN_IF_ERROR(WriteJsonFile(true_pose, pose_path));
+    inputs.true_pose_paths[unit.id] = pose_path.string();
+  }
+  return inputs;
+}
+
+}  // namespace sandtable::sim

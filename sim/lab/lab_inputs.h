@@ -1,0 +1,45 @@
+// The lab's inputs: the TRUE site and scene (from a preset or a file) and the files it hands to
+// the world (site and scene) and to each node (its factory calibration, and in the labelled
+// test mode its true pose).
+//
+// Layout under the output directory:
+//   site.json                        the true site (sim/site/site_json.h), for the world only
+//   scene.gltf                       the scene (presets are written; a FILE is used as given)
+//   factory/unit-N.factory.json      what a real unit ships with (sandtable-world make-site's
+//                                    factory files, from MakeFactoryCalibration and `seed`)
+//   truth/unit-N.true_pose.json      LAB TEST MODE: {"format": "sandtable.true_pose",
+//                                    "version": 1, "unit_id": N, "table_from_projector": RIGID,
+//                                    "table_from_model": RIGID} from the site's truth; the model
+//                                    stands where the glTF says, so table_from_model = identity
+// Failure: INVALID_ARGUMENT naming the flag for an unknown preset or a file that does not load
+// (the caller reports it as a usage error); IO_ERROR naming the path when a file cannot be
+// written.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <string>
+
+#include "common/base/ids.h"
+#include "common/base/status.h"
+#include "common/scene/scene.h"
+#include "sim/site/site.h"
+
+namespace sandtable::sim {
+
+struct LabInputs {
+  Site site;
+  std::string site_label;  // the preset name or the file given
+  std::string scene_label;
+  std::string site_path;  // the files the world loads
+  std::string scene_path;
+  std::map<NodeId, std::string> factory_paths;
+  std::map<NodeId, std::string> true_pose_paths;
+};
+
+// `site` / `scene`: a preset name (sandtable-3, grid-N, flat-4 / sandtable, city, flat) or a
+// file (site JSON / glTF). The scene presets use `seed`; so do the factory calibrations.
+Expected<LabInputs> PrepareLabInputs(const std::string& site, const std::string& scene,
+                                     uint64_t seed, const std::string& out_dir);
+
+}  // namespace sandtable::sim

@@ -1,0 +1,79 @@
+// The lab's report: DIR/report.json (for programs; fields in docs/lab.md) and DIR/report.md
+// (tables and pictures for people), written from one LabResult whether the run succeeded or
+// not (a failed run's report says which child failed, how, and the end of its log).
+//
+// report.json (format "sandtable.lab_report", version 1):
+//   status: "ok" | "failed" | "interrupted"; command; seed; total_s; phases: [{name, seconds}]
+//   site: {name, label, units, file}; scene: {label, file, triangles}
+//   processes: [{name, pid, role, exit}]
+//   calibration: {source, rms_mm, p99_mm, max_mm, rms_px, p99_px, max_px, count, unmeasured,
+//                 table: {...same...}, buildings: {...same...},
+//                 per_unit: {"<id>": {source, json, yaml, ...same..., table, buildings}},
+//                 metric: {candidates, lit_points, table_points, building_points, seed,
+//                          max_incidence_deg, definition}}
+//   images: {top_white, registration_error}; failure: {phase, reason, child, role, pid,
+//   exit, exit_code, signal, signal_name, log, log_tail}
+// Failure: IO_ERROR naming the path when a file cannot be written.
+#pragma once
+
+#include <map>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "common/base/ids.h"
+#include "common/base/status.h"
+#include "sim/lab/registration_metric.h"
+
+namespace sandtable::sim {
+
+struct LabFailure {
+  std::string phase;   // the phase it happened in ("start nodes")
+  std::string reason;  // one line a person can act on
+  // When a child caused it:
+  std::string child, role;
+  int pid = -1;
+  std::string exit_text;  // "killed by signal 9 (SIGKILL)"
+  std::optional<int> exit_code, signal;
+  std::string log_path;  // relative to the output directory
+  std::vector<std::string> log_tail;
+};
+
+struct LabProcess {
+  std::string name, role;
+  int pid = -1;
+  std::string exit_text;
+};
+
+struct LabUnitResult {
+  std::string source;
+  std::string json_path, yaml_path;  // relative to the output directory
+};
+
+struct LabResult {
+  std::string status = "ok";  // ok | failed | interrupted
+  std::string command;
+  uint64_t seed = 1;
+  std::string site_name, site_label, scene_label, site_path, scene_path;
+  int num_units = 0;
+  int scene_triangles = 0;
+  std::vector<std::pair<std::string, double>> phase_seconds;
+  double total_s = 0.0;
+  std::vector<LabProcess> processes;
+  std::string calibration_source;  // the units' common source, or "mixed"
+  std::map<NodeId, LabUnitResult> units;
+  std::optional<RegistrationReport> registration;
+  RegistrationMetricOptions metric_options;
+  std::string top_white_png, heatmap_png;  // relative; empty when not made
+  double heatmap_scale_mm = 0.0;
+  std::optional<LabFailure> failure;
+};
+
+nlohmann::json LabReportJson(const LabResult& result);
+std::string LabReportMarkdown(const LabResult& result);
+Status WriteLabReport(const LabResult& result, const std::string& out_dir);
+
+}  // namespace sandtable::sim

@@ -1,0 +1,513 @@
+#include "sim/lab/lab_run.h"
+
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <future>
+#include <map>
+#include <optional>
+#include <set>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "common/base/ready_line.h"
+#include "common/io/unit_calibration_file.h"
+#include "common/scene/gltf_loader.h"
+#include "sim/lab/lab_images.h"
+#include "sim/lab/lab_inputs.h"
+#include "sim/lab/lab_report.h"
+#include "sim/lab/progress.h"
+#include "sim/lab/registration_metric.h"
+#include "sim/lab/supervisor.h"
+#include "sim/site/site_json.h"
+#include "sim/transport/world.h"
+
+namespace sandtable::sim {
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using std::chrono::milliseconds;
+
+constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2, kExitInterrupted = 130;
+constexpr int kLogTailLines = 20;
+
+milliseconds ToMs(double seconds) { return milliseconds(static_cast<int64_t>(seconds * 1e3)); }
+
+// The build tree's programs (set by sim/lab/CMakeLists.txt), the last place looked in.
+#ifndef SANDTABLE_LAB_WORLD_BIN
+#define SANDTABLE_LAB_WORLD_BIN ""
+#define SANDTABLE_LAB_COORDINATOR_BIN ""
+#define SANDTABLE_LAB_NODE_BIN ""
+#endif
+
+// `name` in --bin-dir, else beside this program, else where the build tree put it.
+Expected<std::string> FindProgram(const std::string& name, const std::string& bin_dir,
+                                  const std::string& built) {
+  std::vector<fs::path> candidates;
+  if (!bin_dir.empty()) {
+    candidates.push_back(fs::path(bin_dir) / name);
+  } else {
+    std::error_code error;
+    const fs::path self = fs::read_symlink("/proc/self/exe", error);
+    if (!error) candidates.push_back(self.parent_path() / name);
+    if (!built.empty()) candidates.push_back(built);
+  }
+  std::string looked;
+  for (const fs::path& candidate : candidates) {
+    if (access(candidate.c_str(), X_OK) == 0) return candidate.string();
+    looked += (looked.empty() ? "" : ", ") + candidate.string();
+  }
+  return NotFoundError("cannot find " + name + " (looked in " + looked +
+                       "): build it, or pass --bin-dir DIR");
+}
+
+std::string JoinLines(const std::vector<std::string>& lines) {
+  std::string out;
+  for (const std::string& line : lines) out += "    " + line + "\n";
+  return out;
+}
+
+class LabRun {
+ public:
+  LabRun(const LabRunOptions& options, const std::atomic<bool>& stop, std::ostream& out,
+         std::ostream& err)
+      : options_(options),
+        stop_(stop),
+        out_(out),
+        err_(err),
+        progress_(err, options.progress_tty),
+        supervisor_((fs::path(options.out_dir) / "processes.json").string()),
+        start_(std::chrono::steady_clock::now()) {}
+
+  int Run() {
+    result_.command = options_.command_line;
+    result_.seed = options_.seed;
+    result_.site_label = options_.site;
+    result_.scene_label = options_.scene;
+    result_.metric_options.num_samples = options_.metric_samples;
+    result_.metric_options.seed = options_.seed;
+    if (int usage = Prepare(); usage != kExitOk) return usage;
+    const bool ok =
+        StartWorld() && StartCoordinator() && StartNodes() && Calibrate() && Hold() && Measure();
+    (void)ok;  // a failure is in result_.failure
+    return Finish();
+  }
+
+ private:
+  // ---- phases ----
+
+  int Prepare() {
+    Phase("prepare", 0);
+    Expected<LabInputs> inputs =
+        PrepareLabInputs(options_.site, options_.scene, options_.seed, options_.out_dir);
+    if (!inputs.ok()) {
+      progress_.End("failed");
+      err_ << "sandtable-lab run: " << inputs.status().message() << "\n";
+      return inputs.status().code() == StatusCode::kInvalidArgument ? kExitUsage : kExitFailure;
+    }
+    inputs_ = std::move(*inputs);
+    result_.site_name = inputs_.site.name;
+    result_.num_units = static_cast<int>(inputs_.site.units.size());
+    result_.site_path = RelativeToOut(inputs_.site_path);
+    result_.scene_path = RelativeToOut(inputs_.scene_path);
+    // The lab's own copy of the truth, read back from the very files the world loads.
+    Expected<Scene> scene = LoadGltfScene(inputs_.scene_path);
+    if (!scene.ok()) {
+      progress_.End("failed");
+      err_ << "sandtable-lab run: " << scene.status().ToString() << "\n";
+      return kExitFailure;
+    }
+    result_.scene_triangles = scene->NumTriangles();
+    scene_ = std::move(*scene);
+    for (auto [name, built, path] :
+         {std::tuple{"sandtable-world", SANDTABLE_LAB_WORLD_BIN, &world_bin_},
+          std::tuple{"sandtable-coordinator", SANDTABLE_LAB_COORDINATOR_BIN, &coordinator_bin_},
+          std::tuple{"sandtable-node", SANDTABLE_LAB_NODE_BIN, &node_bin_}}) {
+      Expected<std::string> found = FindProgram(name, options_.bin_dir, built);
+      if (!found.ok()) {
+        progress_.End("failed");
+        err_ << "sandtable-lab run: " << found.status().message() << "\n";
+        return kExitFailure;
+      }
+      *path = *found;
+    }
+    progress_.End();
+    return kExitOk;
+  }
+
+  bool StartWorld() {
+    Phase("start world", 1);
+    ChildProcess* world = StartChild("world", "world",
+                                     {world_bin_, "serve", "--site", inputs_.site_path, "--scene",
+                                      inputs_.scene_path, "--bind", "tcp://127.0.0.1:*"});
+    if (!world) return false;
+    return Wait(
+        "start world", [&] { return !world_endpoint_.empty(); }, ToMs(options_.start_timeout_s),
+        "sandtable-world printed no readiness line "
+        "{\"ready\":\"sandtable-world\",\"world\":ENDPOINT} on stdout",
+        world);
+  }
+
+  bool StartCoordinator() {
+    Phase("start coordinator", 1);
+    ChildProcess* coordinator = StartChild(
+        "coordinator", "coordinator",
+        {coordinator_bin_, "--requests", "tcp://127.0.0.1:*", "--events", "tcp://127.0.0.1:*"});
+    if (!coordinator) return false;
+    return Wait(
+        "start coordinator", [&] { return !coordinator_events_.empty(); },
+        ToMs(options_.start_timeout_s),
+        "sandtable-coordinator printed no readiness line "
+        "{\"ready\":\"sandtable-coordinator\",\"requests\":..,\"events\":..} on stdout",
+        coordinator);
+  }
+
+  bool StartNodes() {
+    const int n = result_.num_units;
+    Phase("start nodes", n);
+    const std::string export_dir = fs::absolute(fs::path(options_.out_dir) / "calibration");
+    for (const UnitSpec& unit : inputs_.site.units) {
+      const std::string id = std::to_string(unit.id);
+      ChildProcess* node =
+          StartChild("node-" + id, "node",
+                     {node_bin_, "--id", id, "--coordinator",
+                      coordinator_requests_ + "," + coordinator_events_, "--world", world_endpoint_,
+                      "--factory", inputs_.factory_paths.at(unit.id), "--true-pose",
+                      inputs_.true_pose_paths.at(unit.id), "--export-dir", export_dir});
+      if (!node) return false;
+    }
+    return Wait(
+        "start nodes", [&] { return static_cast<int>(nodes_ready_.size()) == n; },
+        ToMs(options_.start_timeout_s),
+        "not every sandtable-node printed its readiness line "
+        "{\"ready\":\"sandtable-node\",\"id\":N,..}",
+        nullptr, [&] { return static_cast<int>(nodes_ready_.size()); },
+        [&] { return Missing(nodes_ready_); });
+  }
+
+  bool Calibrate() {
+    const int n = result_.num_units;
+    Phase("calibration held", n);
+    return Wait(
+        "calibration held", [&] { return static_cast<int>(calibrated_.size()) == n; },
+        ToMs(options_.calibration_timeout_s),
+        "not every sandtable-node reported a calibration "
+        "{\"calibrated\":N,\"source\":..,\"json\":..,\"yaml\":..}",
+        nullptr, [&] { return static_cast<int>(calibrated_.size()); },
+        [&] {
+          std::set<NodeId> have;
+          for (const auto& [id, line] : calibrated_) have.insert(id);
+          return Missing(have);
+        });
+  }
+
+  bool Hold() {
+    if (options_.hold_s <= 0) return true;
+    Phase("hold", 0);
+    const bool never = false;
+    const WaitOutcome outcome =
+        supervisor_.WaitUntil([&] { return never; }, ToMs(options_.hold_s), stop_, Handler());
+    if (outcome == WaitOutcome::kDeadline) {
+      progress_.End();
+      return true;
+    }
+    return Failed("hold", outcome, "", nullptr);
+  }
+
+  bool Measure() {
+    Phase("metrics", result_.num_units);
+    std::vector<EstimatedRegistration> estimates;
+    std::set<std::string> sources;
+    for (const UnitSpec& unit : inputs_.site.units) {
+      const json& line = calibrated_.at(unit.id);
+      const std::string path = line.value("json", std::string());
+      Expected<UnitCalibration> calibration = LoadUnitCalibration(path);
+      if (!calibration.ok()) {
+        return FailedWith("metrics", "unit " + std::to_string(unit.id) +
+                                         ": cannot load its exported calibration: " +
+                                         calibration.status().ToString());
+      }
+      if (!calibration->table_from_projector) {
+        return FailedWith("metrics", path + ": no table_from_projector (unit not registered)");
+      }
+      LabUnitResult& unit_result = result_.units[unit.id];
+      unit_result.source = calibration->source;
+      unit_result.json_path = RelativeToOut(path);
+      unit_result.yaml_path = RelativeToOut(line.value("yaml", std::string()));
+      if (!fs::exists(line.value("yaml", std::string()))) {
+        return FailedWith("metrics", "unit " + std::to_string(unit.id) + ": its OpenCV YAML " +
+                                         line.value("yaml", std::string()) + " is missing");
+      }
+      sources.insert(calibration->source);
+      estimates.push_back({unit.id, calibration->projector, *calibration->table_from_projector,
+                           calibration->table_from_model.value_or(Rigid3d::Identity())});
+    }
+    result_.calibration_source = sources.size() == 1 ? *sources.begin() : "mixed";
+    // The metric and the pictures run on a worker while the children stay watched.
+    struct Work {
+      std::optional<RegistrationReport> report;
+      cv::Mat top, heatmap;
+      double scale_mm = 0;
+      std::string error;
+    };
+    const RegistrationMetricOptions metric_options = result_.metric_options;
+    const int width = options_.image_width_px;
+    std::future<Work> future =
+        std::async(std::launch::async, [this, estimates, metric_options, width]() -> Work {
+          Work work;
+          Expected<std::unique_ptr<World>> world = World::Create(inputs_.site, scene_);
+          if (!world.ok()) {
+            work.error = world.status().ToString();
+            return work;
+          }
+          Expected<RegistrationReport> report =
+              MeasureRegistration(**world, estimates, metric_options);
+          if (!report.ok()) {
+            work.error = report.status().ToString();
+            return work;
+          }
+          work.report = std::move(*report);
+          if (Expected<cv::Mat> top = TopViewWhite(world->get(), width); top.ok()) {
+            work.top = *top;
+          }
+          work.scale_mm = std::max(1e-3, work.report->site.all.p99_mm);
+          if (Expected<cv::Mat> heat =
+                  RegistrationHeatmap(**world, estimates, metric_options, width, work.scale_mm);
+              heat.ok()) {
+            work.heatmap = *heat;
+          }
+          return work;
+        });
+    const auto ready = [&] {
+      return future.wait_for(std::chrono::seconds(0)) == std::future_status::ready;
+    };
+    const WaitOutcome outcome = supervisor_.WaitUntil(ready, ToMs(3600), stop_, Handler());
+    if (outcome != WaitOutcome::kDone) {
+      future.wait();
+      return Failed("metrics", outcome, "", nullptr);
+    }
+    Work work = future.get();
+    if (!work.error.empty()) return FailedWith("metrics", "registration metric: " + work.error);
+    result_.registration = std::move(work.report);
+    result_.heatmap_scale_mm = work.scale_mm;
+    const fs::path dir(options_.out_dir);
+    if (!work.top.empty() && cv::imwrite((dir / "top_white.png").string(), work.top)) {
+      result_.top_white_png = "top_white.png";
+    }
+    if (!work.heatmap.empty() &&
+        cv::imwrite((dir / "registration_error_top.png").string(), work.heatmap)) {
+      result_.heatmap_png = "registration_error_top.png";
+    }
+    progress_.End();
+    return true;
+  }
+
+  int Finish() {
+    Phase("teardown", 0);
+    const std::vector<std::string> killed = supervisor_.TearDown(ToMs(options_.teardown_grace_s));
+    progress_.End(killed.empty() ? "ok" : "killed " + std::to_string(killed.size()));
+    for (const auto& child : supervisor_.children()) {
+      result_.processes.push_back(
+          {child->name(), child->spec().role, child->pid(), child->DescribeExit()});
+    }
+    result_.phase_seconds = progress_.phase_seconds();
+    result_.total_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    const Status written = WriteLabReport(result_, options_.out_dir);
+    const std::string report_path = (fs::path(options_.out_dir) / "report.json").string();
+    WriteJsonLine(out_, {{"lab", "done"}, {"status", result_.status}, {"report", report_path}});
+    if (!written.ok()) {
+      err_ << "sandtable-lab run: " << written.ToString() << "\n";
+      return kExitFailure;
+    }
+    if (result_.failure) {
+      const LabFailure& f = *result_.failure;
+      err_ << "sandtable-lab run: " << result_.status << " in phase '" << f.phase
+           << "': " << f.reason << "\n";
+      if (!f.log_tail.empty())
+        err_ << "  last lines of " << f.log_path << ":\n" << JoinLines(f.log_tail);
+      err_ << "  report: " << report_path << "\n";
+      return result_.status == "interrupted" ? kExitInterrupted : kExitFailure;
+    }
+    if (result_.registration) {
+      const ErrorStats& s = result_.registration->site.all;
+      err_ << "sandtable-lab run: " << result_.site_name << ", calibration "
+           << result_.calibration_source << ": rms " << s.rms_mm << " mm, p99 " << s.p99_mm
+           << " mm, max " << s.max_mm << " mm, rms " << s.rms_px << " px\n";
+    }
+    err_ << "sandtable-lab run: report " << (fs::path(options_.out_dir) / "report.md").string()
+         << "\n";
+    return kExitOk;
+  }
+
+  // ---- helpers ----
+
+  void Phase(const std::string& name, int total) {
+    progress_.Begin(name, total);
+    progress_phase_ = name;
+    json line = {{"lab", "phase"}, {"phase", name}};
+    if (name == "hold") line["hold_s"] = options_.hold_s;
+    WriteJsonLine(out_, line);
+  }
+
+  std::string RelativeToOut(const std::string& path) const {
+    std::error_code error;
+    const fs::path relative = fs::relative(path, options_.out_dir, error);
+    if (error || relative.empty() || *relative.begin() == "..") return path;
+    return relative.string();
+  }
+
+  ChildProcess* StartChild(const std::string& name, const std::string& role,
+                           std::vector<std::string> argv) {
+    ChildSpec spec{name, role, std::move(argv),
+                   (fs::path(options_.out_dir) / "logs" / (name + ".log")).string()};
+    Expected<ChildProcess*> child = supervisor_.Start(spec);
+    if (!child.ok()) {
+      FailedWith(progress_phase_, "cannot start " + name + ": " + child.status().ToString());
+      return nullptr;
+    }
+    return *child;
+  }
+
+  // The handler of every JSON line of every child: readiness and calibration.
+  Supervisor::JsonHandler Handler() {
+    return [this](ChildProcess& child, const json& line) {
+      const std::string ready = line.value("ready", std::string());
+      if (child.spec().role == "world" && ready == "sandtable-world" && line.contains("world") &&
+          line["world"].is_string()) {
+        world_endpoint_ = line["world"].get<std::string>();
+      } else if (child.spec().role == "coordinator" && ready == "sandtable-coordinator" &&
+                 line.contains("requests") && line["requests"].is_string() &&
+                 line.contains("events") && line["events"].is_string()) {
+        coordinator_requests_ = line["requests"].get<std::string>();
+        coordinator_events_ = line["events"].get<std::string>();
+      } else if (child.spec().role == "node" && ready == "sandtable-node" && line.contains("id") &&
+                 line["id"].is_number_unsigned()) {
+        nodes_ready_.insert(line["id"].get<NodeId>());
+        progress_.Update(static_cast<int>(nodes_ready_.size()));
+      } else if (child.spec().role == "node" && line.contains("calibrated") &&
+                 line["calibrated"].is_number_unsigned() && line.contains("json") &&
+                 line["json"].is_string()) {
+        calibrated_[line["calibrated"].get<NodeId>()] = line;
+        if (progress_phase_ == "calibration held") {
+          progress_.Update(static_cast<int>(calibrated_.size()));
+        }
+      }
+    };
+  }
+
+  // Waits for `done`; on anything else records the failure (with `what` on a deadline) and
+  // returns false.
+  bool Wait(const std::string& phase, const std::function<bool()>& done, milliseconds deadline,
+            const std::string& what, const ChildProcess* waited_for,
+            const std::function<int()>& count = nullptr,
+            const std::function<std::string()>& missing = nullptr) {
+    if (count) progress_.Update(count());
+    const WaitOutcome outcome = supervisor_.WaitUntil(done, deadline, stop_, Handler());
+    if (outcome == WaitOutcome::kDone) {
+      progress_.End();
+      return true;
+    }
+    const std::string details = outcome == WaitOutcome::kDeadline && missing
+                                    ? what + " (missing: " + missing() + ")"
+                                    : what;
+    return Failed(phase, outcome, details, waited_for);
+  }
+
+  // "node-1, node-2": the site's units not in `have`.
+  std::string Missing(const std::set<NodeId>& have) const {
+    std::string out;
+    for (const UnitSpec& unit : inputs_.site.units) {
+      if (!have.count(unit.id))
+        out += (out.empty() ? "node-" : ", node-") + std::to_string(unit.id);
+    }
+    return out;
+  }
+
+  bool Failed(const std::string& phase, WaitOutcome outcome, const std::string& what,
+              const ChildProcess* waited_for) {
+    LabFailure f;
+    f.phase = phase;
+    const ChildProcess* child = nullptr;
+    if (outcome == WaitOutcome::kChildDied) {
+      child = supervisor_.dead_child();
+      f.reason = child->name() + " died (" + child->DescribeExit() + ")";
+      result_.status = "failed";
+    } else if (outcome == WaitOutcome::kStopped) {
+      f.reason = "interrupted (SIGINT/SIGTERM): the site was torn down";
+      result_.status = "interrupted";
+    } else {
+      f.reason = what + " within the deadline (the JSON lines of common/base/ready_line.h)";
+      child = waited_for;
+      result_.status = "failed";
+    }
+    if (child) {
+      f.child = child->name();
+      f.role = child->spec().role;
+      f.pid = child->pid();
+      f.exit_text = child->DescribeExit();
+      f.exit_code = child->exit_code();
+      f.signal = child->term_signal();
+      f.log_path = RelativeToOut(child->spec().log_path);
+      f.log_tail = child->LogTail(kLogTailLines);
+    }
+    progress_.End(result_.status);
+    result_.failure = std::move(f);
+    return false;
+  }
+
+  bool FailedWith(const std::string& phase, const std::string& reason) {
+    LabFailure f;
+    f.phase = phase;
+    f.reason = reason;
+    result_.status = "failed";
+    progress_.End("failed");
+    result_.failure = std::move(f);
+    return false;
+  }
+
+  const LabRunOptions& options_;
+  const std::atomic<bool>& stop_;
+  std::ostream& out_;
+  std::ostream& err_;
+  Progress progress_;
+  Supervisor supervisor_;
+  std::chrono::steady_clock::time_point start_;
+  LabInputs inputs_;
+  Scene scene_;
+  LabResult result_;
+  std::string world_bin_, coordinator_bin_, node_bin_;
+  std::string progress_phase_;
+  std::string world_endpoint_, coordinator_requests_, coordinator_events_;
+  std::set<NodeId> nodes_ready_;
+  std::map<NodeId, json> calibrated_;
+};
+
+}  // namespace
+
+Status LabRunOptions::Check() const {
+  if (out_dir.empty()) return InvalidArgumentError("--out: an output directory is required");
+  if (!(hold_s >= 0)) return InvalidArgumentError("--hold-s must be >= 0");
+  if (!(start_timeout_s > 0) || !(calibration_timeout_s > 0) || !(teardown_grace_s >= 0)) {
+    return InvalidArgumentError("timeouts must be > 0");
+  }
+  if (metric_samples < 1) return InvalidArgumentError("--samples must be >= 1");
+  if (image_width_px < 16) return InvalidArgumentError("--image-width must be >= 16");
+  return OkStatus();
+}
+
+int RunLab(const LabRunOptions& options, const std::atomic<bool>& stop, std::ostream& out,
+           std::ostream& err) {
+  if (Status valid = options.Check(); !valid.ok()) {
+    err << "sandtable-lab run: " << valid.message() << "\n";
+    return kExitUsage;
+  }
+  LabRun run(options, stop, out, err);
+  return run.Run();
+}
+
+}  // namespace sandtable::sim

@@ -1,0 +1,57 @@
+// `sandtable-lab run`: one whole simulated site on localhost, measured against the truth.
+//
+// Phases (each shown on the terminal and timed in the report):
+//   prepare         the site, scene, factory and true-pose files (lab_inputs.h)
+//   start world     sandtable-world serve --site F --scene G --bind tcp://127.0.0.1:*
+//                   -> {"ready":"sandtable-world","world":ENDPOINT}
+//   start coordinator  sandtable-coordinator --requests tcp://127.0.0.1:* --events ...:*
+//                   -> {"ready":"sandtable-coordinator","requests":..,"events":..}
+//   start nodes     per unit: sandtable-node --id N --coordinator REQ,EV --world W
+//                   --factory F --true-pose T --export-dir DIR/calibration
+//                   -> {"ready":"sandtable-node","id":N,...}            (k/N ready)
+//   calibration     -> {"calibrated":N,"source":..,"json":..,"yaml":..} (k/N held)
+//   hold            optional: the site keeps running for hold_s (children watched)
+//   metrics         the registration metric (registration_metric.h) on the exported files
+//   report          report.json, report.md, pictures (lab_report.h, lab_images.h)
+// Ports are chosen by the OS; readiness comes only from the JSON lines
+// (common/base/ready_line.h). A child that dies early, a deadline that passes, or SIGINT /
+// SIGTERM on the lab ends the run: every child is torn down (SIGTERM, SIGKILL after a grace
+// period, always reaped), the report names the child, its exit status or signal and the last
+// lines of its log, and the lab exits non-zero.
+// The lab prints its own JSON lines on stdout for supervisors and tests:
+//   {"lab":"phase","phase":"hold","hold_s":30}   when a phase starts
+//   {"lab":"done","status":"ok","report":"DIR/report.json"}
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <ostream>
+#include <string>
+
+#include "common/base/status.h"
+
+namespace sandtable::sim {
+
+struct LabRunOptions {
+  std::string site = "sandtable-3";
+  std::string scene = "sandtable";
+  std::string out_dir;
+  uint64_t seed = 1;
+  double hold_s = 0.0;
+  std::string bin_dir;            // where sandtable-world/-coordinator/-node are ("" = find them)
+  double start_timeout_s = 60.0;  // per readiness phase
+  double calibration_timeout_s = 120.0;
+  double teardown_grace_s = 5.0;
+  int metric_samples = 40000;
+  int image_width_px = 640;
+  bool progress_tty = false;
+  std::string command_line;  // for the report
+  Status Check() const;
+};
+
+// Exit codes: 0 ok, 1 failed (a child died, a deadline passed, a file could not be written),
+// 2 usage (bad site/scene), 130 interrupted.
+int RunLab(const LabRunOptions& options, const std::atomic<bool>& stop, std::ostream& out,
+           std::ostream& err);
+
+}  // namespace sandtable::sim

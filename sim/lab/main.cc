@@ -1,0 +1,78 @@
+// sandtable-lab: runs a whole simulated site on localhost (sandtable-world, sandtable-coordinator
+// and one sandtable-node per unit) and measures it against the world's truth (docs/lab.md).
+//
+//   sandtable-lab run [--site PRESET|FILE] [--scene PRESET|FILE] --out DIR [--seed N]
+//                     [--hold-s S] [--bin-dir DIR] [--samples N] [--start-timeout-s S]
+//                     [--calibration-timeout-s S] [--image-width W] [--progress auto|bar|plain]
+//
+// Exit codes: 0 ok, 1 the run failed (report written), 2 usage, 130 interrupted (SIGINT or
+// SIGTERM: the site is torn down and the report says so).
+#include <unistd.h>
+
+#include <atomic>
+#include <csignal>
+#include <iostream>
+#include <string>
+
+#include "common/base/log.h"
+#include "common/cli/command_line.h"
+#include "sim/lab/lab_run.h"
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+void OnSignal(int) { g_stop = true; }
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace sandtable;
+  SetLogTag("lab");
+  CLI::App app("sandtable-lab: a simulated site on localhost, measured against the truth",
+               "sandtable-lab");
+  cli::Configure(app);
+  app.require_subcommand(1);
+  CLI::App* run = app.add_subcommand("run", "Run the site, collect calibrations, write the report");
+  cli::Configure(*run);
+  sim::LabRunOptions options;
+  std::string progress = "auto";
+  run->add_option("--site", options.site,
+                  "Site: sandtable-3, grid-N (1..32), flat-4, or a site file");
+  run->add_option("--scene", options.scene, "Scene: sandtable, city, flat, or a glTF file");
+  run->add_option("--out", options.out_dir, "Output directory (report, logs, calibrations)")
+      ->required();
+  run->add_option("--seed", options.seed, "Seed of the scene preset, factory errors and metric")
+      ->check(cli::Integer<uint64_t>(0, UINT64_MAX));
+  run->add_option("--hold-s", options.hold_s,
+                  "Keep the site running this long after calibration (children watched)")
+      ->check(cli::Real(0.0, 86400.0));
+  run->add_option("--bin-dir", options.bin_dir,
+                  "Directory of sandtable-world/-coordinator/-node (default: beside this program, "
+                  "then the build tree)");
+  run->add_option("--samples", options.metric_samples,
+                  "Surface points sampled by the registration metric")
+      ->check(cli::Integer<int>(1, 10000000));
+  run->add_option("--start-timeout-s", options.start_timeout_s,
+                  "Deadline of each start phase (readiness lines)")
+      ->check(cli::Real(0.1, 3600.0));
+  run->add_option("--calibration-timeout-s", options.calibration_timeout_s,
+                  "Deadline for every node to report its calibration")
+      ->check(cli::Real(0.1, 36000.0));
+  run->add_option("--image-width", options.image_width_px, "Width of the report's pictures (px)")
+      ->check(cli::Integer<int>(16, 8192));
+  run->add_option("--progress", progress,
+                  "Terminal progress: bars, plain lines, or auto (bars "
+                  "on a TTY)")
+      ->check(CLI::IsMember({"auto", "bar", "plain"}));
+  if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
+
+  options.progress_tty = progress == "bar" || (progress == "auto" && isatty(STDERR_FILENO));
+  for (int i = 0; i < argc; ++i) options.command_line += (i ? " " : "") + std::string(argv[i]);
+  struct sigaction action {};
+  action.sa_handler = OnSignal;
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
+  // A closed stdout (a supervisor that went away) must not kill the lab before it tears down.
+  signal(SIGPIPE, SIG_IGN);
+  return sim::RunLab(options, g_stop, std::cout, std::cerr);
+}

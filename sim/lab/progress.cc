@@ -1,0 +1,63 @@
+#include "sim/lab/progress.h"
+
+#include <cstdio>
+
+namespace sandtable::sim {
+
+namespace {
+constexpr int kBarWidth = 24;
+}
+
+double Progress::Elapsed_s() const {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+}
+
+void Progress::Begin(const std::string& phase, int total) {
+  if (active_) End();
+  phase_ = phase;
+  total_ = total;
+  done_ = 0;
+  active_ = true;
+  start_ = std::chrono::steady_clock::now();
+  Draw(false);
+}
+
+void Progress::Update(int done) {
+  if (!active_ || done == done_) return;
+  done_ = done;
+  Draw(false);
+}
+
+void Progress::End(const std::string& outcome) {
+  if (!active_) return;
+  if (outcome == "ok" && total_ > 0) done_ = total_;
+  seconds_.emplace_back(phase_, Elapsed_s());
+  char time_text[32];
+  std::snprintf(time_text, sizeof(time_text), "%.1f s", Elapsed_s());
+  if (tty_) {
+    Draw(true);
+    out_ << "  " << outcome << "\n" << std::flush;
+  } else {
+    out_ << "lab: " << phase_ << ": " << outcome << " (" << time_text << ")\n" << std::flush;
+  }
+  active_ = false;
+}
+
+void Progress::Draw(bool final_line) {
+  char time_text[32];
+  std::snprintf(time_text, sizeof(time_text), "%.1f s", Elapsed_s());
+  const std::string counts =
+      total_ > 0 ? " " + std::to_string(done_) + "/" + std::to_string(total_) : "";
+  if (!tty_) {
+    if (!final_line)
+      out_ << "lab: " << phase_ << counts << " (" << time_text << ")\n" << std::flush;
+    return;
+  }
+  std::string bar(kBarWidth, ' ');
+  const int filled = total_ > 0 ? kBarWidth * done_ / total_ : (final_line ? kBarWidth : 0);
+  for (int i = 0; i < filled; ++i) bar[i] = '=';
+  if (filled < kBarWidth && filled > 0) bar[filled] = '>';
+  out_ << "\r\033[K[" << bar << "] " << phase_ << counts << "  " << time_text << std::flush;
+}
+
+}  // namespace sandtable::sim

@@ -1,0 +1,44 @@
+// Progress of the lab's phases on the terminal (stderr).
+//
+// On a TTY: one line per phase redrawn in place, a bar with counts and the elapsed time,
+//   [=========>          ] start nodes  2/3  1.4 s
+// Otherwise (logs, CI): plain lines, one when a phase starts, one per count change, one at the end,
+//   lab: start nodes: 2/3 (1.4 s)
+// Every phase's wall time is kept for the report.
+#pragma once
+
+#include <chrono>
+#include <ostream>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace sandtable::sim {
+
+class Progress {
+ public:
+  // `tty`: draw bars (the caller decides, e.g. isatty(STDERR_FILENO)).
+  Progress(std::ostream& out, bool tty) : out_(out), tty_(tty) {}
+
+  void Begin(const std::string& phase, int total);
+  void Update(int done);
+  // Ends the current phase: "ok" or a short failure word.
+  void End(const std::string& outcome = "ok");
+
+  // (phase, seconds) of every ended phase, in order.
+  const std::vector<std::pair<std::string, double>>& phase_seconds() const { return seconds_; }
+
+ private:
+  void Draw(bool final_line);
+  double Elapsed_s() const;
+
+  std::ostream& out_;
+  bool tty_;
+  std::string phase_;
+  int total_ = 0, done_ = -1;
+  bool active_ = false;
+  std::chrono::steady_clock::time_point start_;
+  std::vector<std::pair<std::string, double>> seconds_;
+};
+
+}  // namespace sandtable::sim

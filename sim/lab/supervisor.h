@@ -1,0 +1,66 @@
+// Supervisor: the lab's children (world, coordinator, nodes) and the event loop that waits on
+// them: their JSON lines (docs: common/base/ready_line.h), an early death, the deadline, or the
+// lab's own stop request (SIGINT/SIGTERM).
+//
+// Every line a child prints on stdout that parses as a JSON object is handed to the caller;
+// other lines are free text for people (kept in the log only). Nothing is parsed with regexes.
+// processes.json (name, pid, role of every child) is rewritten after every start so tests can
+// find the processes.
+// Tear-down: SIGTERM to every child (nodes first, then the coordinator, then the world), then
+// SIGKILL to whatever still runs after the grace period; every child is reaped.
+// Not thread-safe: one thread runs the supervisor.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "common/base/status.h"
+#include "sim/lab/child_process.h"
+
+namespace sandtable::sim {
+
+enum class WaitOutcome {
+  kDone,       // the condition holds
+  kDeadline,   // the deadline passed first
+  kStopped,    // the stop flag was raised (SIGINT/SIGTERM on the lab)
+  kChildDied,  // a child exited; see dead_child()
+};
+
+class Supervisor {
+ public:
+  // `processes_json_path`: where the list of children is kept ("" = nowhere).
+  explicit Supervisor(std::string processes_json_path)
+      : processes_json_path_(std::move(processes_json_path)) {}
+  ~Supervisor() { TearDown(std::chrono::milliseconds(3000)); }
+
+  Expected<ChildProcess*> Start(const ChildSpec& spec);
+
+  using JsonHandler = std::function<void(ChildProcess& child, const nlohmann::json& line)>;
+  // Runs the loop until `done()` holds (checked after every batch of lines and at least every
+  // 50 ms), a child exits, `stop` is raised, or `deadline` passes.
+  WaitOutcome WaitUntil(const std::function<bool()>& done, std::chrono::milliseconds deadline,
+                        const std::atomic<bool>& stop, const JsonHandler& on_json);
+
+  // The child whose death ended the last WaitUntil (nullptr otherwise).
+  const ChildProcess* dead_child() const { return dead_child_; }
+  const std::vector<std::unique_ptr<ChildProcess>>& children() const { return children_; }
+
+  // SIGTERM everyone (reverse start order: nodes, coordinator, world), SIGKILL after `grace`.
+  // Returns the names of children that had to be killed. Idempotent.
+  std::vector<std::string> TearDown(std::chrono::milliseconds grace);
+
+ private:
+  Status WriteProcessesJson() const;
+
+  std::string processes_json_path_;
+  std::vector<std::unique_ptr<ChildProcess>> children_;
+  const ChildProcess* dead_child_ = nullptr;
+};
+
+}  // namespace sandtable::sim

@@ -1,0 +1,177 @@
+// sandtable-lab as a real multi-process program: a whole sandtable-3 site on localhost (world,
+// coordinator, three nodes), its report, a node SIGKILLed mid-run, and usage errors. Waits on
+// the lab's JSON lines and on process exits with deadlines; never sleeps for synchronisation.
+#include <signal.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <thread>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "tests/coordinator/membership/child_process.h"
+
+namespace sandtable::sim {
+namespace {
+
+using nlohmann::json;
+using std::chrono::milliseconds;
+using testing::ChildProcess;
+
+// Generous for a loaded 2-core machine: a sandtable-3 run takes a few seconds.
+constexpr milliseconds kRunDeadline{90000};
+constexpr milliseconds kProcessGoneDeadline{10000};
+
+class LabRunTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("sandtable_lab_" + std::to_string(getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::remove_all(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+
+  std::vector<std::string> LabArgs(std::vector<std::string> extra) {
+    std::vector<std::string> args = {SANDTABLE_LAB_BIN, "run",       "--site",        "sandtable-3",
+                                     "--scene",         "sandtable", "--out",         dir_.string(),
+                                     "--samples",       "6000",      "--image-width", "200",
+                                     "--progress",      "plain"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    return args;
+  }
+
+  // Reads the lab's JSON lines until one satisfies `wanted` (true) or output ends (false).
+  static bool ReadUntil(ChildProcess* lab, const std::function<bool(const json&)>& wanted) {
+    const auto until = std::chrono::steady_clock::now() + kRunDeadline;
+    while (std::chrono::steady_clock::now() < until) {
+      std::optional<std::string> line = lab->ReadLine(kRunDeadline);
+      if (!line) return false;
+      const json parsed = json::parse(*line, nullptr, false);
+      if (!parsed.is_discarded() && wanted(parsed)) return true;
+    }
+    return false;
+  }
+
+  json ReadJson(const std::string& name) const {
+    std::ifstream in(dir_ / name);
+    return json::parse(in, nullptr, false);
+  }
+
+  // True once no process of processes.json exists any more (each polled with kill(pid, 0)).
+  bool AllProcessesGone(const json& processes) const {
+    const auto until = std::chrono::steady_clock::now() + kProcessGoneDeadline;
+    for (const json& p : processes["processes"]) {
+      const pid_t pid = p["pid"].get<pid_t>();
+      while (kill(pid, 0) == 0 || errno != ESRCH) {
+        if (std::chrono::steady_clock::now() > until) {
+          ADD_FAILURE() << p["name"] << " (pid " << pid << ") still exists";
+          return false;
+        }
+        std::this_thread::sleep_for(milliseconds(10));
+      }
+    }
+    return true;
+  }
+
+  std::filesystem::path dir_;
+};
+
+bool Finite(const json& value) { return value.is_number() && std::isfinite(value.get<double>()); }
+
+TEST_F(LabRunTest, Sandtable3WritesTheReportAndLeavesNoProcess) {
+  ChildProcess lab(LabArgs({}));
+  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
+  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "report.md";
+  const json report = ReadJson("report.json");
+  ASSERT_FALSE(report.is_discarded());
+  EXPECT_EQ(report["status"], "ok");
+  EXPECT_EQ(report["site"]["name"], "sandtable-3");
+  const json& calibration = report["calibration"];
+  EXPECT_EQ(calibration["source"], "factory+true_pose");
+  for (const char* scope : {"", "table", "buildings"}) {
+    const json& s = *scope ? calibration[scope] : calibration;
+    for (const char* field : {"rms_mm", "p99_mm", "max_mm", "rms_px"}) {
+      EXPECT_TRUE(Finite(s[field])) << scope << "." << field;
+    }
+    EXPECT_GT(s["count"].get<int>(), 0) << scope;
+  }
+  ASSERT_EQ(calibration["per_unit"].size(), 3u);
+  for (const char* id : {"0", "1", "2"}) {
+    const json& unit = calibration["per_unit"][id];
+    EXPECT_EQ(unit["source"], "factory+true_pose") << "unit " << id;
+    EXPECT_TRUE(Finite(unit["rms_mm"])) << "unit " << id;
+    EXPECT_GT(unit["rms_mm"].get<double>(), 0.0) << "factory intrinsics are not the truth";
+    EXPECT_TRUE(
+        std::filesystem::exists(dir_ / "calibration" / ("unit-" + std::string(id) + ".json")));
+    EXPECT_TRUE(
+        std::filesystem::exists(dir_ / "calibration" / ("unit-" + std::string(id) + ".yaml")));
+    EXPECT_TRUE(std::filesystem::exists(dir_ / "logs" / ("node-" + std::string(id) + ".log")));
+  }
+  for (const json& phase : report["phases"]) EXPECT_TRUE(Finite(phase["seconds"]));
+  EXPECT_TRUE(std::filesystem::exists(dir_ / "report.md"));
+  EXPECT_TRUE(std::filesystem::exists(dir_ / "top_white.png"));
+  const json processes = ReadJson("processes.json");
+  ASSERT_EQ(processes["processes"].size(), 5u);  // world, coordinator, 3 nodes
+  EXPECT_TRUE(AllProcessesGone(processes));
+}
+
+TEST_F(LabRunTest, NodeKilledDuringTheRunEndsItWithAReportAndNoOrphan) {
+  ChildProcess lab(LabArgs({"--hold-s", "120"}));
+  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("phase", "") == "hold"; }));
+  const json processes = ReadJson("processes.json");
+  pid_t victim = -1;
+  for (const json& p : processes["processes"]) {
+    if (p["name"] == "node-1") victim = p["pid"].get<pid_t>();
+  }
+  ASSERT_GT(victim, 0);
+  ASSERT_EQ(kill(victim, SIGKILL), 0);
+  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
+  EXPECT_NE(lab.Wait(), 0);
+  const json report = ReadJson("report.json");
+  ASSERT_FALSE(report.is_discarded());
+  EXPECT_EQ(report["status"], "failed");
+  const json& failure = report["failure"];
+  EXPECT_EQ(failure["child"], "node-1");
+  EXPECT_EQ(failure["signal"], SIGKILL);
+  EXPECT_EQ(failure["signal_name"], "SIGKILL");
+  EXPECT_EQ(failure["phase"], "hold");
+  EXPECT_TRUE(failure["log_tail"].is_array());
+  EXPECT_TRUE(AllProcessesGone(processes));
+}
+
+TEST_F(LabRunTest, UsageErrorsExitTwo) {
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{SANDTABLE_LAB_BIN, "run", "--out", dir_.string(), "--seed", "abc"},
+        {SANDTABLE_LAB_BIN, "run", "--out", dir_.string(), "--hold-s", "-1"},
+        {SANDTABLE_LAB_BIN, "run", "--out", dir_.string(), "--frobnicate", "1"},
+        {SANDTABLE_LAB_BIN, "run"},
+        {SANDTABLE_LAB_BIN, "run", "--out", dir_.string(), "--site", "grid-99"},
+        {SANDTABLE_LAB_BIN, "run", "--out", dir_.string(), "--scene", "no-such-scene"}}) {
+    ChildProcess lab(args);
+    while (lab.ReadLine(kRunDeadline)) {
+    }
+    EXPECT_EQ(lab.Wait(), 2) << args.back();
+  }
+}
+
+TEST_F(LabRunTest, HelpListsEveryFlag) {
+  ChildProcess lab({SANDTABLE_LAB_BIN, "run", "--help"});
+  std::string text;
+  while (std::optional<std::string> line = lab.ReadLine(kRunDeadline)) text += *line + "\n";
+  EXPECT_EQ(lab.Wait(), 0);
+  for (const char* flag :
+       {"--site", "--scene", "--out", "--seed", "--hold-s", "--bin-dir", "--samples",
+        "--start-timeout-s", "--calibration-timeout-s", "--image-width", "--progress"}) {
+    EXPECT_NE(text.find(flag), std::string::npos) << flag;
+  }
+}
+
+}  // namespace
+}  // namespace sandtable::sim
