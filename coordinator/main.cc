@@ -3,11 +3,15 @@
 //   sandtable-coordinator [--requests tcp://127.0.0.1:*] [--events tcp://127.0.0.1:*]
 //                         [--curve-keys site.key] [--heartbeat-ms 100] [--misses 5]
 //                         [--annotations FILE.db] [--annotation-sync full|normal]
-//                         [--export-session FILE.jsonl] [--import-session FILE.jsonl]
+//                         [--export-session FILE.jsonl | --import-session FILE.jsonl]
 //                         [--timeline TRACKS.csv] [--status PORT|IPv4:PORT]
-//                         [--tracker-replay FILE.traj|FILE.csv] [--table-from-tracker FILE.json]
-//                         [--virtual-wand SCRIPT.txt] [--scene SCENE.gltf|SCENE.glb]
+//                         [--tracker-replay FILE.traj|FILE.csv [--table-from-tracker FILE.json]
+//                          | --virtual-wand SCRIPT.txt] [--scene SCENE.gltf|SCENE.glb]
 //   sandtable-coordinator --generate-curve-keys site.key
+//
+// Flags are parsed by CLI11 (common/cli/command_line.h): --help lists them all; a bad value
+// (--heartbeat-ms abc, --misses 0, --status 99999) or flags that exclude each other exit 2
+// with a message naming the flag. A file that does not load exits 1.
 //
 // --annotations: the SQLite database of annotation events (created when absent). Without it
 // annotations live in memory only (a warning says so). A damaged database: the coordinator
@@ -29,9 +33,11 @@
 // --scene: the glTF scene (table frame after the +y-up -> +z-up conversion, docs/frames.md) the
 // wand ray is cast against, in addition to the table plane z = 0.
 //
-// On start it prints one line on stdout, for operators and tests:
-//   sandtable-coordinator requests=tcp://127.0.0.1:40001 events=tcp://127.0.0.1:40002
-// with " status=http://127.0.0.1:PORT/status" appended when --status is given.
+// Once serving it prints one JSON line on stdout (common/base/ready_line.h), for supervisors
+// and tests:
+//   {"ready":"sandtable-coordinator","requests":"tcp://127.0.0.1:40001",
+//    "events":"tcp://127.0.0.1:40002"}
+// with "status":"http://127.0.0.1:PORT/status" added when --status is given.
 // SIGINT/SIGTERM stop it cleanly.
 #include <algorithm>
 #include <chrono>
@@ -43,6 +49,8 @@
 #include <string>
 
 #include "common/base/log.h"
+#include "common/base/ready_line.h"
+#include "common/cli/command_line.h"
 #include "common/scene/gltf_loader.h"
 #include "coordinator/annotations/annotation_service.h"
 #include "coordinator/annotations/session_file.h"
@@ -59,19 +67,6 @@ namespace {
 std::atomic<bool> g_stop{false};
 void OnSignal(int) { g_stop = true; }
 
-int Usage(const char* why) {
-  std::cerr << "sandtable-coordinator: " << why << "\n"
-            << "usage: sandtable-coordinator [--requests ENDPOINT] [--events ENDPOINT]\n"
-            << "         [--curve-keys FILE] [--heartbeat-ms N] [--misses N]\n"
-            << "         [--annotations FILE.db] [--annotation-sync full|normal]\n"
-            << "         [--export-session FILE.jsonl] [--import-session FILE.jsonl]\n"
-            << "         [--timeline TRACKS.csv] [--status PORT|IPv4:PORT]\n"
-            << "         [--tracker-replay FILE.traj|FILE.csv] [--table-from-tracker FILE.json]\n"
-            << "         [--virtual-wand SCRIPT.txt]\n"
-            << "       sandtable-coordinator --generate-curve-keys FILE\n";
-  return 2;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -82,57 +77,77 @@ int main(int argc, char** argv) {
   coordinator::AnnotationStoreOptions store_options;
   std::string export_path, import_path, timeline_path, status_address;
   std::string tracker_replay_path, table_from_tracker_path, virtual_wand_path, scene_path;
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    if (i + 1 >= argc) return Usage(("missing value after " + flag).c_str());
-    const std::string value = argv[++i];
-    if (flag == "--requests") {
-      options.request_endpoint = value;
-    } else if (flag == "--events") {
-      options.event_endpoint = value;
-    } else if (flag == "--curve-keys") {
-      Expected<net::CurveKeyPair> keys = net::ReadCurveKeyFile(value);
-      if (!keys.ok()) return Usage(keys.status().ToString().c_str());
-      options.curve = *keys;
-    } else if (flag == "--generate-curve-keys") {
-      Expected<net::CurveKeyPair> keys = net::GenerateCurveKeyPair();
-      Status written = keys.ok() ? net::WriteCurveKeyFile(value, *keys) : keys.status();
-      if (!written.ok()) {
-        std::cerr << written.ToString() << "\n";
-        return 1;
-      }
-      std::cout << "wrote " << value << "\n";
-      return 0;
-    } else if (flag == "--heartbeat-ms") {
-      options.membership.heartbeat_period = std::chrono::milliseconds(std::atoi(value.c_str()));
-    } else if (flag == "--misses") {
-      options.membership.misses_allowed = std::atoi(value.c_str());
-    } else if (flag == "--annotations") {
-      annotations_path = value;
-    } else if (flag == "--annotation-sync") {
-      if (value != "full" && value != "normal") return Usage("--annotation-sync: full or normal");
-      store_options.sync =
-          value == "full" ? coordinator::SyncMode::kFull : coordinator::SyncMode::kNormal;
-    } else if (flag == "--export-session") {
-      export_path = value;
-    } else if (flag == "--import-session") {
-      import_path = value;
-    } else if (flag == "--timeline") {
-      timeline_path = value;
-    } else if (flag == "--status") {
-      status_address = value;
-    } else if (flag == "--tracker-replay") {
-      tracker_replay_path = value;
-    } else if (flag == "--virtual-wand") {
-      virtual_wand_path = value;
-    } else if (flag == "--table-from-tracker") {
-      table_from_tracker_path = value;
-    } else if (flag == "--scene") {
-      scene_path = value;
-    } else {
-      return Usage(("unknown flag " + flag).c_str());
+  std::string curve_keys_path, generate_keys_path, sync_name = "full";
+  int heartbeat_ms = static_cast<int>(options.membership.heartbeat_period.count());
+  int misses = options.membership.misses_allowed;
+
+  CLI::App app(
+      "The site's rendezvous (membership), time reference and event hub. Prints one JSON "
+      "line {\"ready\":\"sandtable-coordinator\",...} on stdout once serving; SIGINT/SIGTERM "
+      "stop it.",
+      "sandtable-coordinator");
+  cli::Configure(app);
+  app.add_option("--requests", options.request_endpoint, "ROUTER endpoint the nodes connect to")
+      ->check(cli::Endpoint());
+  app.add_option("--events", options.event_endpoint, "PUB endpoint of the events")
+      ->check(cli::Endpoint());
+  app.add_option("--curve-keys", curve_keys_path, "site CURVE key file: require CURVE");
+  CLI::Option* generate = app.add_option("--generate-curve-keys", generate_keys_path,
+                                         "write a new site key file and exit");
+  app.add_option("--heartbeat-ms", heartbeat_ms, "heartbeat period of the members, ms")
+      ->check(cli::Integer(1, 60000));
+  app.add_option("--misses", misses, "missed heartbeats before a member is dead")
+      ->check(cli::Integer(1, 1000));
+  app.add_option("--annotations", annotations_path,
+                 "SQLite database of the annotation events (created when absent; default: in "
+                 "memory only)");
+  app.add_option("--annotation-sync", sync_name, "SQLite synchronous mode of the database")
+      ->check(CLI::IsMember({"full", "normal"}));
+  CLI::Option* export_session = app.add_option(
+      "--export-session", export_path, "write the database's events as JSON lines and exit");
+  CLI::Option* import_session = app.add_option("--import-session", import_path,
+                                               "append JSON-lines events to the database and exit");
+  export_session->excludes(import_session);
+  app.add_option("--timeline", timeline_path, "personnel tracks (CSV) replayed as a timeline");
+  app.add_option("--status", status_address,
+                 "serve JSON at http://HOST:PORT/status (a bare PORT binds loopback; 0: any "
+                 "free port)")
+      ->check(CLI::Validator(
+          [](std::string& value) {
+            const Status valid = coordinator::HttpStatusServer::CheckAddress(value);
+            return valid.ok() ? std::string() : valid.message();
+          },
+          "PORT|IPv4:PORT", "StatusAddress"));
+  CLI::Option* replay = app.add_option("--tracker-replay", tracker_replay_path,
+                                       "replay a tracker recording (FASTRAK .traj or .csv)");
+  CLI::Option* table_from_tracker_option =
+      app.add_option("--table-from-tracker", table_from_tracker_path,
+                     "tracker calibration JSON for --tracker-replay (identity without it)");
+  CLI::Option* virtual_wand = app.add_option("--virtual-wand", virtual_wand_path,
+                                             "play a scripted wand (written in the table frame)");
+  table_from_tracker_option->needs(replay);
+  virtual_wand->excludes(replay)->excludes(table_from_tracker_option);
+  app.add_option("--scene", scene_path, "glTF scene the wand ray is cast against (.gltf, .glb)");
+  if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
+  if (generate->count() > 0) {
+    Expected<net::CurveKeyPair> keys = net::GenerateCurveKeyPair();
+    Status written = keys.ok() ? net::WriteCurveKeyFile(generate_keys_path, *keys) : keys.status();
+    if (!written.ok()) {
+      std::cerr << written.ToString() << "\n";
+      return 1;
     }
+    std::cout << "wrote " << generate_keys_path << "\n";
+    return 0;
   }
+  if (!curve_keys_path.empty()) {
+    Expected<net::CurveKeyPair> keys = net::ReadCurveKeyFile(curve_keys_path);
+    if (!keys.ok()) return cli::UsageError(app, "--curve-keys: " + keys.status().ToString());
+    options.curve = *keys;
+  }
+  options.membership.heartbeat_period = std::chrono::milliseconds(heartbeat_ms);
+  options.membership.misses_allowed = misses;
+  store_options.sync =
+      sync_name == "full" ? coordinator::SyncMode::kFull : coordinator::SyncMode::kNormal;
   Expected<std::unique_ptr<coordinator::AnnotationStore>> store =
       coordinator::AnnotationStore::Open(annotations_path, store_options);
   if (!store.ok()) {
@@ -192,18 +207,8 @@ int main(int argc, char** argv) {
   auto make_wand = [&](std::unique_ptr<coordinator::TrackerSource> source,
                        coordinator::WandServiceOptions wand_options) {
     return std::make_unique<coordinator::WandService>(std::move(source), wand_options,
-                                                      scene_positions_in_table_m,
-                                                      scene_triangles);
+                                                      scene_positions_in_table_m, scene_triangles);
   };
-  if (!virtual_wand_path.empty() && !tracker_replay_path.empty()) {
-    return Usage("--virtual-wand and --tracker-replay are exclusive (one tracker source)");
-  }
-  if (!virtual_wand_path.empty() && !table_from_tracker_path.empty()) {
-    return Usage("--virtual-wand scripts are in the table frame: no --table-from-tracker");
-  }
-  if (!table_from_tracker_path.empty() && tracker_replay_path.empty()) {
-    return Usage("--table-from-tracker needs a tracker source (--tracker-replay)");
-  }
   if (!virtual_wand_path.empty()) {
     Expected<coordinator::VirtualWandScript> script =
         coordinator::LoadVirtualWandScript(virtual_wand_path);
@@ -276,13 +281,14 @@ int main(int argc, char** argv) {
     ST_LOG(kError) << "cannot start: " << started.ToString();
     return 1;
   }
-  std::cout << "sandtable-coordinator requests=" << server.request_endpoint()
-            << " events=" << server.event_endpoint();
+  nlohmann::json ready = {{"ready", "sandtable-coordinator"},
+                          {"requests", server.request_endpoint()},
+                          {"events", server.event_endpoint()}};
   if (http) {
     http->Publish(status->BuildJson(server));  // served before the first step
-    std::cout << " status=" << http->url();
+    ready["status"] = http->url();
   }
-  std::cout << std::endl;
+  WriteJsonLine(std::cout, ready);
   Status ran = server.Run(g_stop);
   ST_LOG(kInfo) << "stopping; messages " << server.counters().ToString();
   if (!ran.ok()) {

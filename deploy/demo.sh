@@ -7,7 +7,9 @@
 # says so in the report.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-build="${BUILD_DIR:-$root/build}"
+# Its own build directory: deploy/test.sh configures build/ (tests on, -Werror); sharing it
+# would reconfigure each other's build.
+build="${DEMO_BUILD_DIR:-$root/build-demo}"
 out="${OUT_DIR:-$root/out/demo}"
 
 bash "$root/deploy/install-deps.sh"

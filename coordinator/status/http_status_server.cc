@@ -2,51 +2,31 @@
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
-#include <poll.h>
 #include <sys/socket.h>
-#include <unistd.h>
 
-#include <cerrno>
-#include <chrono>
-#include <cstring>
+#include <cstdlib>
+
+#include <httplib.h>
 
 #include "common/base/log.h"
 
 namespace sandtable::coordinator {
 namespace {
 
-constexpr size_t kMaxRequestBytes = 8192;
-constexpr auto kRequestTimeout = std::chrono::seconds(2);
-constexpr int kAcceptPollMs = 100;  // how often the loop checks stop_
+constexpr size_t kMaxPayloadBytes = 64 * 1024;  // bodies are never read; refuse big ones early
+constexpr auto kStartDeadline = std::chrono::seconds(5);
+const char* const kText = "text/plain; charset=utf-8";
 
-void SendAll(int fd, const std::string& data) {
-  size_t sent = 0;
-  while (sent < data.size()) {
-    const ssize_t n = ::send(fd, data.data() + sent, data.size() - sent, MSG_NOSIGNAL);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) return;  // peer gone: nothing to do for a status page
-    sent += static_cast<size_t>(n);
-  }
-}
+struct Address {
+  std::string host;
+  int port = 0;
+};
 
-std::string Response(int code, const char* reason, const std::string& content_type,
-                     const std::string& body, bool head_only = false,
-                     const std::string& extra_headers = {}) {
-  std::string r = "HTTP/1.1 " + std::to_string(code) + " " + reason + "\r\n";
-  r += "Content-Type: " + content_type + "\r\n";
-  r += "Content-Length: " + std::to_string(body.size()) + "\r\n";
-  r += "Cache-Control: no-store\r\nConnection: close\r\n" + extra_headers + "\r\n";
-  if (!head_only) r += body;
-  return r;
-}
-
-}  // namespace
-
-Expected<std::unique_ptr<HttpStatusServer>> HttpStatusServer::Start(const std::string& address) {
-  std::string host = "127.0.0.1";
+Expected<Address> ParseAddress(const std::string& address) {
+  Address out{"127.0.0.1", 0};
   std::string port_text = address;
   if (const size_t colon = address.rfind(':'); colon != std::string::npos) {
-    host = address.substr(0, colon);
+    out.host = address.substr(0, colon);
     port_text = address.substr(colon + 1);
   }
   char* end = nullptr;
@@ -55,36 +35,148 @@ Expected<std::unique_ptr<HttpStatusServer>> HttpStatusServer::Start(const std::s
     return InvalidArgumentError("status: '" + address +
                                 "' is not PORT or IPv4:PORT (port 0..65535, 0: any free port)");
   }
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_port = htons(static_cast<uint16_t>(port));
-  if (::inet_pton(AF_INET, host.c_str(), &addr.sin_addr) != 1) {
-    return InvalidArgumentError("status: '" + host + "' is not an IPv4 address (e.g. 127.0.0.1)");
+  in_addr parsed{};
+  if (::inet_pton(AF_INET, out.host.c_str(), &parsed) != 1) {
+    return InvalidArgumentError("status: '" + out.host +
+                                "' is not an IPv4 address (e.g. 127.0.0.1)");
   }
-  const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  if (fd < 0) return UnavailableError(std::string("status: socket(): ") + std::strerror(errno));
-  const int one = 1;
-  ::setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one));
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0 || ::listen(fd, 16) != 0) {
-    const std::string why = std::strerror(errno);
-    ::close(fd);
-    return UnavailableError("status: cannot listen on " + host + ":" + port_text + ": " + why +
-                            " (choose another port, or 0 for any free one)");
-  }
-  socklen_t length = sizeof(addr);
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &length);
-  return std::unique_ptr<HttpStatusServer>(new HttpStatusServer(fd, host, ntohs(addr.sin_port)));
+  out.port = static_cast<int>(port);
+  return out;
 }
 
-HttpStatusServer::HttpStatusServer(int listen_fd, std::string host, uint16_t port)
-    : listen_fd_(listen_fd), host_(std::move(host)), port_(port) {
-  thread_ = std::thread([this] { Loop(); });
+// SO_REUSEADDR only: httplib's default also sets SO_REUSEPORT, which would let a second
+// server bind a port that is in use instead of failing.
+void SocketOptions(int fd) {
+  const int one = 1;
+  ::setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one));
+}
+
+std::string ErrorBody(int status) {
+  switch (status) {
+    case 404:
+      return "not found: try GET /status\n";
+    case 405:
+      return "only GET /status\n";
+    case 413:
+      return "request body too large\n";
+    default:
+      return "bad request: not an HTTP/1.x request for GET /status\n";
+  }
+}
+
+}  // namespace
+
+Status HttpStatusOptions::Check() const {
+  if (worker_threads < 1 || worker_threads > 256) {
+    return InvalidArgumentError("status: worker_threads must be in [1, 256]");
+  }
+  if (read_timeout.count() <= 0 || write_timeout.count() <= 0) {
+    return InvalidArgumentError("status: read_timeout and write_timeout must be > 0");
+  }
+  return OkStatus();
+}
+
+Status HttpStatusServer::CheckAddress(const std::string& address) {
+  Expected<Address> parsed = ParseAddress(address);
+  return parsed.ok() ? OkStatus() : parsed.status();
+}
+
+Expected<std::unique_ptr<HttpStatusServer>> HttpStatusServer::Start(const std::string& address,
+                                                                    HttpStatusOptions options) {
+  Expected<Address> parsed = ParseAddress(address);
+  if (!parsed.ok()) return parsed.status();
+  if (Status valid = options.Check(); !valid.ok()) return valid;
+  auto server = std::make_unique<httplib::Server>();
+  const int threads = options.worker_threads;
+  server->new_task_queue = [threads] { return new httplib::ThreadPool(threads); };
+  server->set_address_family(AF_INET);
+  server->set_socket_options(SocketOptions);
+  const auto seconds = [](std::chrono::milliseconds t) {
+    return std::pair<time_t, time_t>(t.count() / 1000, (t.count() % 1000) * 1000);
+  };
+  server->set_read_timeout(seconds(options.read_timeout).first,
+                           seconds(options.read_timeout).second);
+  server->set_write_timeout(seconds(options.write_timeout).first,
+                            seconds(options.write_timeout).second);
+  // One request per connection ("Connection: close"); a connected client that never sends is
+  // dropped after the keep-alive wait (whole seconds in httplib, at least 1).
+  server->set_keep_alive_max_count(1);
+  server->set_keep_alive_timeout(
+      std::max<time_t>(1, std::chrono::ceil<std::chrono::seconds>(options.read_timeout).count()));
+  server->set_payload_max_length(kMaxPayloadBytes);
+  server->set_default_headers({{"Cache-Control", "no-store"}});
+
+  int port = -1;
+  if (parsed->port == 0) {
+    port = server->bind_to_any_port(parsed->host);
+  } else if (server->bind_to_port(parsed->host, parsed->port)) {
+    port = parsed->port;
+  }
+  if (port <= 0) {
+    return UnavailableError("status: cannot listen on " + parsed->host + ":" +
+                            std::to_string(parsed->port) +
+                            " (in use? choose another port, or 0 for any free one)");
+  }
+  return std::unique_ptr<HttpStatusServer>(
+      new HttpStatusServer(std::move(server), parsed->host, static_cast<uint16_t>(port)));
+}
+
+HttpStatusServer::HttpStatusServer(std::unique_ptr<httplib::Server> server, std::string host,
+                                   uint16_t port)
+    : server_(std::move(server)), host_(std::move(host)), port_(port) {
+  // Routing of its own before httplib's: the path decides 404 before the method decides 405,
+  // and a target that is not a path is a bad request.
+  server_->set_pre_routing_handler(
+      [this](const httplib::Request& request, httplib::Response& response) {
+        using Result = httplib::Server::HandlerResponse;
+        if (request.path.empty() || request.path.front() != '/') {
+          response.status = 400;
+          return Result::Handled;
+        }
+        if (request.path != "/status") {
+          response.status = 404;
+          return Result::Handled;
+        }
+        if (request.method != "GET" && request.method != "HEAD") {
+          response.status = 405;
+          response.set_header("Allow", "GET, HEAD");
+          return Result::Handled;
+        }
+        return Result::Unhandled;
+      });
+  server_->Get("/status", [this](const httplib::Request&, httplib::Response& response) {
+    ++counters_.ok;
+    response.set_content(Document() + "\n", "application/json");
+  });
+  // Every answer >= 400 (ours above, and httplib's for requests it cannot parse) passes here.
+  server_->set_error_handler(httplib::Server::HandlerWithResponse(
+      [this](const httplib::Request&, httplib::Response& response) {
+        if (response.status == 404) {
+          ++counters_.not_found;
+        } else {
+          ++counters_.bad_request;
+        }
+        response.set_content(ErrorBody(response.status), kText);
+        return httplib::Server::HandlerResponse::Handled;
+      }));
+  server_->set_exception_handler(
+      [](const httplib::Request&, httplib::Response& response, std::exception_ptr) {
+        response.status = 500;
+        response.set_content("internal error\n", kText);
+      });
+  thread_ = std::thread([this] {
+    if (!server_->listen_after_bind()) ST_LOG(kWarning) << "status: the server stopped early";
+  });
+  // stop() is a no-op until the accept loop runs: wait for it, so ~HttpStatusServer can stop.
+  const auto until = std::chrono::steady_clock::now() + kStartDeadline;
+  while (!server_->is_running() && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
 }
 
 HttpStatusServer::~HttpStatusServer() {
-  stop_ = true;
+  server_->stop();
   if (thread_.joinable()) thread_.join();
-  ::close(listen_fd_);
 }
 
 std::string HttpStatusServer::url() const {
@@ -96,94 +188,9 @@ void HttpStatusServer::Publish(std::string json) {
   document_ = std::move(json);
 }
 
-void HttpStatusServer::Loop() {
-  while (!stop_.load()) {
-    pollfd p{listen_fd_, POLLIN, 0};
-    const int ready = ::poll(&p, 1, kAcceptPollMs);
-    if (ready <= 0) continue;  // timeout or EINTR
-    const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
-    if (fd < 0) {
-      if (errno != EINTR && errno != EAGAIN) {
-        ST_LOG(kWarning) << "status: accept: " << std::strerror(errno);
-      }
-      continue;
-    }
-    Serve(fd);
-    // Closing with unread input makes the kernel send RST, which can destroy the response
-    // before the client reads it: half-close, then drain briefly until the client closes.
-    ::shutdown(fd, SHUT_WR);
-    for (int i = 0; i < 10; ++i) {
-      pollfd p{fd, POLLIN, 0};
-      char sink[4096];
-      if (::poll(&p, 1, 20) <= 0 || ::recv(fd, sink, sizeof(sink), 0) <= 0) break;
-    }
-    ::close(fd);
-  }
-}
-
-void HttpStatusServer::Serve(int fd) {
-  // Read the request head (up to the blank line), bounded in size and time.
-  std::string head;
-  const auto until = std::chrono::steady_clock::now() + kRequestTimeout;
-  bool complete = false;
-  while (!complete && head.size() < kMaxRequestBytes && !stop_.load()) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
-        until - std::chrono::steady_clock::now());
-    if (left.count() <= 0) break;
-    pollfd p{fd, POLLIN, 0};
-    if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) continue;
-    char buffer[1024];
-    const ssize_t n = ::recv(fd, buffer, sizeof(buffer), 0);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) break;
-    head.append(buffer, static_cast<size_t>(n));
-    complete = head.find("\r\n\r\n") != std::string::npos || head.find("\n\n") != std::string::npos;
-  }
-  const std::string text = "text/plain; charset=utf-8";
-  auto bad = [&](const std::string& why) {
-    ++counters_.bad_request;
-    SendAll(fd, Response(400, "Bad Request", text, "bad request: " + why + "\n"));
-  };
-  if (!complete)
-    return bad(head.size() >= kMaxRequestBytes ? "request head over 8 KiB"
-                                               : "incomplete request head");
-  // Request line: METHOD SP TARGET SP HTTP/1.x
-  const size_t eol = head.find_first_of("\r\n");
-  const std::string line = head.substr(0, eol);
-  const size_t s1 = line.find(' ');
-  const size_t s2 = s1 == std::string::npos ? s1 : line.find(' ', s1 + 1);
-  if (s1 == std::string::npos || s2 == std::string::npos || s1 == 0 || s2 == s1 + 1 ||
-      line.find(' ', s2 + 1) != std::string::npos) {
-    return bad("request line is not 'METHOD TARGET HTTP/1.1'");
-  }
-  const std::string method = line.substr(0, s1);
-  std::string target = line.substr(s1 + 1, s2 - s1 - 1);
-  const std::string version = line.substr(s2 + 1);
-  if (version.rfind("HTTP/1.", 0) != 0 || version.size() != 8) {
-    return bad("unsupported version '" + version.substr(0, 16) + "'");
-  }
-  for (char c : method) {
-    if (c < 'A' || c > 'Z') return bad("method is not an HTTP token");
-  }
-  if (target.empty() || target.front() != '/') return bad("target must start with '/'");
-  if (const size_t q = target.find('?'); q != std::string::npos) target.resize(q);
-  if (target != "/status") {
-    ++counters_.not_found;
-    return SendAll(
-        fd, Response(404, "Not Found", text, "not found: try GET /status\n", method == "HEAD"));
-  }
-  if (method != "GET" && method != "HEAD") {
-    ++counters_.bad_request;
-    return SendAll(fd, Response(405, "Method Not Allowed", text, "only GET /status\n", false,
-                                "Allow: GET, HEAD\r\n"));
-  }
-  std::string document;
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    document = document_;
-  }
-  ++counters_.ok;
-  SendAll(fd, Response(200, "OK", "application/json", document + "\n", method == "HEAD"));
+std::string HttpStatusServer::Document() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return document_;
 }
 
 }  // namespace sandtable::coordinator

@@ -1,16 +1,21 @@
-// HttpStatusServer: a minimal HTTP/1.1 server on a POSIX socket, its own thread, serving one
-// JSON document at GET /status (for operators' dashboards and curl).
+// HttpStatusServer: the coordinator's status endpoint, one JSON document at GET /status (for
+// operators' dashboards and curl), served by cpp-httplib on its own threads.
 //
 // Answers: GET or HEAD /status (a query string is ignored) -> 200 application/json with the
-// latest document given to Publish(); another path -> 404; another method -> 405; a request
-// line that is not "METHOD SP TARGET SP HTTP/1.x", headers over 8 KiB or not complete within
-// 2 s -> 400. Every response closes the connection. One connection at a time (a status page,
-// not a web server). Never throws or aborts on input; socket errors are logged and the loop
-// goes on. Bind address: "PORT" (loopback) or "IPv4:PORT"; port 0 lets the OS choose, port()
-// reports it.
+// latest document given to Publish(); another path -> 404; another method on /status -> 405
+// (Allow: GET, HEAD); a request that is not HTTP/1.x (no version, a method HTTP does not
+// define, a target not starting with '/', headers over 8 KiB, a head cut short by the read
+// timeout) -> 400; a request line over 8 KiB -> 414. Every response closes the connection.
+//
+// Concurrency: up to `worker_threads` clients are served at once (one thread each, httplib's
+// model), so slow or held-open clients do not block the page as long as fewer than that many
+// hold connections; a client silent for `read_timeout` is dropped without an answer, one cut
+// short in its head gets 400. Publish() is thread-safe. Never throws or aborts on input. Bind
+// address: "PORT" (loopback) or "IPv4:PORT"; port 0 lets the OS choose, port() reports it.
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -19,20 +24,36 @@
 
 #include "common/base/status.h"
 
+namespace httplib {
+class Server;
+}
+
 namespace sandtable::coordinator {
 
 struct HttpStatusCounters {
   std::atomic<uint64_t> ok{0};
   std::atomic<uint64_t> not_found{0};
-  std::atomic<uint64_t> bad_request{0};
+  std::atomic<uint64_t> bad_request{0};  // every other 4xx answer (400, 405, ...)
+};
+
+struct HttpStatusOptions {
+  int worker_threads = 8;                         // clients served at once
+  std::chrono::milliseconds read_timeout{2000};   // per read of a request, and idle wait
+  std::chrono::milliseconds write_timeout{2000};  // per write of a response
+  Status Check() const;
 };
 
 class HttpStatusServer {
  public:
-  // Binds and starts the thread. INVALID_ARGUMENT for a bad address, UNAVAILABLE when the
-  // port cannot be bound (the message names it).
-  static Expected<std::unique_ptr<HttpStatusServer>> Start(const std::string& address);
-  ~HttpStatusServer();  // stops and joins the thread
+  // OK when `address` is "PORT" or "IPv4:PORT" with PORT in 0..65535, else INVALID_ARGUMENT
+  // saying what is expected (what --status checks before anything starts).
+  static Status CheckAddress(const std::string& address);
+
+  // Binds and starts serving. INVALID_ARGUMENT for a bad address or options, UNAVAILABLE when
+  // the port cannot be bound (the message names it).
+  static Expected<std::unique_ptr<HttpStatusServer>> Start(const std::string& address,
+                                                           HttpStatusOptions options = {});
+  ~HttpStatusServer();  // stops, waits for the requests in progress, joins
   HttpStatusServer(const HttpStatusServer&) = delete;
   HttpStatusServer& operator=(const HttpStatusServer&) = delete;
 
@@ -45,14 +66,12 @@ class HttpStatusServer {
   const HttpStatusCounters& counters() const { return counters_; }
 
  private:
-  HttpStatusServer(int listen_fd, std::string host, uint16_t port);
-  void Loop();
-  void Serve(int fd);
+  HttpStatusServer(std::unique_ptr<httplib::Server> server, std::string host, uint16_t port);
+  std::string Document();
 
-  int listen_fd_;
+  std::unique_ptr<httplib::Server> server_;
   std::string host_;
   uint16_t port_;
-  std::atomic<bool> stop_{false};
   std::mutex mutex_;
   std::string document_ = "{}";
   HttpStatusCounters counters_;

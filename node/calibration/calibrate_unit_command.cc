@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "common/base/units.h"
+#include "common/cli/command_line.h"
 #include "node/calibration/board_observation.h"
 #include "node/calibration/cross_validation.h"
 #include "node/calibration/unit_calibration.h"
@@ -19,31 +20,13 @@ namespace {
 
 using Json = nlohmann::json;
 
-int Usage(const std::string& why) {
-  std::cerr << "sandtable-node calibrate-unit: " << why << "\n"
-            << "usage: sandtable-node calibrate-unit --poses DIR -o unit.json [--report FILE]\n"
-            << "         [--board-cols 9] [--board-rows 7] [--square-mm 75]\n"
-            << "         [--projector-width 1024] [--projector-height 768]\n"
-            << "         [--projector-distortion none|k1|k1k2|radial3|full]\n"
-            << "         [--camera-distortion none|k1|k1k2|radial3|full]\n"
-            << "         [--dense-points 500] [--dense-weight 1] [--no-cross-validation]\n";
-  return 2;
-}
-
-bool ParseInt(const std::string& text, int* out) {
-  char* end = nullptr;
-  const long v = std::strtol(text.c_str(), &end, 10);
-  if (end == text.c_str() || *end != '\0' || v < 1 || v > 1000000) return false;
-  *out = static_cast<int>(v);
-  return true;
-}
-
-bool ParseDouble(const std::string& text, double* out) {
-  char* end = nullptr;
-  const double v = std::strtod(text.c_str(), &end);
-  if (end == text.c_str() || *end != '\0' || !std::isfinite(v) || v <= 0.0) return false;
-  *out = v;
-  return true;
+CLI::Validator DistortionModelValidator() {
+  return CLI::Validator(
+      [](std::string& value) {
+        Expected<DistortionModel> model = ParseDistortionModel(value);
+        return model.ok() ? std::string() : model.status().message();
+      },
+      "none|k1|k1k2|radial3|full", "DistortionModel");
 }
 
 // NaN is not JSON: null instead.
@@ -66,51 +49,53 @@ int RunCalibrateUnit(const std::vector<std::string>& args) {
   ObservationOptions observation;
   bool cross_validate = true;
   double square_mm = 75.0;
-  for (size_t i = 0; i < args.size(); ++i) {
-    const std::string& flag = args[i];
-    if (flag == "--no-cross-validation") {
-      cross_validate = false;
-      continue;
-    }
-    if (i + 1 >= args.size()) return Usage("missing value after " + flag);
-    const std::string& value = args[++i];
-    bool ok = true;
-    if (flag == "--poses") {
-      poses_dir = value;
-    } else if (flag == "-o" || flag == "--output") {
-      output_path = value;
-    } else if (flag == "--report") {
-      report_path = value;
-    } else if (flag == "--board-cols") {
-      ok = ParseInt(value, &options.board.inner_cols);
-    } else if (flag == "--board-rows") {
-      ok = ParseInt(value, &options.board.inner_rows);
-    } else if (flag == "--square-mm") {
-      ok = ParseDouble(value, &square_mm);
-    } else if (flag == "--projector-width") {
-      ok = ParseInt(value, &options.projector_width_px);
-    } else if (flag == "--projector-height") {
-      ok = ParseInt(value, &options.projector_height_px);
-    } else if (flag == "--dense-points") {
-      ok = ParseInt(value, &options.max_dense_points_per_pose);
-    } else if (flag == "--dense-weight") {
-      ok = ParseDouble(value, &options.dense_weight);
-    } else if (flag == "--projector-distortion" || flag == "--camera-distortion") {
-      Expected<DistortionModel> model = ParseDistortionModel(value);
-      if (!model.ok()) return Usage(flag + ": " + model.status().message());
-      (flag == "--projector-distortion" ? options.projector_distortion
-                                        : options.camera_distortion) = *model;
-    } else {
-      return Usage("unknown flag " + flag);
-    }
-    if (!ok) return Usage(flag + " " + value + ": not a valid positive number");
-  }
-  if (poses_dir.empty()) return Usage("--poses DIR is required");
-  if (output_path.empty()) return Usage("-o unit.json is required");
+  std::string projector_distortion = DistortionModelName(options.projector_distortion);
+  std::string camera_distortion = DistortionModelName(options.camera_distortion);
+
+  CLI::App app(
+      "The factory calibration of one unit (camera, projector, projector_from_camera) from "
+      "chessboard poses with their Gray-code captures (docs/unit-calibration.md).",
+      "sandtable-node calibrate-unit");
+  cli::Configure(app);
+  app.add_option("--poses", poses_dir,
+                 "folder of capture_0 .. capture_N, each with graycode_00.png .. (OpenCV "
+                 "GrayCodePattern order)")
+      ->required();
+  app.add_option("-o,--output", output_path, "the unit calibration (JSON) to write")->required();
+  app.add_option("--report", report_path,
+                 "also write a JSON report (residuals, deviations, "
+                 "leave-one-pose-out cross-validation)");
+  app.add_option("--board-cols", options.board.inner_cols, "inner corners per chessboard row")
+      ->check(cli::Integer(2, 1000));
+  app.add_option("--board-rows", options.board.inner_rows, "inner corners per chessboard column")
+      ->check(cli::Integer(2, 1000));
+  app.add_option("--square-mm", square_mm, "chessboard square side, mm")
+      ->check(cli::Real(0.01, 10000.0));
+  app.add_option("--projector-width", options.projector_width_px, "projector width, px")
+      ->check(cli::Integer(16, 65536));
+  app.add_option("--projector-height", options.projector_height_px, "projector height, px")
+      ->check(cli::Integer(16, 65536));
+  app.add_option("--projector-distortion", projector_distortion, "projector distortion model")
+      ->check(DistortionModelValidator());
+  app.add_option("--camera-distortion", camera_distortion, "camera distortion model")
+      ->check(DistortionModelValidator());
+  app.add_option("--dense-points", options.max_dense_points_per_pose,
+                 "dense Gray-code points per pose in the joint refinement")
+      ->check(cli::Integer(10, 1000000));
+  app.add_option("--dense-weight", options.dense_weight,
+                 "weight of a dense residual relative to a corner residual")
+      ->check(cli::Real(1e-6, 1e6));
+  bool no_cross_validation = false;
+  app.add_flag("--no-cross-validation", no_cross_validation,
+               "skip the leave-one-pose-out cross-validation in the report");
+  if (std::optional<int> exit = cli::Parse(app, args)) return *exit;
+  cross_validate = !no_cross_validation;
+  options.projector_distortion = *ParseDistortionModel(projector_distortion);
+  options.camera_distortion = *ParseDistortionModel(camera_distortion);
   options.board.square_m = MmToM(square_mm);
   observation.patterns =
       PatternOptions::OpenCvGrayCode(options.projector_width_px, options.projector_height_px);
-  if (Status valid = options.Check(); !valid.ok()) return Usage(valid.message());
+  if (Status valid = options.Check(); !valid.ok()) return cli::UsageError(app, valid.message());
 
   Expected<std::vector<PoseObservation>> poses =
       ObservePoseFolders(poses_dir, options.board, observation);

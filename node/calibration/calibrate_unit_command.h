@@ -8,8 +8,10 @@
 //       [--dense-points 500] [--dense-weight 1] [--no-cross-validation]
 //
 // DIR holds capture_0 .. capture_N, each with graycode_00.png .. in OpenCV GrayCodePattern
-// order (the procam-kamino410 layout). Returns the process exit code: 0 on success, 1 when
-// calibration fails (message on stderr), 2 for bad usage.
+// order (the procam-kamino410 layout). Flags are parsed by CLI11 (common/cli/command_line.h):
+// --help lists them all (exit 0). Returns the process exit code: 0 on success, 1 when
+// calibration fails (message on stderr), 2 for bad usage (an unknown flag, a missing --poses or
+// -o, a value of the wrong type or out of range: the message names the flag).
 #pragma once
 
 #include <string>

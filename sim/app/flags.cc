@@ -1,83 +1,124 @@
 #include "sim/app/flags.h"
 
-#include <cerrno>
-#include <cmath>
 #include <cstdlib>
+#include <limits>
+
+#include "common/cli/command_line.h"
+#include "common/scene/procedural_scene.h"
 
 namespace sandtable::sim {
+namespace {
 
-Expected<Flags> Flags::Parse(const std::vector<std::string>& args, const FlagSpec& spec) {
-  Flags flags;
-  for (size_t i = 0; i < args.size(); ++i) {
-    std::string name = args[i];
-    if (name.size() < 2 || name[0] != '-') {
-      return InvalidArgumentError("unexpected argument '" + name + "' (flags start with -)");
-    }
-    std::string value;
-    bool has_inline_value = false;
-    const size_t equals = name.find('=');
-    if (equals != std::string::npos) {
-      value = name.substr(equals + 1);
-      name = name.substr(0, equals);
-      has_inline_value = true;
-    }
-    if (spec.switches.count(name)) {
-      if (has_inline_value) return InvalidArgumentError(name + " takes no value");
-      flags.switches_.insert(name);
-      continue;
-    }
-    const bool single = spec.values.count(name) > 0;
-    if (!single && !spec.repeated.count(name)) {
-      return InvalidArgumentError("unknown flag " + name);
-    }
-    if (!has_inline_value) {
-      if (i + 1 >= args.size()) return InvalidArgumentError("missing value after " + name);
-      value = args[++i];
-    }
-    if (single && flags.values_.count(name)) {
-      return InvalidArgumentError(name + " given more than once");
-    }
-    flags.values_[name].push_back(value);
+// A non-negative integer that fits a NodeId.
+bool IsId(const std::string& text) {
+  if (text.empty() || text.size() > 9) return false;
+  for (char c : text) {
+    if (c < '0' || c > '9') return false;
   }
-  for (const std::string& name : spec.required) {
-    if (!flags.values_.count(name)) return InvalidArgumentError("missing required flag " + name);
-  }
-  return flags;
+  return true;
 }
 
-std::string Flags::Get(const std::string& name, const std::string& fallback) const {
-  auto it = values_.find(name);
-  return it == values_.end() ? fallback : it->second.front();
+CLI::Validator ScenePresetName() {
+  return CLI::Validator(
+      [](std::string& value) {
+        Expected<ScenePreset> preset = ParseScenePreset(value);
+        return preset.ok() ? std::string() : preset.status().message();
+      },
+      "sandtable|city|flat", "ScenePreset");
 }
 
-std::vector<std::string> Flags::GetAll(const std::string& name) const {
-  auto it = values_.find(name);
-  return it == values_.end() ? std::vector<std::string>{} : it->second;
+CLI::Validator FrameAssignment() {
+  return CLI::Validator(
+      [](std::string& value) {
+        const size_t equals = value.find('=');
+        if (equals == std::string::npos || equals + 1 == value.size() ||
+            !IsId(value.substr(0, equals))) {
+          return "'" + value + "' must be ID=FILE.png (ID: a projector id)";
+        }
+        return std::string();
+      },
+      "ID=FILE.png", "FrameAssignment");
 }
 
-Expected<int64_t> Flags::GetInt(const std::string& name, int64_t fallback, int64_t lo,
-                                int64_t hi) const {
-  if (!values_.count(name)) return fallback;
-  const std::string text = Get(name);
-  errno = 0;
-  char* end = nullptr;
-  const long long value = std::strtoll(text.c_str(), &end, 10);
-  if (text.empty() || *end != '\0' || errno == ERANGE || value < lo || value > hi) {
-    return InvalidArgumentError(name + " = '" + text + "' must be an integer in [" +
-                                std::to_string(lo) + ", " + std::to_string(hi) + "]");
-  }
-  return static_cast<int64_t>(value);
+CLI::Validator ViewName() {
+  return CLI::Validator(
+      [](std::string& value) {
+        if (value == "top" || (value.rfind("camera:", 0) == 0 && IsId(value.substr(7)))) {
+          return std::string();
+        }
+        return "'" + value + "' must be top or camera:ID";
+      },
+      "top|camera:ID", "View");
 }
 
-Expected<double> Flags::GetDouble(const std::string& name, double fallback) const {
-  if (!values_.count(name)) return fallback;
-  const std::string text = Get(name);
-  char* end = nullptr;
-  const double value = std::strtod(text.c_str(), &end);
-  if (text.empty() || *end != '\0' || !std::isfinite(value)) {
-    return InvalidArgumentError(name + " = '" + text + "' must be a finite number");
-  }
-  return value;
+void AddSiteAndScene(CLI::App* command, std::string* site, std::string* scene) {
+  command->add_option("--site", *site, "site file (make-site writes one)")->required();
+  command->add_option("--scene", *scene, "glTF scene (.gltf, .glb; make-scene writes one)")
+      ->required();
+}
+
+}  // namespace
+
+void AddWorldCommands(CLI::App& app, WorldCommandLine& line) {
+  app.require_subcommand(1);
+  const CLI::Validator kSeed = cli::Integer<uint64_t>(0, std::numeric_limits<uint64_t>::max());
+
+  CLI::App* scene = app.add_subcommand("make-scene", "write a procedural scene as glTF");
+  MakeSceneArgs& s = line.make_scene;
+  scene->add_option("--preset", s.preset, "scene preset")->required()->check(ScenePresetName());
+  scene->add_option("--seed", s.seed, "random seed of the layout")->check(kSeed);
+  scene->add_option("--buildings", s.buildings, "number of buildings (-1: the preset's)")
+      ->check(cli::Integer(-1, 1000));
+  scene->add_option("-o,--output", s.output, "output .gltf or .glb")->required();
+  line.make_scene_command = scene;
+
+  CLI::App* site = app.add_subcommand("make-site", "write a site preset (and factory files)");
+  MakeSiteArgs& m = line.make_site;
+  site->add_option("--preset", m.preset, "site preset: sandtable-3, grid-N (N units), flat-4")
+      ->required();
+  site->add_option("--seed", m.seed, "random seed of the factory calibrations' errors")
+      ->check(kSeed);
+  site->add_option("--factory-dir", m.factory_dir,
+                   "write one factory calibration per unit here (unit-ID.factory.json)");
+  site->add_option("-o,--output", m.output, "output site .json")->required();
+  line.make_site_command = site;
+
+  CLI::App* render = app.add_subcommand("render", "render the lit site to a PNG");
+  RenderArgs& r = line.render;
+  AddSiteAndScene(render, &r.site, &r.scene);
+  CLI::Option* white = render->add_flag("--white", r.white, "every projector shows full white");
+  CLI::Option* frame =
+      render->add_option("--frame", r.frames, "projector ID shows FILE.png (repeatable)")
+          ->allow_extra_args(false)
+          ->check(FrameAssignment());
+  white->excludes(frame);
+  render->add_option("--view", r.view, "top (orthographic) or camera:ID")
+      ->required()
+      ->check(ViewName());
+  render->add_option("--width", r.width_px, "image width, px")->check(cli::Integer(16, 16384));
+  render->add_option("--height", r.height_px, "image height, px (default: from the aspect)")
+      ->check(cli::Integer(16, 16384));
+  render
+      ->add_option("--white-nits", r.white_nits,
+                   "luminance shown as white, cd/m^2 (0: the 99th percentile)")
+      ->check(cli::Real(0.0, 1e9));
+  render->add_option("--threads", r.threads, "render threads (0: all cores)")
+      ->check(cli::Integer(0, 1024));
+  render->add_option("-o,--output", r.output, "output .png")->required();
+  line.render_command = render;
+
+  CLI::App* serve = app.add_subcommand(
+      "serve", "serve the world to nodes (prints {\"ready\":\"sandtable-world\",...})");
+  ServeArgs& v = line.serve;
+  AddSiteAndScene(serve, &v.site, &v.scene);
+  serve->add_option("--bind", v.bind, "ROUTER endpoint (port 0 or *: any free port)")
+      ->check(cli::Endpoint());
+  serve->add_flag("--no-noise", v.no_noise, "noise-free captures");
+  serve->add_option("--noise-seed", v.noise_seed, "seed of the capture noise")->check(kSeed);
+  serve->add_option("--threads", v.threads, "transport threads (0: all cores)")
+      ->check(cli::Integer(0, 1024));
+  serve->add_flag("--prebuild", v.prebuild, "build every camera's transport map first");
+  line.serve_command = serve;
 }
 
 }  // namespace sandtable::sim

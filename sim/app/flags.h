@@ -1,43 +1,75 @@
-// Command-line flags of sandtable-world: `--name value`, `--name=value`, `-o value`, switches.
+// The command line of sandtable-world (CLI11; exit-code policy in common/cli/command_line.h):
 //
-// A FlagSpec lists the accepted flags; anything else, a missing value, a repeated single-value
-// flag, or a missing required flag is an INVALID_ARGUMENT naming the flag, which the program
-// reports as a usage error (exit code 2).
+//   make-scene --preset sandtable|city|flat [--seed N] [--buildings N] -o scene.gltf|.glb
+//   make-site  --preset sandtable-3|grid-N|flat-4 [--seed N] [--factory-dir DIR] -o site.json
+//   render     --site S --scene G [--white | --frame ID=FILE.png ...] --view top|camera:ID
+//              [--width W] [--height H] [--white-nits L] [--threads N] -o out.png
+//   serve      --site S --scene G [--bind tcp://127.0.0.1:0] [--no-noise] [--noise-seed N]
+//              [--threads N] [--prebuild]
+//
+// AddWorldCommands registers the four subcommands with typed, range-checked values: an unknown
+// flag, a missing required flag, a value of the wrong type or out of range is a usage error
+// naming the flag (exit 2) before any file is read. `sandtable-world SUBCOMMAND --help` lists
+// every flag of the subcommand.
 #pragma once
 
 #include <cstdint>
-#include <map>
-#include <set>
 #include <string>
 #include <vector>
 
-#include "common/base/status.h"
+#include <CLI/CLI.hpp>
 
 namespace sandtable::sim {
 
-struct FlagSpec {
-  std::set<std::string> values;    // --name VALUE, at most once
-  std::set<std::string> repeated;  // --name VALUE, any number of times
-  std::set<std::string> switches;  // --name
-  std::set<std::string> required;  // subset of `values`
+struct MakeSceneArgs {
+  std::string preset;  // sandtable | city | flat (checked while parsing)
+  uint64_t seed = 1;
+  int buildings = -1;  // -1: the preset's count
+  std::string output;  // .gltf or .glb
 };
 
-class Flags {
- public:
-  // `args` excludes the program and subcommand names.
-  static Expected<Flags> Parse(const std::vector<std::string>& args, const FlagSpec& spec);
-
-  bool Has(const std::string& name) const { return values_.count(name) || switches_.count(name); }
-  // The value of a single-value flag, or `fallback`.
-  std::string Get(const std::string& name, const std::string& fallback = "") const;
-  std::vector<std::string> GetAll(const std::string& name) const;
-  // Parsed integer flags: INVALID_ARGUMENT naming the flag when not an integer in [lo, hi].
-  Expected<int64_t> GetInt(const std::string& name, int64_t fallback, int64_t lo, int64_t hi) const;
-  Expected<double> GetDouble(const std::string& name, double fallback) const;
-
- private:
-  std::map<std::string, std::vector<std::string>> values_;
-  std::set<std::string> switches_;
+struct MakeSiteArgs {
+  std::string preset;       // sandtable-3 | grid-N | flat-4 (checked after parsing)
+  uint64_t seed = 1;        // of the factory calibrations' errors
+  std::string factory_dir;  // empty: no factory files
+  std::string output;
 };
+
+struct RenderArgs {
+  std::string site, scene;
+  bool white = false;               // every projector full white
+  std::vector<std::string> frames;  // ID=FILE.png, one per --frame
+  std::string view;                 // top | camera:ID
+  int width_px = 1024;
+  int height_px = 0;        // 0: from the extent's aspect (top view)
+  double white_nits = 0.0;  // 0: the 99th percentile of the lit luminance
+  int threads = 0;          // 0: all cores
+  std::string output;
+};
+
+struct ServeArgs {
+  std::string site, scene;
+  std::string bind = "tcp://127.0.0.1:0";  // port 0 or *: any free port
+  bool no_noise = false;
+  uint64_t noise_seed = 1;
+  int threads = 0;
+  bool prebuild = false;  // build every camera's transport map before serving
+};
+
+// The parsed values, and which subcommand was given (after parsing: exactly one `parsed()`).
+struct WorldCommandLine {
+  MakeSceneArgs make_scene;
+  MakeSiteArgs make_site;
+  RenderArgs render;
+  ServeArgs serve;
+  CLI::App* make_scene_command = nullptr;
+  CLI::App* make_site_command = nullptr;
+  CLI::App* render_command = nullptr;
+  CLI::App* serve_command = nullptr;
+};
+
+// Registers the subcommands on `app` (which must be configured with cli::Configure first);
+// `line` receives the values and must outlive the parse.
+void AddWorldCommands(CLI::App& app, WorldCommandLine& line);
 
 }  // namespace sandtable::sim

@@ -1,13 +1,14 @@
 // sandtable-world: the simulated site (scenes, rigs, renders, and the world server).
-// Subcommands and flags: sim/app/world_commands.h and docs/world.md. Exit codes: 0 ok,
-// 1 failure at run time, 2 usage error (bad flags or input files). serve stops cleanly on
-// SIGINT/SIGTERM.
+// Subcommands and flags: sim/app/flags.h (`sandtable-world SUBCOMMAND --help`) and
+// docs/world.md. Exit codes: 0 ok, 1 failure at run time, 2 usage error (bad flags or input
+// files). serve prints {"ready":"sandtable-world","world":"tcp://..."} once bound and stops
+// cleanly on SIGINT/SIGTERM.
 #include <csignal>
 #include <iostream>
-#include <string>
-#include <vector>
 
 #include "common/base/log.h"
+#include "common/cli/command_line.h"
+#include "sim/app/flags.h"
 #include "sim/app/world_commands.h"
 
 namespace {
@@ -20,26 +21,21 @@ void OnSignal(int) { g_stop = true; }
 int main(int argc, char** argv) {
   using namespace sandtable::sim;
   sandtable::SetLogTag("world");
-  if (argc < 2) {
-    std::cerr << "sandtable-world: missing subcommand\n" << WorldUsage();
-    return kExitUsage;
+  CLI::App app("The simulated site: scenes, sites, renders, and the world server.",
+               "sandtable-world");
+  sandtable::cli::Configure(app);
+  WorldCommandLine line;
+  AddWorldCommands(app, line);
+  if (std::optional<int> exit = sandtable::cli::Parse(app, argc, argv)) return *exit;
+  if (line.make_scene_command->parsed()) {
+    return MakeSceneCommand(line.make_scene, std::cout, std::cerr);
   }
-  const std::string command = argv[1];
-  const std::vector<std::string> args(argv + 2, argv + argc);
-  if (command == "make-scene") return MakeSceneCommand(args, std::cout, std::cerr);
-  if (command == "make-site") return MakeSiteCommand(args, std::cout, std::cerr);
-  if (command == "render") return RenderCommand(args, std::cout, std::cerr);
-  if (command == "serve") {
-    struct sigaction action {};
-    action.sa_handler = OnSignal;
-    sigaction(SIGINT, &action, nullptr);
-    sigaction(SIGTERM, &action, nullptr);
-    return ServeCommand(args, g_stop, std::cout, std::cerr);
-  }
-  if (command == "--help" || command == "-h" || command == "help") {
-    std::cout << WorldUsage();
-    return kExitOk;
-  }
-  std::cerr << "sandtable-world: unknown subcommand '" << command << "'\n" << WorldUsage();
-  return kExitUsage;
+  if (line.make_site_command->parsed())
+    return MakeSiteCommand(line.make_site, std::cout, std::cerr);
+  if (line.render_command->parsed()) return RenderCommand(line.render, std::cout, std::cerr);
+  struct sigaction action {};
+  action.sa_handler = OnSignal;
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
+  return ServeCommand(line.serve, g_stop, std::cout, std::cerr);
 }

@@ -1,6 +1,7 @@
 // Event fan-out latency coordinator -> node over loopback TCP at 120 Hz.
 //
-//   build/tests/bench/bench_event_latency [events=1200] [rate_hz=120] [subscribers=1]
+//   build/tests/bench/bench_event_latency [EVENTS=1200] [RATE_HZ=120] [SUBSCRIBERS=1]
+//   build/tests/bench/bench_event_latency --events 1200 --rate-hz 120 --subscribers 3
 //
 // The coordinator's real PUB path (CoordinatorServer::Publish: stamp, encode, send) publishes
 // Cursor events at the given rate; each subscriber thread runs the node's receive path (SUB
@@ -14,15 +15,25 @@
 #include <thread>
 #include <vector>
 
+#include "common/cli/command_line.h"
 #include "coordinator/membership/coordinator_server.h"
 #include "net/channel.h"
 
 using namespace sandtable;
 
 int main(int argc, char** argv) {
-  const int events = argc > 1 ? std::atoi(argv[1]) : 1200;
-  const double rate_hz = argc > 2 ? std::atof(argv[2]) : 120.0;
-  const int subscribers = argc > 3 ? std::atoi(argv[3]) : 1;
+  int events = 1200;
+  double rate_hz = 120.0;
+  int subscribers = 1;
+  CLI::App app("Event fan-out latency coordinator -> nodes over loopback TCP.",
+               "bench_event_latency");
+  cli::Configure(app);
+  app.add_option("--events,events", events, "events published")->check(cli::Integer(1, 10000000));
+  app.add_option("--rate-hz,rate_hz", rate_hz, "publishing rate, Hz")
+      ->check(cli::Real(0.1, 100000.0));
+  app.add_option("--subscribers,subscribers", subscribers, "subscriber threads")
+      ->check(cli::Integer(1, 256));
+  if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
   coordinator::CoordinatorServer server({});
   if (Status s = server.Start(); !s.ok()) {
     std::fprintf(stderr, "%s\n", s.ToString().c_str());

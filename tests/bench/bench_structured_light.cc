@@ -30,6 +30,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "common/cli/command_line.h"
 #include "common/structured_light/capture_io.h"
 #include "common/structured_light/decoder.h"
 #include "common/structured_light/opencv_peer.h"
@@ -115,35 +116,6 @@ Agreement Compare(const Decoding& a, const Decoding& b) {
     }
   }
   return r;
-}
-
-Args ParseArgs(int argc, char** argv) {
-  Args a;
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "%s needs a value\n", flag.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (flag == "--data")
-      a.data = value();
-    else if (flag == "--out")
-      a.out = value();
-    else if (flag == "--repeats")
-      a.repeats = std::max(1, std::stoi(value()));
-    else if (flag == "--poses")
-      a.poses = std::clamp(std::stoi(value()), 1, 5);
-    else {
-      std::fprintf(stderr,
-                   "usage: bench_structured_light [--data DIR] [--out DIR] [--repeats N] "
-                   "[--poses N]\n");
-      std::exit(flag == "--help" ? 0 : 2);
-    }
-  }
-  return a;
 }
 
 int Run(const Args& args) {
@@ -312,4 +284,19 @@ int Run(const Args& args) {
 }  // namespace
 }  // namespace sandtable
 
-int main(int argc, char** argv) { return sandtable::Run(sandtable::ParseArgs(argc, argv)); }
+int main(int argc, char** argv) {
+  sandtable::Args args;
+  CLI::App app(
+      "Our structured-light decoder against OpenCV's GrayCodePattern on the real "
+      "procam-kamino410 captures: agreement, speed and accuracy (CSV).",
+      "bench_structured_light");
+  sandtable::cli::Configure(app);
+  app.add_option("--data", args.data, "procam-kamino410 folder");
+  app.add_option("--out", args.out, "where the CSVs go");
+  app.add_option("--repeats", args.repeats, "timed repetitions of our decoder (median)")
+      ->check(sandtable::cli::Integer(1, 100000));
+  app.add_option("--poses", args.poses, "how many of capture_0..4 to use")
+      ->check(sandtable::cli::Integer(1, 5));
+  if (std::optional<int> exit = sandtable::cli::Parse(app, argc, argv)) return *exit;
+  return sandtable::Run(args);
+}

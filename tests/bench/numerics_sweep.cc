@@ -12,6 +12,8 @@
 #include <vector>
 
 #include <cmath>
+
+#include "common/cli/command_line.h"
 #include "tests/bench/sweep_csv.h"
 
 namespace sandtable::bench {
@@ -57,30 +59,6 @@ void CsvWriter::Row(std::initializer_list<Cell> cells) {
 
 int main(int argc, char** argv) {
   using namespace sandtable::bench;
-  std::string out_dir, only;
-  bool quick = false;
-  for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--out") && i + 1 < argc) {
-      out_dir = argv[++i];
-    } else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) {
-      only = argv[++i];
-    } else if (!std::strcmp(argv[i], "--quick")) {
-      quick = true;
-    } else {
-      std::fprintf(stderr, "usage: %s --out DIR [--quick] [--only NAME]\n", argv[0]);
-      return 2;
-    }
-  }
-  if (out_dir.empty()) {
-    std::fprintf(stderr, "usage: %s --out DIR [--quick] [--only NAME]\n", argv[0]);
-    return 2;
-  }
-  std::error_code error;
-  std::filesystem::create_directories(out_dir, error);
-  if (error) {
-    std::fprintf(stderr, "cannot create %s: %s\n", out_dir.c_str(), error.message().c_str());
-    return 1;
-  }
   const std::vector<std::pair<std::string, std::function<void(const std::string&, bool)>>> sweeps =
       {
           {"runtime_vs_error", SweepRuntimeVsError},
@@ -95,6 +73,23 @@ int main(int argc, char** argv) {
           {"umeyama", SweepUmeyama},
           {"table_frame", SweepTableFrame},
       };
+  std::vector<std::string> names;
+  for (const auto& sweep : sweeps) names.push_back(sweep.first);
+  std::string out_dir, only;
+  bool quick = false;
+  CLI::App app("The geometry core's sweeps: run time against error and breakdown curves (CSV).",
+               "sandtable_numerics_sweep");
+  sandtable::cli::Configure(app);
+  app.add_option("--out", out_dir, "folder of the CSV files")->required();
+  app.add_flag("--quick", quick, "fewer trials (a smoke run)");
+  app.add_option("--only", only, "run only this sweep")->check(CLI::IsMember(names));
+  if (std::optional<int> exit = sandtable::cli::Parse(app, argc, argv)) return *exit;
+  std::error_code error;
+  std::filesystem::create_directories(out_dir, error);
+  if (error) {
+    std::fprintf(stderr, "cannot create %s: %s\n", out_dir.c_str(), error.message().c_str());
+    return 1;
+  }
   double total_ms = 0.0;
   for (const auto& [name, sweep] : sweeps) {
     if (!only.empty() && only != name) continue;

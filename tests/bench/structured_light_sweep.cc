@@ -27,6 +27,7 @@
 #include <string>
 #include <vector>
 
+#include "common/cli/command_line.h"
 #include "common/structured_light/decoder.h"
 #include "common/structured_light/pattern_sequence.h"
 #include "tests/common/structured_light/sim_decode_harness.h"
@@ -178,32 +179,23 @@ int Run(const Args& args) {
 
 int main(int argc, char** argv) {
   sandtable::sim_decode::Args args;
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    const bool has_value = i + 1 < argc;
-    if (flag == "--out" && has_value) {
-      args.out_dir = argv[++i];
-    } else if (flag == "--site" && has_value) {
-      args.site = argv[++i];
-    } else if (flag == "--width" && has_value) {
-      args.width_px = std::stoi(argv[++i]);
-    } else if (flag == "--height" && has_value) {
-      args.height_px = std::stoi(argv[++i]);
-    } else if (flag == "--repeats" && has_value) {
-      args.repeats = std::max(1, std::stoi(argv[++i]));
-    } else if (flag == "--capture-latency-s" && has_value) {
-      args.capture_latency_s = std::stod(argv[++i]);
-    } else if (flag == "--quick") {
-      args.quick = true;
-    } else {
-      std::cerr << "usage: structured_light_sweep --out DIR [--site sandtable-3|flat-4] [--width W "
-                   "--height H] [--repeats N] [--capture-latency-s S] [--quick]\n";
-      return 2;
-    }
-  }
-  if (args.out_dir.empty()) {
-    std::cerr << "structured_light_sweep: --out DIR is required\n";
-    return 2;
-  }
+  CLI::App app("Run time against error of structured light in the simulated world (CSV).",
+               "structured_light_sweep");
+  sandtable::cli::Configure(app);
+  app.add_option("--out", args.out_dir, "folder of structured_light_sweep.csv")->required();
+  app.add_option("--site", args.site, "site preset (unit 0 is measured)");
+  CLI::Option* width = app.add_option("--width", args.width_px, "camera width, px (0: the site's)")
+                           ->check(sandtable::cli::Integer(16, 16384));
+  CLI::Option* height =
+      app.add_option("--height", args.height_px, "camera height, px (0: the site's)")
+          ->check(sandtable::cli::Integer(16, 16384));
+  width->needs(height);
+  height->needs(width);
+  app.add_option("--repeats", args.repeats, "decodes per setting (median)")
+      ->check(sandtable::cli::Integer(1, 1000));
+  app.add_option("--capture-latency-s", args.capture_latency_s, "modeled capture latency, s")
+      ->check(sandtable::cli::Real(0.0, 10.0));
+  app.add_flag("--quick", args.quick, "fewer settings (a smoke run)");
+  if (std::optional<int> exit = sandtable::cli::Parse(app, argc, argv)) return *exit;
   return sandtable::sim_decode::Run(args);
 }

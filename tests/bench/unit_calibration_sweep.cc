@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "common/cli/command_line.h"
 #include "node/calibration/board_observation.h"
 #include "node/calibration/cross_validation.h"
 #include "node/calibration/unit_calibrator.h"
@@ -24,19 +25,15 @@ int main(int argc, char** argv) {
   std::string poses_dir = "../shared/data/procam-kamino410";
   std::string out_dir = "sweep-out";
   bool quick = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    if (flag == "--quick") {
-      quick = true;
-    } else if (flag == "--poses" && i + 1 < argc) {
-      poses_dir = argv[++i];
-    } else if (flag == "--out" && i + 1 < argc) {
-      out_dir = argv[++i];
-    } else {
-      std::cerr << "usage: unit_calibration_sweep --poses DIR --out DIR [--quick]\n";
-      return 2;
-    }
-  }
+  CLI::App app(
+      "Leave-one-pose-out cross-validation of the unit calibration over its "
+      "settings, on real captures (CSV, PNG).",
+      "unit_calibration_sweep");
+  cli::Configure(app);
+  app.add_option("--poses", poses_dir, "folder of capture_0 .. capture_N (procam-kamino410)");
+  app.add_option("--out", out_dir, "folder of the CSV and PNG");
+  app.add_flag("--quick", quick, "fewer settings (a smoke run)");
+  if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
   std::filesystem::create_directories(out_dir);
   ObservationOptions observation;
   auto poses = ObservePoseFolders(poses_dir, BoardSpec{}, observation);

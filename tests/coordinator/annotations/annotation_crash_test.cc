@@ -30,7 +30,8 @@ using cluster::testing::LinePoint;
 using cluster::testing::Points;
 using std::chrono::milliseconds;
 using testing::ChildProcess;
-using testing::FieldOf;
+using testing::ReadReadyLine;
+using testing::ReadyString;
 
 constexpr milliseconds kStartDeadline{15000};
 constexpr milliseconds kReplyDeadline{10000};
@@ -87,9 +88,11 @@ class AnnotationCrashTest : public ::testing::Test {
   std::unique_ptr<ChildProcess> Start(std::string* requests) {
     auto child = std::make_unique<ChildProcess>(
         std::vector<std::string>{SANDTABLE_COORDINATOR_BIN, "--annotations", db_});
-    std::optional<std::string> line = child->ReadLine(kStartDeadline);
-    EXPECT_TRUE(line.has_value()) << "coordinator printed no endpoints";
-    if (line) *requests = FieldOf(*line, "requests");
+    std::string error;
+    const std::optional<nlohmann::json> ready =
+        ReadReadyLine(*child, "sandtable-coordinator", kStartDeadline, &error);
+    EXPECT_TRUE(ready.has_value()) << error;
+    if (ready) *requests = ReadyString(*ready, "requests");
     return child;
   }
 

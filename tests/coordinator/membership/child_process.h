@@ -1,5 +1,7 @@
 // ChildProcess: spawns a program for multi-process tests, reads its stdout lines with
 // deadlines, signals it, and kills it (SIGKILL) if still running when destroyed.
+// ReadReadyLine: the one-line JSON readiness hand-shake of the programs (common/base/ready_line.h),
+// e.g. {"ready":"sandtable-coordinator","requests":"tcp://...","events":"tcp://..."}.
 #pragma once
 
 #include <fcntl.h>
@@ -14,18 +16,27 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 extern char** environ;
 
 namespace sandtable::testing {
 
+// What the pipe read by ReadLine carries (stderr is otherwise the test's own).
+enum class ChildOutput { kStdout, kStdoutAndStderr };
+
 class ChildProcess {
  public:
-  explicit ChildProcess(const std::vector<std::string>& argv) {
+  explicit ChildProcess(const std::vector<std::string>& argv,
+                        ChildOutput output = ChildOutput::kStdout) {
     int fds[2];
     if (pipe(fds) != 0) return;
     posix_spawn_file_actions_t actions;
     posix_spawn_file_actions_init(&actions);
     posix_spawn_file_actions_adddup2(&actions, fds[1], STDOUT_FILENO);
+    if (output == ChildOutput::kStdoutAndStderr) {
+      posix_spawn_file_actions_adddup2(&actions, fds[1], STDERR_FILENO);
+    }
     posix_spawn_file_actions_addclose(&actions, fds[0]);
     std::vector<char*> args;
     for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
@@ -89,12 +100,50 @@ class ChildProcess {
   std::string buffer_;
 };
 
-// The value of `key=` in a line of `key=value` words ("" if absent).
-inline std::string FieldOf(const std::string& line, const std::string& key) {
-  const size_t at = line.find(key + "=");
-  if (at == std::string::npos) return "";
-  const size_t start = at + key.size() + 1;
-  return line.substr(start, line.find(' ', start) - start);
+// Everything the child prints until it closes its output (or the deadline), then its exit
+// status (or 128 + signal; -1 if it is still running at the deadline).
+inline int RunToEnd(ChildProcess& child, std::chrono::milliseconds deadline,
+                    std::string* output = nullptr) {
+  const auto until = std::chrono::steady_clock::now() + deadline;
+  std::string text;
+  while (true) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+        until - std::chrono::steady_clock::now());
+    if (left.count() <= 0) break;
+    std::optional<std::string> line = child.ReadLine(left);
+    if (!line) break;
+    text += *line + "\n";
+  }
+  if (output) *output = text;
+  if (std::chrono::steady_clock::now() >= until && child.running()) return -1;
+  return child.Wait();
+}
+
+// The next stdout line of `child`, which must be its readiness line: a JSON object whose
+// "ready" member is `program`. nullopt (and *error says why) at the deadline, at the end of
+// output, or for any other line: the hand-shake is JSON, not free text.
+inline std::optional<nlohmann::json> ReadReadyLine(ChildProcess& child, const std::string& program,
+                                                   std::chrono::milliseconds deadline,
+                                                   std::string* error = nullptr) {
+  auto fail = [&](const std::string& why) -> std::optional<nlohmann::json> {
+    if (error) *error = program + ": " + why;
+    return std::nullopt;
+  };
+  const std::optional<std::string> line = child.ReadLine(deadline);
+  if (!line) return fail("no readiness line within the deadline (or the program exited)");
+  const nlohmann::json json = nlohmann::json::parse(*line, nullptr, /*allow_exceptions=*/false);
+  if (json.is_discarded() || !json.is_object()) return fail("not a JSON object: " + *line);
+  const auto ready = json.find("ready");
+  if (ready == json.end() || !ready->is_string() || ready->get<std::string>() != program) {
+    return fail("\"ready\" is not \"" + program + "\": " + *line);
+  }
+  return json;
+}
+
+// A string member of a readiness line ("" when absent or not a string).
+inline std::string ReadyString(const nlohmann::json& line, const std::string& key) {
+  const auto it = line.find(key);
+  return it != line.end() && it->is_string() ? it->get<std::string>() : std::string();
 }
 
 }  // namespace sandtable::testing

@@ -27,7 +27,8 @@ namespace {
 
 using std::chrono::milliseconds;
 using testing::ChildProcess;
-using testing::FieldOf;
+using testing::ReadReadyLine;
+using testing::ReadyString;
 using Clock = std::chrono::steady_clock;
 
 constexpr int kNodeCount = 8;
@@ -49,11 +50,14 @@ class Site {
                         const std::string& events = "tcp://127.0.0.1:*") {
     coordinator_ = std::make_unique<ChildProcess>(std::vector<std::string>{
         SANDTABLE_COORDINATOR_BIN, "--requests", requests, "--events", events});
-    std::optional<std::string> line = coordinator_->ReadLine(kStartDeadline);
-    ASSERT_TRUE(line.has_value()) << "coordinator printed no endpoints";
-    requests_ = FieldOf(*line, "requests");
-    events_ = FieldOf(*line, "events");
-    ASSERT_FALSE(requests_.empty());
+    std::string error;
+    const std::optional<nlohmann::json> ready =
+        ReadReadyLine(*coordinator_, "sandtable-coordinator", kStartDeadline, &error);
+    ASSERT_TRUE(ready.has_value()) << error;
+    requests_ = ReadyString(*ready, "requests");
+    events_ = ReadyString(*ready, "events");
+    ASSERT_FALSE(requests_.empty()) << ready->dump();
+    ASSERT_FALSE(events_.empty()) << ready->dump();
     if (!subscriber_) {
       auto sub = net::Socket::Create(&context_, net::SocketType::kSub);
       ASSERT_TRUE(sub.ok());
@@ -65,9 +69,14 @@ class Site {
     nodes_[id] = std::make_unique<ChildProcess>(
         std::vector<std::string>{SANDTABLE_NODE_BIN, "--id", std::to_string(id), "--coordinator",
                                  requests_ + "," + events_});
-    std::optional<std::string> line = nodes_[id]->ReadLine(kStartDeadline);
-    ASSERT_TRUE(line.has_value()) << "node " << id << " printed no endpoint";
-    peer_endpoints_[id] = FieldOf(*line, "peer");
+    std::string error;
+    const std::optional<nlohmann::json> ready =
+        ReadReadyLine(*nodes_[id], "sandtable-node", kStartDeadline, &error);
+    ASSERT_TRUE(ready.has_value()) << "node " << id << ": " << error;
+    ASSERT_TRUE(ready->contains("id") && ready->at("id").is_number_unsigned()) << ready->dump();
+    ASSERT_EQ(ready->at("id").get<NodeId>(), id) << ready->dump();
+    peer_endpoints_[id] = ReadyString(*ready, "peer");
+    ASSERT_FALSE(peer_endpoints_[id].empty()) << ready->dump();
   }
 
   // Waits for a member list satisfying `accept`; returns it (nullopt at the deadline).

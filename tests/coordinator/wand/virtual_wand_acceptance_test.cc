@@ -20,7 +20,8 @@ namespace {
 namespace fs = std::filesystem;
 using std::chrono::milliseconds;
 using testing::ChildProcess;
-using testing::FieldOf;
+using testing::ReadReadyLine;
+using testing::ReadyString;
 
 constexpr milliseconds kStartDeadline{15000};
 constexpr milliseconds kStrokeDeadline{15000};
@@ -41,13 +42,15 @@ TEST(VirtualWandAcceptanceTest, WandStrokeIsPublishedAndSurvivesSigkill) {
   }
   ChildProcess coordinator(
       {SANDTABLE_COORDINATOR_BIN, "--virtual-wand", script.string(), "--annotations", db.string()});
-  std::optional<std::string> line = coordinator.ReadLine(kStartDeadline);
-  ASSERT_TRUE(line.has_value()) << "coordinator printed no endpoints";
+  std::string error;
+  const std::optional<nlohmann::json> ready =
+      ReadReadyLine(coordinator, "sandtable-coordinator", kStartDeadline, &error);
+  ASSERT_TRUE(ready.has_value()) << error;
   zmq::context_t context;
   proto::MessageCounters counters;
   auto sub = net::Socket::Create(&context, net::SocketType::kSub);
   ASSERT_TRUE(sub.ok());
-  ASSERT_TRUE((*sub)->Connect(FieldOf(*line, "events")).ok());
+  ASSERT_TRUE((*sub)->Connect(ReadyString(*ready, "events")).ok());
   net::Channel channel(std::move(*sub), 952, 1, &counters);
 
   int begins = 0, points_events = 0;

@@ -28,7 +28,8 @@ namespace {
 namespace fs = std::filesystem;
 using std::chrono::milliseconds;
 using testing::ChildProcess;
-using testing::FieldOf;
+using testing::ReadReadyLine;
+using testing::ReadyString;
 
 constexpr milliseconds kStartDeadline{15000};
 constexpr milliseconds kEventDeadline{5000};
@@ -66,10 +67,12 @@ TEST(WandReplayAcceptanceTest, TrajectoryDrivesPosesAndCursorAtTrackerRate) {
 
   ChildProcess coordinator({SANDTABLE_COORDINATOR_BIN, "--tracker-replay", kTraj,
                             "--table-from-tracker", json.string()});
-  std::optional<std::string> line = coordinator.ReadLine(kStartDeadline);
-  ASSERT_TRUE(line.has_value()) << "coordinator printed no endpoints";
-  const std::string events = FieldOf(*line, "events");
-  ASSERT_FALSE(events.empty()) << *line;
+  std::string error;
+  const std::optional<nlohmann::json> ready =
+      ReadReadyLine(coordinator, "sandtable-coordinator", kStartDeadline, &error);
+  ASSERT_TRUE(ready.has_value()) << error;
+  const std::string events = ReadyString(*ready, "events");
+  ASSERT_FALSE(events.empty()) << ready->dump();
 
   zmq::context_t context;
   proto::MessageCounters counters;

@@ -11,11 +11,11 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "net/channel.h"
-#include "sim/app/world_server.h"
 #include "common/scene/gltf_loader.h"
 #include "common/scene/gltf_writer.h"
 #include "common/scene/procedural_scene.h"
+#include "net/channel.h"
+#include "sim/app/world_server.h"
 #include "sim/site/site_json.h"
 #include "sim/site/site_presets.h"
 #include "sim/transport/world.h"
@@ -227,10 +227,12 @@ TEST_F(WorldAppTest, ServeAnswersNodesAndSurvivesBadRequests) {
   ChildProcess server({SANDTABLE_WORLD_BIN, "serve", "--site", Path("site.json"), "--scene",
                        Path("scene.gltf"), "--bind", "tcp://127.0.0.1:0", "--noise-seed", "7",
                        "--threads", "2"});
-  const std::optional<std::string> line = server.ReadLine(kProcessDeadline);
-  ASSERT_TRUE(line.has_value()) << "serve printed no endpoint";
-  const std::string endpoint = testing::FieldOf(*line, "world");
-  ASSERT_EQ(endpoint.rfind("tcp://127.0.0.1:", 0), 0u) << *line;
+  std::string error;
+  const std::optional<nlohmann::json> ready =
+      testing::ReadReadyLine(server, "sandtable-world", kProcessDeadline, &error);
+  ASSERT_TRUE(ready.has_value()) << error;
+  const std::string endpoint = testing::ReadyString(*ready, "world");
+  ASSERT_EQ(endpoint.rfind("tcp://127.0.0.1:", 0), 0u) << ready->dump();
 
   zmq::context_t context;
   Client node0(&context, endpoint, 0), node1(&context, endpoint, 1);

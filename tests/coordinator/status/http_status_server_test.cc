@@ -1,0 +1,142 @@
+// HttpStatusServer over real sockets, in process: answers, malformed requests, bad addresses,
+// and clients served concurrently (held-open and slow clients do not block the page).
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "coordinator/status/http_status_server.h"
+#include "tests/coordinator/status/http_exchange.h"
+
+namespace sandtable::coordinator {
+namespace {
+
+using namespace std::chrono_literals;
+constexpr auto kDeadline = 5000ms;
+// A status request while other clients hold connections open must be answered well before one
+// of them times out (2 s); normally it takes about a millisecond.
+constexpr auto kConcurrentAnswerDeadline = 1000ms;
+constexpr int kHeldOpenClients = 4;
+
+using testing::Body;
+using testing::ClosedByServerWithin;
+using testing::HttpExchange;
+using testing::StatusLine;
+
+TEST(HttpStatusServerTest, AnswersGetStatusAndRefusesEverythingElse) {
+  Expected<std::unique_ptr<HttpStatusServer>> server = HttpStatusServer::Start("127.0.0.1:0");
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  HttpStatusServer& http = **server;
+  ASSERT_NE(http.port(), 0);
+  EXPECT_EQ(http.url(), "http://127.0.0.1:" + std::to_string(http.port()) + "/status");
+  http.Publish(R"({"members":[],"answer":42})");
+
+  std::string r = HttpExchange(http.port(), "GET /status HTTP/1.1\r\nHost: x\r\n\r\n");
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 200 OK");
+  EXPECT_NE(r.find("Content-Type: application/json"), std::string::npos);
+  nlohmann::json doc = nlohmann::json::parse(Body(r), nullptr, false);
+  ASSERT_FALSE(doc.is_discarded()) << r;
+  EXPECT_EQ(doc["answer"], 42);
+
+  EXPECT_EQ(StatusLine(HttpExchange(http.port(), "GET /status?x=1 HTTP/1.0\r\n\r\n")),
+            "HTTP/1.1 200 OK");
+  EXPECT_EQ(StatusLine(HttpExchange(http.port(), "GET /metrics HTTP/1.1\r\n\r\n")),
+            "HTTP/1.1 404 Not Found");
+  r = HttpExchange(http.port(), "POST /status HTTP/1.1\r\n\r\n");
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 405 Method Not Allowed");
+  EXPECT_NE(r.find("Allow: GET, HEAD"), std::string::npos) << r;
+  r = HttpExchange(http.port(), "HEAD /status HTTP/1.1\r\n\r\n");
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 200 OK");
+  EXPECT_EQ(Body(r), "") << "HEAD: headers only";
+  // Malformed requests: 400, and the server keeps serving.
+  for (const std::string& bad :
+       {std::string("garbage\r\n\r\n"), std::string("GET /status\r\n\r\n"),
+        std::string("GET status HTTP/1.1\r\n\r\n"), std::string("GET /status SPDY/3\r\n\r\n"),
+        std::string("G\x01T /status HTTP/1.1\r\n\r\n"), std::string("BREW /pot HTTP/1.1\r\n\r\n"),
+        std::string("GET /status HTTP/1.1\r\nX: ") + std::string(9000, 'y') + "\r\n\r\n"}) {
+    EXPECT_EQ(StatusLine(HttpExchange(http.port(), bad)), "HTTP/1.1 400 Bad Request")
+        << bad.substr(0, 40);
+  }
+  EXPECT_EQ(StatusLine(HttpExchange(http.port(), std::string(9000, 'A') + "\r\n\r\n")),
+            "HTTP/1.1 414 URI Too Long");
+  // A client that connects and never sends is dropped without an answer, and so is one that
+  // sends no line end; one that sends half a request head gets 400 once the read times out.
+  EXPECT_EQ(HttpExchange(http.port(), std::string(9000, 'A')), "");
+  EXPECT_EQ(HttpExchange(http.port(), ""), "");
+  EXPECT_EQ(StatusLine(HttpExchange(http.port(), "GET /status HTTP/1.1\r\nHost")),
+            "HTTP/1.1 400 Bad Request");
+  EXPECT_EQ(StatusLine(HttpExchange(http.port(), "GET /status HTTP/1.1\r\n\r\n")),
+            "HTTP/1.1 200 OK");
+  EXPECT_EQ(http.counters().ok.load(), 4u);
+  EXPECT_EQ(http.counters().not_found.load(), 1u);
+}
+
+TEST(HttpStatusServerTest, HeldOpenAndSlowClientsDoNotBlockThePage) {
+  Expected<std::unique_ptr<HttpStatusServer>> server = HttpStatusServer::Start("127.0.0.1:0");
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  HttpStatusServer& http = **server;
+  http.Publish(R"({"answer":42})");
+  // Clients that connect and send nothing, and one that sends half a request head.
+  std::vector<int> held;
+  for (int i = 0; i < kHeldOpenClients; ++i) {
+    held.push_back(testing::ConnectLoopback(http.port()));
+    ASSERT_GE(held.back(), 0);
+  }
+  const int half = testing::ConnectLoopback(http.port());
+  ASSERT_GE(half, 0);
+  const std::string partial = "GET /status HTTP/1.1\r\nHost: sl";
+  ASSERT_EQ(::send(half, partial.data(), partial.size(), MSG_NOSIGNAL),
+            static_cast<ssize_t>(partial.size()));
+  // A slow client: one byte of a complete request at a time (paced, not synchronising).
+  std::thread slow([&] {
+    const int fd = testing::ConnectLoopback(http.port());
+    const std::string request = "GET /status HTTP/1.1\r\n\r\n";
+    for (char c : request) {
+      (void)::send(fd, &c, 1, MSG_NOSIGNAL);
+      std::this_thread::sleep_for(30ms);
+    }
+    ClosedByServerWithin(fd, kDeadline);
+    ::close(fd);
+  });
+  // Meanwhile a real request is answered at once.
+  const auto start = std::chrono::steady_clock::now();
+  const std::string r = HttpExchange(http.port(), "GET /status HTTP/1.1\r\n\r\n");
+  const auto took = std::chrono::steady_clock::now() - start;
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 200 OK");
+  nlohmann::json doc = nlohmann::json::parse(Body(r), nullptr, false);
+  ASSERT_FALSE(doc.is_discarded()) << r;
+  EXPECT_EQ(doc["answer"], 42);
+  EXPECT_LT(took, kConcurrentAnswerDeadline)
+      << std::chrono::duration_cast<std::chrono::milliseconds>(took).count() << " ms";
+  slow.join();
+  // The silent clients are dropped after the read timeout; none of them got a 200.
+  for (int fd : held) {
+    EXPECT_TRUE(ClosedByServerWithin(fd, kDeadline));
+    ::close(fd);
+  }
+  EXPECT_TRUE(ClosedByServerWithin(half, kDeadline));
+  ::close(half);
+  EXPECT_EQ(http.counters().ok.load(), 2u) << "the real request and the slow one";
+}
+
+TEST(HttpStatusServerTest, BadAddressesAreRefused) {
+  EXPECT_EQ(HttpStatusServer::Start("localhost:x").status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(HttpStatusServer::Start("127.0.0.1:70000").status().code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(HttpStatusServer::Start("not-an-ip:0").status().code(), StatusCode::kInvalidArgument);
+  // A port already in use.
+  Expected<std::unique_ptr<HttpStatusServer>> first = HttpStatusServer::Start("0");
+  ASSERT_TRUE(first.ok());
+  Expected<std::unique_ptr<HttpStatusServer>> second =
+      HttpStatusServer::Start(std::to_string((*first)->port()));
+  EXPECT_EQ(second.status().code(), StatusCode::kUnavailable);
+}
+
+}  // namespace
+}  // namespace sandtable::coordinator
