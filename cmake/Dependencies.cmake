@@ -4,9 +4,10 @@
 find_package(Threads REQUIRED)
 find_package(Eigen3 3.3 REQUIRED NO_MODULE)            # Eigen3::Eigen
 find_package(Ceres REQUIRED)                          # Ceres::ceres
-find_package(OpenCV 4 REQUIRED COMPONENTS core imgproc imgcodecs calib3d structured_light)
+find_package(OpenCV 4 REQUIRED COMPONENTS core imgproc imgcodecs calib3d structured_light videoio)
 find_package(glm REQUIRED)                            # glm::glm
 find_package(glfw3 3.3 REQUIRED)                      # glfw
+find_package(X11 REQUIRED)                            # X11::X11 (window tests read the screen)
 find_package(TinyGLTF REQUIRED)                       # TinyGLTF
 find_package(nlohmann_json 3 REQUIRED)                # nlohmann_json::nlohmann_json
 find_package(embree 3 REQUIRED)                       # embree

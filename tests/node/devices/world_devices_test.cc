@@ -1,0 +1,257 @@
+// The world-backed ProjectorOutput and CameraInput against a real WorldServer (the server of
+// `sandtable-world serve`) running in-process on a thread, on a small flat-4 site. Nodes see
+// only the interfaces, made by the factory from "world:ENDPOINT" specs.
+#include <atomic>
+#include <chrono>
+#include <thread>
+
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+
+#include "common/scene/procedural_scene.h"
+#include "node/devices/device_factory.h"
+#include "node/devices/world_link.h"
+#include "sim/app/world_server.h"
+#include "sim/site/site_presets.h"
+#include "sim/transport/world.h"
+
+namespace sandtable::node {
+namespace {
+
+using std::chrono::milliseconds;
+
+const cv::Size kProjectorSize_px(1280, 800);  // DefaultProjector()
+const cv::Size kCameraSize_px(128, 96);       // shrunk below so transport maps build fast
+// The camera of unit 0 sees its own projector's footprint: white lifts the mean well above
+// black (about 40 DN here; black level and ambient alone stay under 10).
+constexpr double kMinWhiteOverBlack_dn = 15.0;
+// A dead world must be reported within the connect timeout plus scheduling slack.
+constexpr milliseconds kConnectTimeout{300};
+constexpr milliseconds kDeadWorldBound{3000};
+
+class WorldDevicesTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    Expected<sim::Site> site = sim::MakeSitePreset("flat-4");
+    ASSERT_TRUE(site.ok()) << site.status().ToString();
+    for (sim::UnitSpec& unit : site->units) {
+      const CameraModel& m = unit.camera->model;
+      const double s = static_cast<double>(kCameraSize_px.width) / m.width_px;
+      unit.camera->model =
+          CameraModel(kCameraSize_px.width, kCameraSize_px.height, m.fx_px * s, m.fy_px * s,
+                      (m.cx_px + 0.5) * s - 0.5, (m.cy_px + 0.5) * s - 0.5, m.distortion);
+    }
+    ProceduralSceneOptions scene_options;
+    scene_options.preset = ScenePreset::kFlat;
+    Expected<ProceduralScene> scene = MakeProceduralScene(scene_options);
+    ASSERT_TRUE(scene.ok());
+    Expected<std::unique_ptr<sim::World>> world = sim::World::Create(*site, scene->scene);
+    ASSERT_TRUE(world.ok()) << world.status().ToString();
+    server_ = std::make_unique<sim::WorldServer>(std::move(*world), sim::WorldServerOptions{});
+    ASSERT_TRUE(server_->Start().ok());
+    spec_ = "world:" + server_->endpoint();
+    thread_ = std::thread([this] { served_ = server_->Run(stop_); });
+  }
+  void TearDown() override { StopWorld(); }
+
+  void StopWorld() {
+    if (!server_) return;
+    stop_ = true;
+    thread_.join();
+    EXPECT_TRUE(served_.ok()) << served_.ToString();
+    server_.reset();
+  }
+
+  DeviceOptions Unit(NodeId id) const {
+    DeviceOptions options;
+    options.node_id = id;
+    options.projector_size_px = kProjectorSize_px;
+    options.camera_size_px = kCameraSize_px;
+    options.camera_bit_depth = 8;
+    options.world_connect_timeout = kConnectTimeout;
+    return options;
+  }
+
+  std::unique_ptr<sim::WorldServer> server_;
+  std::string spec_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+  Status served_;
+};
+
+TEST_F(WorldDevicesTest, FrameShownIsCapturedByTheCamera) {
+  Expected<std::unique_ptr<ProjectorOutput>> projector = MakeProjectorOutput(spec_, Unit(0));
+  ASSERT_TRUE(projector.ok()) << projector.status().ToString();
+  Expected<std::unique_ptr<CameraInput>> camera = MakeCameraInput(spec_, Unit(0));
+  ASSERT_TRUE(camera.ok()) << camera.status().ToString();
+  EXPECT_EQ((*projector)->size(), kProjectorSize_px);
+  EXPECT_EQ((*camera)->size(), kCameraSize_px);
+  EXPECT_EQ((*camera)->bit_depth(), 8);
+
+  auto show_and_capture = [&](const cv::Mat& frame, ShownFrame* shown) {
+    Expected<ShownFrame> s = (*projector)->Show(frame);
+    EXPECT_TRUE(s.ok()) << s.status().ToString();
+    Expected<CapturedFrame> c = (*camera)->Capture(Seconds(0.0));
+    EXPECT_TRUE(c.ok()) << c.status().ToString();
+    if (!s.ok() || !c.ok()) return -1.0;
+    *shown = *s;
+    EXPECT_GE(c->capture_time, s->shown_time) << "the capture sees the frame shown before it";
+    EXPECT_EQ(c->image.type(), CV_8UC1);
+    EXPECT_EQ(c->image.size(), kCameraSize_px);
+    return cv::mean(c->image)[0];
+  };
+  ShownFrame first, second, third;
+  const double black = show_and_capture(cv::Mat(kProjectorSize_px, CV_8UC1, cv::Scalar(0)), &first);
+  const double white =
+      show_and_capture(cv::Mat(kProjectorSize_px, CV_8UC1, cv::Scalar(255)), &second);
+  // RGB8 works too; a non-continuous ROI of a larger image is fine.
+  cv::Mat big(kProjectorSize_px.height + 10, kProjectorSize_px.width + 10, CV_8UC3,
+              cv::Scalar(255, 255, 255));
+  const double white_rgb =
+      show_and_capture(big(cv::Rect(cv::Point(5, 5), kProjectorSize_px)), &third);
+  EXPECT_GT(white, black + kMinWhiteOverBlack_dn) << "black " << black << " white " << white;
+  EXPECT_GT(white_rgb, black + kMinWhiteOverBlack_dn);
+  EXPECT_EQ(first.frame_index, 1u);
+  EXPECT_EQ(second.frame_index, 2u);
+  EXPECT_EQ(third.frame_index, 3u);
+  EXPECT_LE(first.shown_time, second.shown_time);
+  EXPECT_EQ(server_->stats().frames_set, 3u);
+  EXPECT_EQ(server_->stats().captures, 3u);
+  EXPECT_EQ(server_->stats().bad_requests, 0u);
+}
+
+TEST_F(WorldDevicesTest, ProjectorAndCameraOfAUnitShareOneLink) {
+  WorldLinkOptions options;
+  options.endpoint = server_->endpoint();
+  options.node_id = 2;
+  Expected<std::shared_ptr<WorldLink>> a = WorldLink::Shared(options);
+  Expected<std::shared_ptr<WorldLink>> b = WorldLink::Shared(options);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ(a->get(), b->get());
+  options.node_id = 3;
+  Expected<std::shared_ptr<WorldLink>> other = WorldLink::Shared(options);
+  ASSERT_TRUE(other.ok());
+  EXPECT_NE(a->get(), other->get());
+}
+
+TEST_F(WorldDevicesTest, CameraSizeAndDepthAreProbedWhenUnknown) {
+  DeviceOptions options = Unit(1);
+  options.camera_size_px.reset();
+  options.camera_bit_depth.reset();
+  Expected<std::unique_ptr<CameraInput>> camera = MakeCameraInput(spec_, options);
+  ASSERT_TRUE(camera.ok()) << camera.status().ToString();
+  EXPECT_EQ((*camera)->size(), kCameraSize_px);
+  EXPECT_EQ((*camera)->bit_depth(), 8);
+  Expected<CapturedFrame> frame = (*camera)->Capture(Seconds(0.0));
+  ASSERT_TRUE(frame.ok()) << frame.status().ToString();
+  EXPECT_EQ(frame->index, 1u) << "the probe is not counted";
+  // A unit that believes in another camera size is told so.
+  options.camera_size_px = cv::Size(1024, 768);
+  camera = MakeCameraInput(spec_, options);
+  ASSERT_FALSE(camera.ok());
+  EXPECT_NE(camera.status().message().find("1024x768"), std::string::npos)
+      << camera.status().ToString();
+}
+
+TEST_F(WorldDevicesTest, WrongFramesAreRefusedWithAClearMessage) {
+  Expected<std::unique_ptr<ProjectorOutput>> projector = MakeProjectorOutput(spec_, Unit(0));
+  ASSERT_TRUE(projector.ok()) << projector.status().ToString();
+  // Refused here: the frame does not match the projector.
+  Expected<ShownFrame> shown = (*projector)->Show(cv::Mat(400, 640, CV_8UC1, cv::Scalar(255)));
+  ASSERT_FALSE(shown.ok());
+  EXPECT_EQ(shown.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(shown.status().message().find("frame is 640x400 GRAY8, projector is 1280x800"),
+            std::string::npos)
+      << shown.status().ToString();
+  shown = (*projector)->Show(cv::Mat(kProjectorSize_px, CV_16UC1, cv::Scalar(0)));
+  ASSERT_FALSE(shown.ok());
+  EXPECT_NE(shown.status().message().find("16UC1"), std::string::npos);
+  EXPECT_EQ(server_->stats().bad_requests, 0u) << "nothing was sent";
+
+  // A unit that believes its projector is 640x400: the world refuses, in its own words.
+  DeviceOptions wrong = Unit(0);
+  wrong.projector_size_px = cv::Size(640, 400);
+  Expected<std::unique_ptr<ProjectorOutput>> mistaken = MakeProjectorOutput(spec_, wrong);
+  ASSERT_TRUE(mistaken.ok());
+  shown = (*mistaken)->Show(cv::Mat(400, 640, CV_8UC1, cv::Scalar(255)));
+  ASSERT_FALSE(shown.ok());
+  EXPECT_EQ(shown.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(shown.status().message().find(
+                "set_frame projector 0: frame is 640x400, projector is 1280x800"),
+            std::string::npos)
+      << shown.status().ToString();
+  EXPECT_EQ(server_->stats().bad_requests, 1u);
+
+  // Both stay usable.
+  EXPECT_TRUE((*projector)->Show(cv::Mat(kProjectorSize_px, CV_8UC1, cv::Scalar(9))).ok());
+
+  // A camera the site does not have.
+  DeviceOptions stranger = Unit(9);
+  EXPECT_FALSE(MakeProjectorOutput(spec_, stranger)
+                   .value()
+                   ->Show(cv::Mat(kProjectorSize_px, CV_8UC1, cv::Scalar(0)))
+                   .ok());
+  Expected<std::unique_ptr<CameraInput>> camera = MakeCameraInput(spec_, stranger);
+  ASSERT_TRUE(camera.ok());
+  Expected<CapturedFrame> capture = (*camera)->Capture(Seconds(0.0));
+  ASSERT_FALSE(capture.ok());
+  EXPECT_NE(capture.status().message().find("no such camera"), std::string::npos)
+      << capture.status().ToString();
+  // A bad exposure is refused before it is sent.
+  camera = MakeCameraInput(spec_, Unit(0));
+  ASSERT_TRUE(camera.ok());
+  EXPECT_EQ((*camera)->Capture(Seconds(-1.0)).status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST_F(WorldDevicesTest, DeadWorldIsUnavailableNeverAHang) {
+  Expected<std::unique_ptr<ProjectorOutput>> projector = MakeProjectorOutput(spec_, Unit(1));
+  ASSERT_TRUE(projector.ok());
+  Expected<std::unique_ptr<CameraInput>> camera = MakeCameraInput(spec_, Unit(1));
+  ASSERT_TRUE(camera.ok());
+  ASSERT_TRUE((*projector)->Show(cv::Mat(kProjectorSize_px, CV_8UC1, cv::Scalar(255))).ok());
+  StopWorld();  // the world dies under a running node
+
+  auto start = std::chrono::steady_clock::now();
+  Expected<ShownFrame> shown =
+      (*projector)->Show(cv::Mat(kProjectorSize_px, CV_8UC1, cv::Scalar(0)));
+  ASSERT_FALSE(shown.ok());
+  EXPECT_EQ(shown.status().code(), StatusCode::kUnavailable) << shown.status().ToString();
+  EXPECT_NE(shown.status().message().find("sandtable-world serve"), std::string::npos)
+      << shown.status().ToString();
+  EXPECT_LT(std::chrono::steady_clock::now() - start, kDeadWorldBound);
+  start = std::chrono::steady_clock::now();
+  Expected<CapturedFrame> captured = (*camera)->Capture(Seconds(0.0));
+  ASSERT_FALSE(captured.ok());
+  EXPECT_EQ(captured.status().code(), StatusCode::kUnavailable);
+  EXPECT_LT(std::chrono::steady_clock::now() - start, kDeadWorldBound);
+
+  // A node started against no world at all: its devices are made (no request is sent), and
+  // the first request says the world is not reachable.
+  DeviceOptions options = Unit(1);
+  options.camera_size_px.reset();  // needs a probe capture: fails at once
+  start = std::chrono::steady_clock::now();
+  Expected<std::unique_ptr<CameraInput>> probed =
+      MakeCameraInput("world:tcp://127.0.0.1:1", options);
+  ASSERT_FALSE(probed.ok());
+  EXPECT_EQ(probed.status().code(), StatusCode::kUnavailable);
+  EXPECT_NE(probed.status().message().find("not reachable"), std::string::npos)
+      << probed.status().ToString();
+  EXPECT_LT(std::chrono::steady_clock::now() - start, kDeadWorldBound);
+}
+
+TEST_F(WorldDevicesTest, BadWorldSpecsAreClearErrors) {
+  EXPECT_EQ(MakeProjectorOutput("world:", Unit(0)).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(MakeProjectorOutput("world:not-an-endpoint", Unit(0)).status().code(),
+            StatusCode::kInvalidArgument);
+  DeviceOptions no_size = Unit(0);
+  no_size.projector_size_px.reset();
+  Expected<std::unique_ptr<ProjectorOutput>> projector = MakeProjectorOutput(spec_, no_size);
+  ASSERT_FALSE(projector.ok());
+  EXPECT_NE(projector.status().message().find("projector size is unknown"), std::string::npos);
+  DeviceOptions no_id = Unit(0);
+  no_id.node_id = kInvalidNodeId;
+  EXPECT_EQ(MakeProjectorOutput(spec_, no_id).status().code(), StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace sandtable::node
