@@ -83,7 +83,7 @@ CLI::Validator Real(double lo, double hi) {
   std::ostringstream description;
   description << "REAL in [" << lo << ", " << hi << "]";
   return CLI::Validator(
-      [lo, hi, range = description.str().substr(5)](std::string& value) -> std::string {
+      [lo, hi, range = description.str().substr(8)](std::string& value) -> std::string {
         char* end = nullptr;
         errno = 0;
         const double parsed = std::strtod(value.c_str(), &end);

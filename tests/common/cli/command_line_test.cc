@@ -66,6 +66,7 @@ TEST(CommandLineTest, ValuesAreTypedAndRangeChecked) {
     EXPECT_EQ(q.Run(bad, nullptr, &err), kExitUsage) << bad.front();
     EXPECT_NE(err.find(bad.front()), std::string::npos) << "names the flag: " << err;
     EXPECT_EQ(err.rfind("prog: ", 0), 0u) << err;
+    EXPECT_EQ(err.find("in in"), std::string::npos) << err;
   }
   Program unknown;
   std::string err;
