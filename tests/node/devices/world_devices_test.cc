@@ -9,8 +9,10 @@
 #include <opencv2/core.hpp>
 
 #include "common/scene/procedural_scene.h"
+#include "net/socket.h"
 #include "node/devices/device_factory.h"
 #include "node/devices/world_link.h"
+#include "node/devices/world_projector_output.h"
 #include "sim/app/world_server.h"
 #include "sim/site/site_presets.h"
 #include "sim/transport/world.h"
@@ -251,6 +253,91 @@ TEST_F(WorldDevicesTest, BadWorldSpecsAreClearErrors) {
   DeviceOptions no_id = Unit(0);
   no_id.node_id = kInvalidNodeId;
   EXPECT_EQ(MakeProjectorOutput(spec_, no_id).status().code(), StatusCode::kInvalidArgument);
+}
+
+// A "world" that takes requests and never answers, then closes: the two ways a live connection
+// can fail a request. A bare ROUTER socket, so nothing but the link's deadlines can end a wait.
+class SilentWorld {
+ public:
+  SilentWorld() {
+    Expected<std::unique_ptr<net::Socket>> socket =
+        net::Socket::Create(&context_, net::SocketType::kRouter);
+    EXPECT_TRUE(socket.ok());
+    socket_ = std::move(*socket);
+    Expected<std::string> endpoint = socket_->Bind("tcp://127.0.0.1:*");
+    EXPECT_TRUE(endpoint.ok());
+    endpoint_ = *endpoint;
+  }
+  const std::string& endpoint() const { return endpoint_; }
+  // Waits (bounded) for one request, then closes the socket: the world died mid-request.
+  void CloseAfterOneRequest() {
+    thread_ = std::thread([this] {
+      std::vector<bool> readable;
+      const Status polled = net::Socket::Poll({socket_.get()}, kRequestDeadline, &readable);
+      if (polled.ok() && readable[0]) socket_->TryReceive().ok();
+      socket_.reset();
+    });
+  }
+  ~SilentWorld() {
+    if (thread_.joinable()) thread_.join();
+  }
+
+ private:
+  static constexpr milliseconds kRequestDeadline{10000};
+  zmq::context_t context_;
+  std::unique_ptr<net::Socket> socket_;
+  std::string endpoint_;
+  std::thread thread_;
+};
+
+Expected<std::unique_ptr<WorldProjectorOutput>> ProjectorOf(const std::string& endpoint,
+                                                            milliseconds reply_timeout) {
+  WorldLinkOptions options;
+  options.endpoint = endpoint;
+  options.node_id = 0;
+  options.connect_timeout = kConnectTimeout;
+  options.reply_timeout = reply_timeout;
+  Expected<std::shared_ptr<WorldLink>> link = WorldLink::Connect(options);
+  if (!link.ok()) return link.status();
+  return WorldProjectorOutput::Create(*link, 0, kProjectorSize_px);
+}
+
+TEST(WorldLinkTest, AWorldThatDoesNotAnswerIsUnavailableAtTheReplyDeadline) {
+  SilentWorld world;
+  constexpr milliseconds kReplyTimeout{400};
+  Expected<std::unique_ptr<WorldProjectorOutput>> projector =
+      ProjectorOf(world.endpoint(), kReplyTimeout);
+  ASSERT_TRUE(projector.ok()) << projector.status().ToString();
+  const auto start = std::chrono::steady_clock::now();
+  Expected<ShownFrame> shown =
+      (*projector)->Show(cv::Mat(kProjectorSize_px, CV_8UC1, cv::Scalar(0)));
+  const auto waited = std::chrono::steady_clock::now() - start;
+  ASSERT_FALSE(shown.ok());
+  EXPECT_EQ(shown.status().code(), StatusCode::kUnavailable);
+  EXPECT_NE(shown.status().message().find("no set_frame_reply to set_frame_request within 400 ms"),
+            std::string::npos)
+      << shown.status().ToString();
+  EXPECT_GE(waited, kReplyTimeout);
+  EXPECT_LT(waited, kDeadWorldBound);
+}
+
+TEST(WorldLinkTest, AWorldThatDiesMidRequestIsUnavailableWithinTheConnectTimeout) {
+  SilentWorld world;
+  constexpr milliseconds kLongReplyTimeout{60000};
+  Expected<std::unique_ptr<WorldProjectorOutput>> projector =
+      ProjectorOf(world.endpoint(), kLongReplyTimeout);
+  ASSERT_TRUE(projector.ok()) << projector.status().ToString();
+  world.CloseAfterOneRequest();
+  const auto start = std::chrono::steady_clock::now();
+  Expected<ShownFrame> shown =
+      (*projector)->Show(cv::Mat(kProjectorSize_px, CV_8UC1, cv::Scalar(0)));
+  ASSERT_FALSE(shown.ok());
+  EXPECT_EQ(shown.status().code(), StatusCode::kUnavailable);
+  EXPECT_NE(shown.status().message().find("went away while answering set_frame_request"),
+            std::string::npos)
+      << shown.status().ToString();
+  EXPECT_LT(std::chrono::steady_clock::now() - start, kDeadWorldBound)
+      << "not the 60 s reply timeout";
 }
 
 }  // namespace
