@@ -14,7 +14,7 @@ PACKAGES=(
   libopencv-dev libopencv-contrib-dev
   # graphics: GL, EGL (Mesa llvmpipe for headless), windows, math, glTF
   libglfw3-dev libglm-dev libtinygltf-dev libstb-dev nlohmann-json3-dev
-  libegl-dev libgl-dev libgles-dev libegl-mesa0 libgl1-mesa-dri mesa-utils xvfb xauth
+  libegl-dev libgl-dev libgles-dev libegl-mesa0 libgl1-mesa-dri mesa-utils xvfb xauth libx11-dev
   # world ray casting
   libembree-dev
   # protocol and transport
