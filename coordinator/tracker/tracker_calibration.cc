@@ -5,6 +5,8 @@
 
 #include "common/base/units.h"
 #include "common/estimation/umeyama.h"
+#include "common/io/json_codec.h"
+#include "common/io/json_reader.h"
 
 namespace sandtable::coordinator {
 
@@ -131,6 +133,42 @@ Expected<TrackerCalibrationReport> FitTableFromTracker(
   }
   report.message = m.str();
   return report;
+}
+
+nlohmann::json TableFromTrackerToJson(const Rigid3d& table_from_tracker) {
+  return {{"format", kTableFromTrackerFormat},
+          {"version", kTableFromTrackerVersion},
+          {"table_from_tracker", io::RigidToJson(table_from_tracker)}};
+}
+
+Status SaveTableFromTracker(const Rigid3d& table_from_tracker, const std::string& path) {
+  if (!table_from_tracker.AllFinite()) {
+    return InvalidArgumentError(path + ": table_from_tracker is not finite");
+  }
+  return io::WriteJsonFile(TableFromTrackerToJson(table_from_tracker), path);
+}
+
+Expected<Rigid3d> TableFromTrackerFromJson(const nlohmann::json& json, std::string_view source) {
+  const std::string where = std::string(source) + ":";
+  io::ObjectReader root(json, where);
+  ST_RETURN_IF_ERROR(root.Begin());
+  if (!root.Has("format")) {
+    // The older file: the transform itself, {"rotation_wxyz": [w, x, y, z], "translation_m"}.
+    return io::RigidFromJson(json, where);
+  }
+  Expected<int> version = io::ReadFormatVersion(&root, kTableFromTrackerFormat,
+                                                kTableFromTrackerVersion, kTableFromTrackerVersion);
+  if (!version.ok()) return version.status();
+  Expected<Rigid3d> table_from_tracker = io::ReadRigid(&root, "table_from_tracker");
+  if (!table_from_tracker.ok()) return table_from_tracker.status();
+  ST_RETURN_IF_ERROR(root.End());
+  return *table_from_tracker;
+}
+
+Expected<Rigid3d> LoadTableFromTracker(const std::string& path) {
+  Expected<nlohmann::json> json = io::ReadJsonFile(path);
+  if (!json.ok()) return json.status();
+  return TableFromTrackerFromJson(*json, path);
 }
 
 TrackerCalibrationSession::TrackerCalibrationSession(std::vector<Eigen::Vector3d> targets,

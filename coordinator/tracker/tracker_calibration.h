@@ -12,9 +12,11 @@
 
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
+#include <nlohmann/json.hpp>
 
 #include "common/base/status.h"
 #include "common/geometry/rigid3.h"
@@ -50,6 +52,21 @@ Expected<TrackerCalibrationReport> FitTableFromTracker(
     const std::vector<Eigen::Vector3d>& tips_in_tracker_m,
     const std::vector<Eigen::Vector3d>& targets_in_table_m,
     const TrackerCalibrationOptions& options = {});
+
+// The table_from_tracker file (docs/file-formats.md), written with the common codec
+// (common/io/json_codec.h):
+//   {"format": "sandtable.table_from_tracker", "version": 1,
+//    "table_from_tracker": {"rotation_xyzw": [x, y, z, w], "translation_m": [x, y, z]}}
+// Also read: the older file that is the transform itself,
+//   {"rotation_wxyz": [w, x, y, z], "translation_m": [x, y, z]}.
+// A quaternion must have norm within io::kQuaternionNormTolerance (1e-3) of 1 (then it is
+// normalised). Errors (IO_ERROR, PARSE_ERROR, INVALID_ARGUMENT) name the file and the field.
+inline constexpr char kTableFromTrackerFormat[] = "sandtable.table_from_tracker";
+inline constexpr int kTableFromTrackerVersion = 1;
+nlohmann::json TableFromTrackerToJson(const Rigid3d& table_from_tracker);
+Status SaveTableFromTracker(const Rigid3d& table_from_tracker, const std::string& path);
+Expected<Rigid3d> TableFromTrackerFromJson(const nlohmann::json& json, std::string_view source);
+Expected<Rigid3d> LoadTableFromTracker(const std::string& path);
 
 // The interactive session: shows target i until the wand button is pressed and released; the
 // tip positions while pressed are averaged (the press itself jitters the wand less than any

@@ -2,10 +2,7 @@
 
 #include <chrono>
 #include <cmath>
-#include <fstream>
 #include <utility>
-
-#include <nlohmann/json.hpp>
 
 #include "common/base/log.h"
 #include "proto/convert.h"
@@ -14,29 +11,10 @@
 namespace sandtable::coordinator {
 namespace {
 
-constexpr double kQuaternionNormTolerance = 1e-3;
-
 RayCaster BuildScene(double half_extent_m, std::vector<Eigen::Vector3d> positions,
                      std::vector<Eigen::Vector3i> triangles) {
   AppendTablePlane(half_extent_m, &positions, &triangles);
   return RayCaster(std::move(positions), std::move(triangles));
-}
-
-// `n` finite numbers from a JSON array field, or a PARSE_ERROR naming file and field.
-Expected<std::vector<double>> Numbers(const nlohmann::json& j, const std::string& field, size_t n,
-                                      const std::string& path) {
-  if (!j.contains(field) || !j[field].is_array() || j[field].size() != n) {
-    return ParseError(path + ": field " + field + ": expected an array of " + std::to_string(n) +
-                      " numbers");
-  }
-  std::vector<double> out;
-  for (const nlohmann::json& v : j[field]) {
-    if (!v.is_number() || !std::isfinite(v.get<double>())) {
-      return ParseError(path + ": field " + field + ": " + v.dump() + " is not a finite number");
-    }
-    out.push_back(v.get<double>());
-  }
-  return out;
 }
 
 }  // namespace
@@ -61,29 +39,6 @@ void AppendTablePlane(double half_extent_m, std::vector<Eigen::Vector3d>* positi
   positions->push_back({-h, h, 0.0});
   triangles->push_back({base, base + 1, base + 2});  // counter-clockwise seen from +z
   triangles->push_back({base, base + 2, base + 3});
-}
-
-Expected<Rigid3d> LoadTableFromTracker(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return IoError(path + ": cannot open table_from_tracker file");
-  nlohmann::json j = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
-  if (j.is_discarded() || !j.is_object()) {
-    return ParseError(path +
-                      ": not a JSON object (expected {\"rotation_wxyz\": [w, x, y, z], "
-                      "\"translation_m\": [x, y, z]})");
-  }
-  Expected<std::vector<double>> q = Numbers(j, "rotation_wxyz", 4, path);
-  if (!q.ok()) return q.status();
-  Expected<std::vector<double>> t = Numbers(j, "translation_m", 3, path);
-  if (!t.ok()) return t.status();
-  Eigen::Quaterniond rotation((*q)[0], (*q)[1], (*q)[2], (*q)[3]);
-  const double norm = rotation.norm();
-  if (std::abs(norm - 1.0) > kQuaternionNormTolerance) {
-    return ParseError(path + ": field rotation_wxyz: norm " + std::to_string(norm) +
-                      " is not 1 (within 1e-3); write a unit quaternion (w, x, y, z)");
-  }
-  rotation.normalize();
-  return Rigid3d(rotation, Eigen::Vector3d((*t)[0], (*t)[1], (*t)[2]));
 }
 
 WandService::WandService(std::unique_ptr<TrackerSource> source, WandServiceOptions options,

@@ -27,6 +27,7 @@
 
 #include "common/geometry/rigid3.h"
 #include "coordinator/annotations/annotation_service.h"
+#include "coordinator/tracker/tracker_calibration.h"  // LoadTableFromTracker (its file)
 #include "coordinator/membership/coordinator_server.h"
 #include "coordinator/tracker/tracker_source.h"
 #include "coordinator/wand/ray_caster.h"
@@ -54,12 +55,6 @@ struct WandCounters {
 // The table plane z = 0 as two counter-clockwise triangles over [-h, h]^2, appended.
 void AppendTablePlane(double half_extent_m, std::vector<Eigen::Vector3d>* positions,
                       std::vector<Eigen::Vector3i>* triangles);
-
-// table_from_tracker from a JSON file (docs/coordinator.md):
-//   {"rotation_wxyz": [w, x, y, z], "translation_m": [x, y, z]}
-// The quaternion must have norm within 1e-3 of 1 (it is then normalised); values finite.
-// Errors (IO_ERROR, PARSE_ERROR) name the file and the field.
-Expected<Rigid3d> LoadTableFromTracker(const std::string& path);
 
 class WandService : public CoordinatorService {
  public:

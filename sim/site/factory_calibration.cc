@@ -4,7 +4,6 @@
 #include <random>
 
 #include "common/base/units.h"
-#include "sim/site/site_json.h"
 
 namespace sandtable::sim {
 
@@ -73,11 +72,18 @@ Expected<FactoryCalibration> MakeFactoryCalibration(const UnitSpec& unit,
   return out;
 }
 
+UnitCalibration ToUnitCalibration(const FactoryCalibration& c) {
+  UnitCalibration out;
+  out.unit_id = c.unit_id;
+  out.source = kSourceFactory;
+  out.camera = c.camera;
+  out.projector = c.projector;
+  out.projector_from_camera = c.projector_from_camera;
+  return out;
+}
+
 nlohmann::json FactoryCalibrationToJson(const FactoryCalibration& c) {
-  return {{"unit_id", c.unit_id},
-          {"camera", CameraModelToJson(c.camera)},
-          {"projector", CameraModelToJson(c.projector)},
-          {"projector_from_camera", RigidToJson(c.projector_from_camera)}};
+  return UnitCalibrationToJsonValue(ToUnitCalibration(c));
 }
 
 }  // namespace sandtable::sim

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "common/base/status.h"
+#include "common/io/unit_calibration_file.h"
 #include "sim/site/site.h"
 
 namespace sandtable::sim {
@@ -36,6 +37,11 @@ Expected<FactoryCalibration> MakeFactoryCalibration(const UnitSpec& unit,
                                                     const FactoryCalibrationError& error,
                                                     uint64_t seed);
 
+// As a unit's calibration: source "factory", no pose on the table yet.
+UnitCalibration ToUnitCalibration(const FactoryCalibration& calibration);
+// The factory file of a unit (make-site --factory-dir): the unit calibration file format
+// (common/io/unit_calibration_file.h, "format": "sandtable.unit_calibration", version 2), so
+// a node loads it with LoadUnitCalibration.
 nlohmann::json FactoryCalibrationToJson(const FactoryCalibration& calibration);
 
 }  // namespace sandtable::sim

@@ -1,7 +1,10 @@
 #include "coordinator/tracker/tracker_calibration.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
+#include <filesystem>
+#include <fstream>
 #include <random>
 
 #include "common/base/units.h"
@@ -141,6 +144,72 @@ TEST(TrackerCalibrationTest, SessionAveragesPressedSamplesPerTarget) {
     EXPECT_LT((session.tips_in_tracker_m()[i] - (targets[i] + tip_in_sensor_m)).norm(), 1e-12);
   }
   EXPECT_TRUE(session.done());
+}
+
+// The table_from_tracker file: the common codec's form with format/version; the older
+// {"rotation_wxyz", "translation_m"} file still loads.
+class TableFromTrackerFile : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    path_ = (std::filesystem::temp_directory_path() /
+             ("sandtable_tft_cal_" + std::to_string(::getpid()) + ".json"))
+                .string();
+  }
+  void TearDown() override { std::filesystem::remove(path_); }
+  std::string path_;
+};
+
+constexpr double kFileTolerance_m = 1e-15;
+constexpr double kFileTolerance_rad = 1e-7;  // acos near 1 (see rigid3_test)
+
+TEST_F(TableFromTrackerFile, SaveLoadRoundTripAndFormat) {
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 20; ++trial) {
+    const Rigid3d table_from_tracker = RandomPose(&rng);
+    ASSERT_TRUE(SaveTableFromTracker(table_from_tracker, path_).ok());
+    Expected<Rigid3d> back = LoadTableFromTracker(path_);
+    ASSERT_TRUE(back.ok()) << back.status().ToString();
+    EXPECT_LT((back->translation - table_from_tracker.translation).norm(), kFileTolerance_m);
+    EXPECT_LT(RotationAngleBetween_rad(*back, table_from_tracker), kFileTolerance_rad);
+  }
+  const nlohmann::json j = TableFromTrackerToJson(Rigid3d::Identity());
+  EXPECT_EQ(j.at("format"), kTableFromTrackerFormat);
+  EXPECT_EQ(j.at("version"), kTableFromTrackerVersion);
+  EXPECT_TRUE(j.at("table_from_tracker").contains("rotation_xyzw"));
+}
+
+TEST_F(TableFromTrackerFile, OlderWxyzFileStillLoads) {
+  const Eigen::Quaterniond q(Eigen::AngleAxisd(DegToRad(30.0), Eigen::Vector3d::UnitZ()));
+  std::ofstream out(path_);
+  out.precision(17);
+  out << "{\"rotation_wxyz\": [" << q.w() << ", " << q.x() << ", " << q.y() << ", " << q.z()
+      << "], \"translation_m\": [0.4, -0.25, 0.8]}\n";
+  out.close();
+  Expected<Rigid3d> t = LoadTableFromTracker(path_);
+  ASSERT_TRUE(t.ok()) << t.status().ToString();
+  EXPECT_LT(RotationAngleBetween_rad(*t, Rigid3d(q, Eigen::Vector3d::Zero())), kFileTolerance_rad);
+  EXPECT_NEAR(t->translation.y(), -0.25, kFileTolerance_m);
+}
+
+TEST_F(TableFromTrackerFile, BadFilesNameTheField) {
+  std::ofstream(path_) << R"({"format": "sandtable.table_from_tracker", "version": 2,
+                              "table_from_tracker": {"rotation_xyzw": [0, 0, 0, 1],
+                                                     "translation_m": [0, 0, 0]}})";
+  Status s = LoadTableFromTracker(path_).status();
+  EXPECT_EQ(s.code(), StatusCode::kParseError);
+  EXPECT_NE(s.message().find(path_ + ": version = 2"), std::string::npos) << s.ToString();
+  std::ofstream(path_) << R"({"format": "sandtable.table_from_tracker", "version": 1,
+                              "table_from_tracker": {"rotation_xyzw": [0, 0, 0, 5],
+                                                     "translation_m": [0, 0, 0]}})";
+  s = LoadTableFromTracker(path_).status();
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find(path_ + ": table_from_tracker.rotation_xyzw has norm 5"),
+            std::string::npos)
+      << s.ToString();
+  std::ofstream(path_) << R"({"format": "sandtable.table_from_tracker", "version": 1})";
+  s = LoadTableFromTracker(path_).status();
+  EXPECT_NE(s.message().find("table_from_tracker is missing"), std::string::npos) << s.ToString();
+  EXPECT_EQ(LoadTableFromTracker(path_ + ".absent").status().code(), StatusCode::kIoError);
 }
 
 }  // namespace

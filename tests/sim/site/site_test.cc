@@ -101,7 +101,8 @@ TEST(SiteJson, RoundTripAndErrors) {
   typo["units"][2]["projector"]["fx"] = 10;
   Expected<Site> e1 = SiteFromJson(typo);
   ASSERT_FALSE(e1.ok());
-  EXPECT_NE(e1.status().message().find("units[2].projector: unknown key 'fx'"), std::string::npos)
+  EXPECT_NE(e1.status().message().find("site.units[2].projector has unknown key 'fx'"),
+            std::string::npos)
       << e1.status().message();
 
   nlohmann::json wrong_type = j;
@@ -110,6 +111,29 @@ TEST(SiteJson, RoundTripAndErrors) {
   ASSERT_FALSE(e2.ok());
   EXPECT_NE(e2.status().message().find("units[1].camera.fy_px"), std::string::npos)
       << e2.status().message();
+
+  // Every written site carries format and version; files without them (older) still load.
+  EXPECT_EQ(j.at("format"), kSiteFormat);
+  EXPECT_EQ(j.at("version"), kSiteVersion);
+  nlohmann::json old_file = j;
+  old_file.erase("format");
+  old_file.erase("version");
+  EXPECT_TRUE(SiteFromJson(old_file).ok());
+  nlohmann::json future = j;
+  future["version"] = kSiteVersion + 1;
+  Expected<Site> e4 = SiteFromJson(future);
+  ASSERT_FALSE(e4.ok());
+  EXPECT_EQ(e4.status().code(), StatusCode::kParseError);
+  EXPECT_NE(e4.status().message().find("site.version"), std::string::npos) << e4.status().message();
+  // A bad quaternion names its field.
+  nlohmann::json bad_rotation = j;
+  bad_rotation["units"][0]["projector"]["table_from_projector"]["rotation_xyzw"] = {0, 0, 0, 2};
+  Expected<Site> e5 = SiteFromJson(bad_rotation);
+  ASSERT_FALSE(e5.ok());
+  EXPECT_NE(
+      e5.status().message().find("site.units[0].projector.table_from_projector.rotation_xyzw"),
+      std::string::npos)
+      << e5.status().message();
 
   // Throw-ratio form of intrinsics.
   nlohmann::json throw_form = j;
