@@ -3,15 +3,23 @@
 #include "proto/convert.h"
 
 namespace sandtable::coordinator {
+namespace {
+
+// Hits closer than this to the tip are ignored (a tip resting on a surface still hits it).
+constexpr double kMinDistance_m = 1e-9;
+
+}  // namespace
 
 CursorState ComputeCursor(const TrackerSample& sample, const Rigid3d& table_from_tracker,
-                          const RayCaster& scene, const WandOptions& options) {
+                          const RayCaster* scene, const WandOptions& options) {
   const Rigid3d table_from_sensor = table_from_tracker * sample.tracker_from_sensor;
   CursorState cursor;
   cursor.tip_in_table_m = table_from_sensor * options.tip_in_sensor_m;
   cursor.direction_in_table = (table_from_sensor.rotation * options.ray_in_sensor).normalized();
-  cursor.hit =
-      scene.Cast(cursor.tip_in_table_m, cursor.direction_in_table, 1e-9, options.max_distance_m);
+  if (scene) {
+    cursor.hit = scene->Intersect(cursor.tip_in_table_m, cursor.direction_in_table, kMinDistance_m,
+                                  options.max_distance_m);
+  }
   cursor.button_pressed = sample.button_pressed;
   cursor.sensor_index = sample.sensor_index;
   return cursor;

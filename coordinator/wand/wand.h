@@ -1,6 +1,7 @@
 // Wand: from a tracker sample to the cursor on the scene (TR09-017 4.4): the wand pose is
 // taken to the table frame with table_from_tracker, its ray (from the tip along the pointing
-// axis) is cast against the scene, giving the cursor point and surface normal.
+// axis) is cast against the scene (common/scene RayCaster), giving the cursor point and the
+// surface normal (facing the wand).
 //
 // Conventions (documented in docs/coordinator.md): tip_in_sensor_m is the tip's offset in the
 // sensor frame (0 for a sensor at the tip); the pointing axis is ray_in_sensor (default +x of
@@ -12,8 +13,8 @@
 #include <Eigen/Core>
 
 #include "common/geometry/rigid3.h"
+#include "common/scene/ray_caster.h"
 #include "coordinator/tracker/tracker_source.h"
-#include "coordinator/wand/ray_caster.h"
 #include "proto/events.pb.h"
 
 namespace sandtable::coordinator {
@@ -27,13 +28,14 @@ struct WandOptions {
 struct CursorState {
   Eigen::Vector3d tip_in_table_m = Eigen::Vector3d::Zero();
   Eigen::Vector3d direction_in_table = Eigen::Vector3d::UnitX();  // unit
-  std::optional<RayHit> hit;
+  std::optional<RayHit> hit;  // closest hit within (0, max_distance_m]; nullopt: none
   bool button_pressed = false;
   uint32_t sensor_index = 0;
 };
 
+// `scene` nullptr: no scene (the cursor never hits).
 CursorState ComputeCursor(const TrackerSample& sample, const Rigid3d& table_from_tracker,
-                          const RayCaster& scene, const WandOptions& options = {});
+                          const RayCaster* scene, const WandOptions& options = {});
 
 // The published event (sample_time_ns: coordinator clock).
 wire::Cursor ToWire(const CursorState& cursor, int64_t sample_time_ns);

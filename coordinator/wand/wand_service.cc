@@ -11,10 +11,18 @@
 namespace sandtable::coordinator {
 namespace {
 
-RayCaster BuildScene(double half_extent_m, std::vector<Eigen::Vector3d> positions,
-                     std::vector<Eigen::Vector3i> triangles) {
+// The table plane plus the given triangles, as a Scene (float vertices) and its caster.
+Expected<std::unique_ptr<RayCaster>> BuildScene(double half_extent_m,
+                                                std::vector<Eigen::Vector3d> positions,
+                                                std::vector<Eigen::Vector3i> triangles) {
   AppendTablePlane(half_extent_m, &positions, &triangles);
-  return RayCaster(std::move(positions), std::move(triangles));
+  auto scene = std::make_shared<Scene>();
+  scene->positions_in_table_m.reserve(positions.size());
+  for (const Eigen::Vector3d& p : positions) scene->positions_in_table_m.push_back(p.cast<float>());
+  scene->triangles = std::move(triangles);
+  scene->triangle_material.assign(scene->triangles.size(), 0);
+  scene->materials.push_back(Material{"wand scene", {1.0, 1.0, 1.0, 1.0}, -1});
+  return RayCaster::Create(std::move(scene));
 }
 
 }  // namespace
@@ -44,12 +52,18 @@ void AppendTablePlane(double half_extent_m, std::vector<Eigen::Vector3d>* positi
 WandService::WandService(std::unique_ptr<TrackerSource> source, WandServiceOptions options,
                          std::vector<Eigen::Vector3d> extra_positions_in_table_m,
                          std::vector<Eigen::Vector3i> extra_triangles)
-    : source_(std::move(source)),
-      options_(std::move(options)),
-      scene_(BuildScene(options_.scene_half_extent_m, std::move(extra_positions_in_table_m),
-                        std::move(extra_triangles))) {
+    : source_(std::move(source)), options_(std::move(options)) {
   ST_CHECK(source_ != nullptr) << "WandService needs a tracker source";
   ST_CHECK(options_.Check().ok()) << options_.Check().ToString();
+  Expected<std::unique_ptr<RayCaster>> scene =
+      BuildScene(options_.scene_half_extent_m, std::move(extra_positions_in_table_m),
+                 std::move(extra_triangles));
+  if (scene.ok()) {
+    scene_ = std::move(*scene);
+  } else {
+    scene_status_ = scene.status().WithContext("wand scene");
+    ST_LOG(kError) << scene_status_.ToString() << "; cursors will hit nothing";
+  }
   last_state_ = source_->state();
 }
 
@@ -87,7 +101,7 @@ std::vector<wire::Envelope> WandService::PollEvents(int64_t now_ns) {
     events.push_back(std::move(pose));
 
     const CursorState cursor =
-        ComputeCursor(sample, options_.table_from_tracker, scene_, options_.wand);
+        ComputeCursor(sample, options_.table_from_tracker, scene_.get(), options_.wand);
     if (cursor.hit) ++counters_.cursor_hits;
     if (painter_) {
       for (wire::AnnotationEvent& e : painter_->OnCursor(cursor, next_id_floor_())) {

@@ -13,7 +13,10 @@
 // t_0) s: the instant the sample is due, independent of step jitter.
 //
 // Frames and units: table frame, metres. Scene: the table plane z = 0 as a square of half
-// side scene_half_extent_m (two triangles), plus whatever triangles are added (AppendBox etc.).
+// side scene_half_extent_m (two triangles), plus whatever triangles are added (the glTF
+// scene's), cast with the common RayCaster (Embree; vertices stored in float, as glTF has
+// them). Should the caster not start (Embree unavailable), the service logs it, reports it in
+// scene_status() and publishes cursors that hit nothing; poses still go out.
 #pragma once
 
 #include <cstdint>
@@ -26,11 +29,11 @@
 #include <Eigen/Core>
 
 #include "common/geometry/rigid3.h"
+#include "common/scene/ray_caster.h"
 #include "coordinator/annotations/annotation_service.h"
 #include "coordinator/tracker/tracker_calibration.h"  // LoadTableFromTracker (its file)
 #include "coordinator/membership/coordinator_server.h"
 #include "coordinator/tracker/tracker_source.h"
-#include "coordinator/wand/ray_caster.h"
 #include "coordinator/wand/wand.h"
 #include "coordinator/wand/wand_painter.h"
 
@@ -58,7 +61,9 @@ void AppendTablePlane(double half_extent_m, std::vector<Eigen::Vector3d>* positi
 
 class WandService : public CoordinatorService {
  public:
-  // `extra_triangles` (with `extra_positions_in_table_m`) are added to the table plane.
+  // `extra_triangles` (with `extra_positions_in_table_m`) are added to the table plane; their
+  // indices must be valid and positions finite (LoadGltfScene checks both), else the scene is
+  // left out (scene_status() says why).
   WandService(std::unique_ptr<TrackerSource> source, WandServiceOptions options,
               std::vector<Eigen::Vector3d> extra_positions_in_table_m = {},
               std::vector<Eigen::Vector3i> extra_triangles = {});
@@ -85,12 +90,15 @@ class WandService : public CoordinatorService {
   const WandPainter* painter() const { return painter_ ? &*painter_ : nullptr; }
   const TrackerSource& source() const { return *source_; }
   const WandCounters& counters() const { return counters_; }
-  const RayCaster& scene() const { return scene_; }
+  // The wand's scene; nullptr when it could not be built (see scene_status()).
+  const RayCaster* scene() const { return scene_.get(); }
+  const Status& scene_status() const { return scene_status_; }
 
  private:
   std::unique_ptr<TrackerSource> source_;
   WandServiceOptions options_;
-  RayCaster scene_;
+  std::unique_ptr<RayCaster> scene_;
+  Status scene_status_;
   WandCounters counters_;
   bool anchored_ = false;
   int64_t anchor_ns_ = 0;

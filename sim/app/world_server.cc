@@ -225,8 +225,11 @@ wire::Envelope WorldServer::GroundTruth(const wire::GroundTruthRequest& request)
     Expected<ProjectorTruth> truth = world_->ProjectorTruthAtPoint(request.projector_id(), point);
     if (!truth.ok()) return fail(truth.status().message());
     wire::GroundTruthSample* sample = reply->add_samples();
-    sample->mutable_projector_px()->set_x(truth->sample.pixel_px.x());
-    sample->mutable_projector_px()->set_y(truth->sample.pixel_px.y());
+    sample->set_projectable(truth->sample.projectable);
+    if (truth->sample.projectable) {
+      sample->mutable_projector_px()->set_x(truth->sample.pixel_px.x());
+      sample->mutable_projector_px()->set_y(truth->sample.pixel_px.y());
+    }
     sample->set_visible(truth->sample.visible);
     sample->set_luminance_cd_per_m2(truth->luminance_nits);
   }

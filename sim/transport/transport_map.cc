@@ -44,25 +44,16 @@ struct ProjectorPose {
   }
 };
 
-// Everything of SampleProjector except the shadow ray: false when the projector cannot light
-// the point (behind the surface or the projector, outside its image). On true, *out holds the
-// sample of a visible point.
-bool ProjectorGeometryAt(const ProjectorSpec& projector, const ProjectorPose& pose,
-                         const Eigen::Vector3d& point, const Eigen::Vector3d& normal,
-                         ProjectorSample* out) {
-  const Eigen::Vector3d& centre = pose.centre_in_table_m;
-  const Eigen::Vector3d to_projector = centre - point;
-  const double d = to_projector.norm();
-  if (!(d > 0)) return false;
-  const double cos_theta = normal.dot(to_projector) / d;
-  if (cos_theta <= 0.0) return false;
+// The projection of a point into the projector: `distance_m` (to the centre) always; on true
+// (the point is projectable), projectable, pixel_px (maybe outside the image) and the blur.
+bool ProjectionAt(const ProjectorSpec& projector, const ProjectorPose& pose,
+                  const Eigen::Vector3d& point, double distance_m, ProjectorSample* out) {
+  out->distance_m = distance_m;
   const Eigen::Vector3d x_in_projector = pose.ToProjector(point);
   const std::optional<Eigen::Vector2d> pixel = projector.model.Project(x_in_projector);
-  if (!pixel || !projector.model.InImage(*pixel)) return false;
-  out->visible = true;
+  if (!pixel) return false;
+  out->projectable = true;
   out->pixel_px = *pixel;
-  out->distance_m = d;
-  out->gain_per_m2 = cos_theta / (d * d);
   out->blur_px = 0.0;
   if (projector.aperture_diameter_m > 0 && projector.focus_distance_m > 0) {
     // Thin lens focused at s: the blur circle of a point at depth z (along the axis) on the
@@ -76,13 +67,38 @@ bool ProjectorGeometryAt(const ProjectorSpec& projector, const ProjectorPose& po
   return true;
 }
 
+// Everything of SampleProjector except the shadow ray: false when the projector cannot light
+// the point (behind the surface or the projector, outside its image). On true, *out holds the
+// sample of a visible point (visible is set only then). The facing test comes first: it is
+// cheap and rejects half of the candidates before their projection.
+bool ProjectorGeometryAt(const ProjectorSpec& projector, const ProjectorPose& pose,
+                         const Eigen::Vector3d& point, const Eigen::Vector3d& normal,
+                         ProjectorSample* out) {
+  const Eigen::Vector3d to_projector = pose.centre_in_table_m - point;
+  const double d = to_projector.norm();
+  if (!(d > 0)) return false;
+  const double cos_theta = normal.dot(to_projector) / d;
+  if (cos_theta <= 0.0) return false;
+  if (!ProjectionAt(projector, pose, point, d, out) || !projector.model.InImage(out->pixel_px)) {
+    return false;
+  }
+  out->visible = true;
+  out->gain_per_m2 = cos_theta / (d * d);
+  return true;
+}
+
 ProjectorSample SampleProjectorAt(const ProjectorSpec& projector, const ProjectorPose& pose,
                                   const RayCaster& caster, const Eigen::Vector3d& point,
                                   const Eigen::Vector3d& normal) {
-  ProjectorSample out;
-  if (!ProjectorGeometryAt(projector, pose, point, normal, &out)) return ProjectorSample();
-  if (caster.Occluded(point, pose.centre_in_table_m, kShadowEpsilon_m)) return ProjectorSample();
-  return out;
+  ProjectorSample lit;
+  if (ProjectorGeometryAt(projector, pose, point, normal, &lit) &&
+      !caster.Occluded(point, pose.centre_in_table_m, kShadowEpsilon_m)) {
+    return lit;
+  }
+  // Not lit: the projection alone (also outside the image, grazing or shadowed).
+  ProjectorSample unlit;
+  ProjectionAt(projector, pose, point, (pose.centre_in_table_m - point).norm(), &unlit);
+  return unlit;
 }
 
 // One view pixel's surface point and footprint (see BuildTransportMap).
@@ -99,6 +115,13 @@ struct PixelSurface {
 ProjectorSample SampleProjector(const ProjectorSpec& projector, const RayCaster& caster,
                                 const Eigen::Vector3d& point, const Eigen::Vector3d& normal) {
   return SampleProjectorAt(projector, ProjectorPose(projector), caster, point, normal);
+}
+
+ProjectorSample ProjectPoint(const ProjectorSpec& projector, const Eigen::Vector3d& point) {
+  const ProjectorPose pose(projector);
+  ProjectorSample out;
+  ProjectionAt(projector, pose, point, (pose.centre_in_table_m - point).norm(), &out);
+  return out;
 }
 
 size_t TransportMap::NumEntries() const {
@@ -150,9 +173,12 @@ Expected<TransportMap> BuildTransportMap(const Site& site, const RayCaster& cast
     // At most one entry per pixel and projector: reserving that (untouched pages cost
     // nothing) avoids regrowing and copying the lists.
     for (auto& list : band_entries[band]) list.reserve(static_cast<size_t>(y1 - y0) * width);
-    // Per row: first every pixel's surface point (primary rays), then per projector the
-    // candidates' shadow rays as one coherent batch (they all end at the projector centre),
-    // then the entries in pixel order.
+    // Per row: first every pixel's surface point (primary rays, one coherent batch), then per
+    // projector the candidates' shadow rays as one coherent batch (they all end at the
+    // projector centre), then the entries in pixel order.
+    std::vector<Ray> rays;  // the row's primary rays, one coherent batch
+    std::vector<int> ray_x;
+    std::vector<std::optional<RayHit>> hits;
     std::vector<PixelSurface> surfaces;
     std::vector<ProjectorSample> samples;
     std::vector<Eigen::Vector3d> shadow_from;
@@ -160,19 +186,28 @@ Expected<TransportMap> BuildTransportMap(const Site& site, const RayCaster& cast
     surfaces.reserve(width);
     for (int y = y0; y < y1; ++y) {
       surfaces.clear();
+      rays.clear();
+      ray_x.clear();
       for (int x = 0; x < width; ++x) {
+        Ray ray;
+        if (!view.Ray(x, y, &ray.origin_in_table_m, &ray.direction_in_table)) continue;
+        rays.push_back(ray);
+        ray_x.push_back(x);
+      }
+      caster.IntersectBatch(rays, &hits, /*coherent=*/true);
+      for (size_t r = 0; r < rays.size(); ++r) {
+        const std::optional<RayHit>& hit = hits[r];
+        if (!hit) continue;
+        const int x = ray_x[r];
         const size_t pixel = static_cast<size_t>(y) * width + x;
-        Eigen::Vector3d origin, direction;
-        if (!view.Ray(x, y, &origin, &direction)) continue;
-        const RayHit hit = caster.Intersect(origin, direction);
-        if (!hit.hit) continue;
+        const Eigen::Vector3d& origin = rays[r].origin_in_table_m;
+        const Eigen::Vector3d& direction = rays[r].direction_in_table;
         PixelSurface surface;
         surface.x = x;
-        surface.point = origin + hit.distance_m * direction.normalized();
+        surface.point = hit->point_in_table_m;
         // (direction keeps the scale of View::Ray so the ray steps above apply to it.)
-        surface.normal = scene.FaceNormal(hit.triangle);
-        if (surface.normal.dot(direction) > 0) surface.normal = -surface.normal;  // face the view
-        surface.albedo = scene.AlbedoAt(hit.triangle, hit.u, hit.v);
+        surface.normal = hit->normal_in_table;  // faces the view
+        surface.albedo = scene.AlbedoAt(hit->triangle, hit->u, hit->v);
         map.hit[pixel] = 1;
         map.albedo[pixel] = static_cast<float>(surface.albedo);
         map.point_in_table_m[pixel] = surface.point.cast<float>();

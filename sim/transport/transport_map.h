@@ -1,13 +1,14 @@
 // Static light transport from every projector to the surface points a view sees.
 //
-// For each pixel of a View, the nearest surface point (Embree), its normal (turned to face the
-// viewer), its albedo, and for each projector that lights it: the projector pixel (through the
-// projector's TRUE model, distortion included), visibility (in front, inside the image, facing
-// the projector, shadow ray to the projector centre unobstructed), and the geometric gain
-// cos(theta) / d^2 (theta: incidence angle at the surface, d: distance to the projector centre,
-// in m). Built once per camera; a capture is then a gather (capture.h).
-// Cost: one primary ray + one shadow ray per projector per pixel; rows are split over
-// `num_threads` threads (0 = hardware concurrency). Deterministic whatever the thread count.
+// For each pixel of a View, the nearest surface point (common/scene RayCaster, Embree), its
+// normal (turned to face the viewer), its albedo, and for each projector that lights it: the
+// projector pixel (through the projector's TRUE model, distortion included), visibility (in
+// front, inside the image, facing the projector, shadow ray to the projector centre
+// unobstructed), and the geometric gain cos(theta) / d^2 (theta: incidence angle at the
+// surface, d: distance to the projector centre, in m). Built once per camera; a capture is then a
+// gather (capture.h). Cost: one primary ray + one shadow ray per projector per pixel; rows are
+// split over `num_threads` threads (0 = hardware concurrency). Deterministic whatever the thread
+// count.
 #pragma once
 
 #include <cstdint>
@@ -17,26 +18,40 @@
 #include <Eigen/Core>
 
 #include "common/base/status.h"
+#include "common/scene/ray_caster.h"
 #include "sim/site/site.h"
-#include "sim/transport/ray_caster.h"
 #include "sim/transport/view.h"
 
 namespace sandtable::sim {
 
 // What one projector contributes at one surface point.
+// `projectable` and `visible` are separate facts: a point can have a true pixel and not be lit
+// (outside the image, grazing or facing away, shadowed), and (0, 0) is a valid pixel, so
+// pixel_px means something exactly when `projectable` is true.
 struct ProjectorSample {
+  // The point has a true projector pixel: it lies in front of the projector (z > 0 in the
+  // projector frame) and inside the domain of its TRUE model (distortion included).
+  bool projectable = false;
+  // Lit by the projector: projectable, pixel inside the image, facing the projector
+  // (cos(theta) > 0) and the segment to the projector centre unobstructed.
   bool visible = false;
-  Eigen::Vector2d pixel_px = Eigen::Vector2d::Zero();  // true projector pixel (valid if visible)
+  Eigen::Vector2d pixel_px = Eigen::Vector2d::Zero();  // true pixel; zero unless projectable,
+                                                       // may lie outside the image
   double gain_per_m2 = 0.0;                            // cos(theta) / d^2, 0 when not visible
-  double distance_m = 0.0;
-  double blur_px = 0.0;  // defocus blur circle diameter, projector pixels
+  double distance_m = 0.0;                             // to the projector centre (always set)
+  double blur_px = 0.0;  // defocus blur circle diameter, projector pixels (0 unless projectable)
 };
 
 // Samples one projector at a surface point. `normal` must face the observer; a projector
-// behind the surface (cos(theta) <= 0) does not light it.
+// behind the surface (cos(theta) <= 0) does not light it. The pixel is filled whenever the
+// point is projectable, lit or not.
 ProjectorSample SampleProjector(const ProjectorSpec& projector, const RayCaster& caster,
                                 const Eigen::Vector3d& point_in_table_m,
                                 const Eigen::Vector3d& normal_in_table);
+// The projection alone (projectable, pixel, distance, blur; never visible): what the projector
+// would do at the point if nothing else mattered.
+ProjectorSample ProjectPoint(const ProjectorSpec& projector,
+                             const Eigen::Vector3d& point_in_table_m);
 
 // A camera pixel integrates the projector's piecewise-constant pixels over its footprint
 // (point sampling aliases edges and moved checkerboard corners by up to 0.5 px). The footprint

@@ -11,10 +11,10 @@ Expected<std::unique_ptr<World>> World::Create(Site site, Scene scene,
   ST_RETURN_IF_ERROR(site.Check());
   std::unique_ptr<World> world(new World());
   world->site_ = std::move(site);
-  world->scene_ = std::make_unique<Scene>(std::move(scene));
+  world->scene_ = std::make_shared<const Scene>(std::move(scene));
   world->options_ = options;
   Expected<std::unique_ptr<RayCaster>> caster =
-      RayCaster::Create(*world->scene_, options.embree_config);
+      RayCaster::Create(world->scene_, options.embree_config);
   if (!caster.ok()) return caster.status();
   world->caster_ = std::move(*caster);
   for (const UnitSpec& unit : world->site_.units) {
@@ -102,13 +102,13 @@ Expected<std::vector<float>> World::RenderLuminance(const View& view) {
 
 Expected<SurfaceTruth> World::TruthAlongRay(const Eigen::Vector3d& origin,
                                             const Eigen::Vector3d& direction) const {
-  const RayHit hit = caster_->Intersect(origin, direction);
-  if (!hit.hit) return NotFoundError("world: the ray hits no surface");
+  const std::optional<RayHit> hit = caster_->Intersect(origin, direction);
+  if (!hit) return NotFoundError("world: the ray hits no surface");
   SurfaceTruth truth;
-  truth.point_in_table_m = origin + hit.distance_m * direction.normalized();
-  truth.normal_in_table = scene_->FaceNormal(hit.triangle);
-  if (truth.normal_in_table.dot(direction) > 0) truth.normal_in_table = -truth.normal_in_table;
-  truth.albedo = scene_->AlbedoAt(hit.triangle, hit.u, hit.v);
+  truth.point_in_table_m = hit->point_in_table_m;
+  truth.normal_in_table = hit->normal_in_table;  // faces the ray's origin
+  truth.triangle = hit->triangle;
+  truth.albedo = scene_->AlbedoAt(hit->triangle, hit->u, hit->v);
   truth.luminance_nits = truth.albedo * site_.ambient_luminance_nits;
   for (size_t i = 0; i < site_.units.size(); ++i) {
     const ProjectorSpec& projector = site_.units[i].projector;
@@ -136,19 +136,18 @@ Expected<ProjectorTruth> World::ProjectorTruthAtPoint(NodeId unit, const Eigen::
   if (!index.ok()) return index.status();
   const ProjectorSpec& projector = site_.units[*index].projector;
   const Eigen::Vector3d centre = projector.table_from_projector.translation;
-  ProjectorTruth out;
-  out.unit = unit;
   // The first surface on the projector's ray towards the point: if it is the point itself,
-  // the full truth there (visibility includes facing and the image bounds).
+  // the full truth there (visibility includes facing and the image bounds; the pixel is the
+  // projection whether lit or not).
   Expected<SurfaceTruth> truth = TruthAlongRay(centre, point - centre);
   if (truth.ok() && (truth->point_in_table_m - point).norm() <= tolerance_m) {
     return truth->projectors[*index];
   }
-  // Shadowed (or not on a surface): not lit, but the true pixel is still the projection.
-  const std::optional<Eigen::Vector2d> pixel =
-      projector.model.Project(projector.table_from_projector.Inverse() * point);
-  if (pixel) out.sample.pixel_px = *pixel;
-  out.sample.distance_m = (point - centre).norm();
+  // Shadowed, behind the projector or not on a surface: not lit; the true pixel is the
+  // projection where there is one.
+  ProjectorTruth out;
+  out.unit = unit;
+  out.sample = ProjectPoint(projector, point);
   return out;
 }
 

@@ -15,10 +15,10 @@
 
 #include "common/base/ids.h"
 #include "common/base/status.h"
+#include "common/scene/ray_caster.h"
 #include "common/scene/scene.h"
 #include "sim/site/site.h"
 #include "sim/transport/capture.h"
-#include "sim/transport/ray_caster.h"
 #include "sim/transport/transport_map.h"
 #include "sim/transport/view.h"
 
@@ -39,6 +39,7 @@ struct ProjectorTruth {
 struct SurfaceTruth {
   Eigen::Vector3d point_in_table_m = Eigen::Vector3d::Zero();
   Eigen::Vector3d normal_in_table = Eigen::Vector3d::UnitZ();  // facing the query ray's origin
+  int triangle = -1;                                           // hit triangle (Scene::triangles)
   double albedo = 0.0;
   std::vector<ProjectorTruth> projectors;  // site.units order
   double luminance_nits = 0.0;             // all projectors + ambient
@@ -74,11 +75,13 @@ class World {
                                        const Eigen::Vector3d& direction) const;
   // The surface seen from straight above table point (x, y).
   Expected<SurfaceTruth> TruthAtTableXY(const Eigen::Vector2d& xy_in_table_m) const;
-  // What projector `unit` does at a surface point: its true pixel (the projection of the
-  // point, also when shadowed; zero when behind the projector), whether it lights the point
-  // (the projector's ray towards the point first meets the surface within `tolerance_m` of
-  // it), gain, and its luminance contribution under the current frame. NOT_FOUND for an
-  // unknown unit.
+  // What projector `unit` does at a surface point (ProjectorSample): whether the point has a
+  // true pixel (`projectable`: in front of the projector and inside its model's domain; the
+  // pixel is then the projection of the point, also when it is outside the image, grazing,
+  // facing away or shadowed; behind the projector there is none), whether it lights the point
+  // (`visible`: the projector's ray towards the point first meets the surface within
+  // `tolerance_m` of it, inside the image, at incidence under 90 degrees), gain, and its
+  // luminance contribution under the current frame. NOT_FOUND for an unknown unit.
   Expected<ProjectorTruth> ProjectorTruthAtPoint(NodeId unit,
                                                  const Eigen::Vector3d& point_in_table_m,
                                                  double tolerance_m = 1e-4) const;
@@ -89,7 +92,7 @@ class World {
   std::vector<const LinearFrame*> CurrentFrames() const;
 
   Site site_;
-  std::unique_ptr<Scene> scene_;  // stable address for the caster
+  std::shared_ptr<const Scene> scene_;  // shared with the caster
   std::unique_ptr<RayCaster> caster_;
   WorldOptions options_;
   std::vector<LinearFrame> frames_;  // per unit
