@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# Fuzzes Sandtable's message handlers (tests/fuzz/message_handlers.h) for a bounded time.
+# Fuzzes Sandtable's message handlers (tests/fuzz/message_handlers.h) and the glTF loader
+# (common/scene/gltf_loader.h, from memory) for a bounded time.
 #   deploy/fuzz.sh [seconds=60] [build_dir=build-fuzz]
+#   FUZZ_GLTF_SECONDS (default 20): the glTF loader's share, run after the message handlers.
 # With clang + libFuzzer (Debian: clang-14, libclang-rt-14-dev) it builds
 # fuzz_message_handlers with ASan/UBSan and runs it over a copy of tests/fuzz/corpus/ for the
 # given time; any crash is a failure (exit != 0) and leaves crash-* files in the build dir.
@@ -12,6 +14,7 @@ BUILD_DIR="${2:-build-fuzz}"
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$ROOT"
 JOBS="${FUZZ_JOBS:-2}"
+GLTF_SECONDS="${FUZZ_GLTF_SECONDS:-20}"
 
 CLANGXX="$(command -v clang++-14 || command -v clang++ || true)"
 CLANGCC="$(command -v clang-14 || command -v clang || true)"
@@ -29,16 +32,24 @@ if [ "$have_libfuzzer" = 1 ]; then
   cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
     -DCMAKE_C_COMPILER="$CLANGCC" -DCMAKE_CXX_COMPILER="$CLANGXX" \
     -DSANDTABLE_BUILD_FUZZERS=ON -DSANDTABLE_BUILD_BENCHMARKS=OFF > /dev/null
-  ninja -C "$BUILD_DIR" -j"$JOBS" fuzz_message_handlers
+  ninja -C "$BUILD_DIR" -j"$JOBS" fuzz_message_handlers fuzz_gltf_loader
   work="$BUILD_DIR/fuzz-corpus"
   mkdir -p "$work"
   cp -n tests/fuzz/corpus/* "$work/" 2>/dev/null || true
   (cd "$BUILD_DIR" && ./tests/fuzz/fuzz_message_handlers -max_total_time="$SECONDS_TO_RUN" \
      -max_len=65536 -rss_limit_mb=2048 -print_final_stats=1 fuzz-corpus)
-  echo "fuzz: no findings in ${SECONDS_TO_RUN} s"
+  echo "fuzz: glTF loader for ${GLTF_SECONDS} s"
+  gltf_work="$BUILD_DIR/fuzz-gltf-corpus"
+  mkdir -p "$gltf_work"
+  cp -n tests/fuzz/gltf_corpus/* "$gltf_work/" 2>/dev/null || true
+  # -timeout: one input taking over 10 s is a finding (a hang), as is growing past 2 GB.
+  (cd "$BUILD_DIR" && ./tests/fuzz/fuzz_gltf_loader -max_total_time="$GLTF_SECONDS" \
+     -max_len=65536 -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 fuzz-gltf-corpus)
+  echo "fuzz: no findings in ${SECONDS_TO_RUN} s + ${GLTF_SECONDS} s (glTF)"
 else
-  echo "fuzz: libFuzzer not available; replaying tests/fuzz/corpus"
+  echo "fuzz: libFuzzer not available; replaying tests/fuzz/corpus and tests/fuzz/gltf_corpus"
   cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo > /dev/null
-  ninja -C "$BUILD_DIR" -j"$JOBS" fuzz_corpus_replay_test
+  ninja -C "$BUILD_DIR" -j"$JOBS" fuzz_corpus_replay_test fuzz_gltf_corpus_replay_test
   "$BUILD_DIR/tests/fuzz/fuzz_corpus_replay_test"
+  "$BUILD_DIR/tests/fuzz/fuzz_gltf_corpus_replay_test"
 fi
