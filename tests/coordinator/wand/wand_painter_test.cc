@@ -18,6 +18,8 @@
 namespace sandtable::coordinator {
 namespace {
 
+using cluster::Stroke;
+
 constexpr int64_t kStart_ns = 7'000'000'000;
 // Points are float on the wire: ~3e-8 m resolution at 0.3 m; the path itself is exact in double.
 constexpr double kFloatPoint_m = 1e-7;
