@@ -31,8 +31,8 @@
 #include "common/geometry/rigid3.h"
 #include "common/scene/ray_caster.h"
 #include "coordinator/annotations/annotation_service.h"
-#include "coordinator/tracker/tracker_calibration.h"  // LoadTableFromTracker (its file)
 #include "coordinator/membership/coordinator_server.h"
+#include "coordinator/tracker/tracker_calibration.h"  // LoadTableFromTracker (its file)
 #include "coordinator/tracker/tracker_source.h"
 #include "coordinator/wand/wand.h"
 #include "coordinator/wand/wand_painter.h"

@@ -146,7 +146,7 @@ TEST(PaletteLayoutTest, SwatchesCoverTheRingSegmentInOrder) {
   EXPECT_FALSE(palette.SwatchAt({0.0, 0.0, 0.0}).has_value());    // table centre
   EXPECT_FALSE(palette.SwatchAt({0.0, 0.95, 0.0}).has_value());   // far rim, outside the segment
   EXPECT_FALSE(palette.SwatchAt({0.0, -1.05, 0.0}).has_value());  // beyond the outer radius
-  PaletteLayout wrapped;                              // a segment across +-180 deg
+  PaletteLayout wrapped;                                          // a segment across +-180 deg
   wrapped.start_angle_deg = 150.0;
   wrapped.end_angle_deg = 210.0;
   EXPECT_EQ(wrapped.SwatchAt({-0.95, -0.01, 0.0}).value_or(99), 3u);
