@@ -249,6 +249,10 @@ Status CheckGlbLayout(const uint8_t* b, size_t n) {
     return ParseError("binary glTF truncated: header says " + Str(length) + " bytes, file has " +
                       Str(n));
   }
+  if (json_length > kMaxGltfJsonBytes) {
+    return ParseError("binary glTF: JSON chunk of " + Str(json_length) +
+                      " bytes, more than kMaxGltfJsonBytes = " + Str(kMaxGltfJsonBytes));
+  }
   if (json_type != 0x4E4F534Au || uint64_t{json_length} + 20 > length || json_length == 0) {
     return ParseError("binary glTF: first chunk must be JSON within the file's " + Str(length) +
                       " bytes (chunk length " + Str(json_length) + ")");
@@ -791,6 +795,11 @@ Expected<Scene> LoadFromBytes(const uint8_t* bytes, size_t size, const std::stri
                    " bytes, more than kMaxGltfFileBytes = " + Str(kMaxGltfFileBytes));
   }
   const bool binary = size >= 4 && std::memcmp(bytes, "glTF", 4) == 0;
+  if (!binary && size > kMaxGltfJsonBytes) {
+    return ParseError(file + ": " + Str(size) +
+                      " bytes of glTF JSON, more than kMaxGltfJsonBytes = " +
+                      Str(kMaxGltfJsonBytes) + " (use .glb or an external .bin for large buffers)");
+  }
   Status layout = binary ? CheckGlbLayout(bytes, size) : CheckJsonDepth(bytes, size);
   if (!layout.ok()) return layout.WithContext(file);
 

@@ -34,19 +34,29 @@
 
 namespace sandtable {
 
-// Limits (documented in docs/reliability.md, "glTF scenes").
-inline constexpr uint64_t kMaxGltfFileBytes = uint64_t{512} << 20;       // one file (.gltf, .glb,
-                                                                         // external buffer/image)
-inline constexpr uint64_t kMaxGltfTotalBytes = uint64_t{1} << 30;        // all files of one load
-inline constexpr int kMaxGltfJsonDepth = 128;                            // nesting of [ and {
-inline constexpr int kMaxNodeDepth = 1000;                               // root has depth 1
-inline constexpr uint64_t kMaxInstances = 1'000'000;                     // expanded node visits
-inline constexpr uint64_t kMaxSceneTriangles = 20'000'000;               // expanded scene
-inline constexpr uint64_t kMaxSceneVertices = 30'000'000;                // expanded scene
-inline constexpr double kMaxCoordinate_m = 1e4;                          // |x|,|y|,|z| in table
-inline constexpr int kMaxTextureSidePx = 16384;                          // width and height
-inline constexpr uint64_t kMaxTexturePixels = uint64_t{64} << 20;        // one image
-inline constexpr uint64_t kMaxSceneTexturePixels = uint64_t{128} << 20;  // all images
+// Limits (documented in docs/reliability.md, "glTF scenes"). Past any of them the load is
+// refused with a message naming the limit.
+// Bytes of one file read: the .gltf/.glb and each external buffer or image.
+inline constexpr uint64_t kMaxGltfFileBytes = uint64_t{512} << 20;
+// Bytes of all files one load reads together.
+inline constexpr uint64_t kMaxGltfTotalBytes = uint64_t{1} << 30;
+// Bytes of JSON: a .gltf file (data URIs included) or the JSON chunk of a .glb.
+inline constexpr uint64_t kMaxGltfJsonBytes = uint64_t{64} << 20;
+// Nesting of JSON arrays and objects (glTF itself needs about 6).
+inline constexpr int kMaxGltfJsonDepth = 128;
+// Depth of the node hierarchy (a root node has depth 1).
+inline constexpr int kMaxNodeDepth = 1000;
+// Node instances of the expanded hierarchy (a node reached by k paths counts k times).
+inline constexpr uint64_t kMaxInstances = 1'000'000;
+// Triangles and vertices of the expanded scene.
+inline constexpr uint64_t kMaxSceneTriangles = 20'000'000;
+inline constexpr uint64_t kMaxSceneVertices = 30'000'000;
+// Every vertex in the table frame (after the node transforms and the scale): |x|, |y|, |z|.
+inline constexpr double kMaxCoordinate_m = 1e4;
+// Images, from their PNG/JPEG headers before decoding: each side, one image, all images.
+inline constexpr int kMaxTextureSidePx = 16384;
+inline constexpr uint64_t kMaxTexturePixels = uint64_t{64} << 20;
+inline constexpr uint64_t kMaxSceneTexturePixels = uint64_t{128} << 20;
 
 struct GltfLoadOptions {
   double scale_m_per_unit = 1.0;  // glTF units to metres

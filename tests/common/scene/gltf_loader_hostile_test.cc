@@ -217,6 +217,21 @@ TEST(GltfHostile, ModestReuseIsInstanced) {
   EXPECT_EQ(report.num_instances, 31u);  // 1 + 2 + 4 + 8 + 16
 }
 
+TEST(GltfHostile, HalfAMillionInstancesLoadInBoundedTime) {
+  Doc d;
+  d.nodes = DoublingNodes(18);  // 2^19 - 1 instances, below kMaxInstances
+  GltfLoadReport report;
+  const auto start = std::chrono::steady_clock::now();
+  Expected<Scene> scene = LoadGltfSceneFromBytes(d.Json(), kName, {}, &report);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  ASSERT_TRUE(scene.ok()) << scene.status().ToString();
+  EXPECT_EQ(scene->NumTriangles(), 1 << 18);
+  EXPECT_EQ(report.num_instances, (uint64_t{1} << 19) - 1);
+  EXPECT_LT(seconds, kMaxLoadTime_s);
+  RecordProperty("seconds", std::to_string(seconds));
+}
+
 TEST(GltfHostile, ExpandedTrianglesOverLimit) {
   constexpr int kTriangles = 30000;  // x 2^10 instances = 30.7 M > kMaxSceneTriangles
   Doc d;
@@ -315,6 +330,22 @@ TEST(GltfHostile, TruncatedGlb) {
     Timed t = LoadBytes(bad, "box01.glb");
     EXPECT_LT(t.seconds, kMaxLoadTime_s);
   }
+}
+
+TEST(GltfHostile, FileOverSizeLimit) {
+  const std::string path = TempDir() + "/huge.glb";
+  { std::ofstream(path) << "glTF"; }
+  std::filesystem::resize_file(path, kMaxGltfFileBytes + 1);  // sparse: no disk used
+  Expected<Scene> scene = LoadGltfScene(path);
+  ASSERT_FALSE(scene.ok());
+  EXPECT_NE(scene.status().message().find("more than the limit"), std::string::npos)
+      << scene.status().message();
+  std::filesystem::remove(path);
+}
+
+TEST(GltfHostile, JsonOverSizeLimit) {
+  const std::string json = "{" + std::string(kMaxGltfJsonBytes, ' ') + "}";
+  ExpectRefused(LoadBytes(json), "kMaxGltfJsonBytes");
 }
 
 TEST(GltfHostile, DirectoryPath) {
