@@ -689,7 +689,7 @@ class Loader {
         if (!x_in_table.allFinite() ||
             x_in_table.head<3>().cwiseAbs().maxCoeff() > kMaxCoordinate_m) {
           std::ostringstream at_m;
-          at_m << x_in_table.head<3>().transpose();
+          at_m << x_in_table.x() << ", " << x_in_table.y() << ", " << x_in_table.z();
           return ParseError(what + ": vertex " + Str(i) + " at (" + at_m.str() +
                             ") m in the table frame, outside |x|, |y|, |z| <= kMaxCoordinate_m = " +
                             std::to_string(static_cast<int>(kMaxCoordinate_m)) + " m");
