@@ -1,10 +1,13 @@
 #!/usr/bin/env bash
-# Sandtable main job: installs dependencies, builds, and runs what the project can run today,
-# writing a report under out/demo/ (report.md plus CSV and PNG files).
+# Sandtable main job: installs dependencies, builds, and runs the site lab and the other demo
+# sections, writing a report under out/demo/ (report.md plus CSV and PNG files).
 #
-# The site lab (sandtable-lab: world + coordinator + N nodes on localhost, measured against the
-# world's ground truth) does not exist yet. Until it does, this runs the parts that exist and
-# says so in the report.
+# First section (deploy/demo_run.sh): the site lab on the default site and scene,
+#   sandtable-lab run --site sandtable-3 --scene sandtable --out out/demo/lab
+# (world + coordinator + one node per unit on localhost, measured against the world's ground
+# truth; its report is out/demo/lab/report.md, docs/lab.md). Then grid-8 over the city, the
+# world alone, structured light and unit calibration on real captures, the numerics sweeps and
+# the event latency, all summarised in out/demo/report.md.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # Its own build directory: deploy/test.sh configures build/ (tests on, -Werror); sharing it

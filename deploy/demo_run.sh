@@ -32,11 +32,18 @@ step() {  # step NAME COMMAND... ; logs to OUT/NAME.log, records status and seco
   fi
 }
 
+lab="$build/sim/lab/sandtable-lab"
 world="$build/sim/app/sandtable-world"
 node="$build/node/sandtable-node"
 bench="$build/tests/bench"
 
-# 1. The simulated world: a TR09-017 sand table lit white by three projectors.
+# 1. The site lab: the default site and scene as real processes (world, coordinator, one node
+#    per unit) on localhost, measured against the world's truth (docs/lab.md); then the
+#    ceiling-grid site over the city table.
+step lab "$lab" run --site sandtable-3 --scene sandtable --out "$out/lab" --progress plain
+step lab_grid8 "$lab" run --site grid-8 --scene city --out "$out/lab-grid8" --progress plain
+
+# 2. The simulated world alone: a TR09-017 sand table lit white by three projectors.
 step scene "$world" make-scene --preset sandtable --seed 1 -o "$out/scene.gltf"
 step site "$world" make-site --preset sandtable-3 --seed 1 -o "$out/site.json"
 step render_top "$world" render --site "$out/site.json" --scene "$out/scene.gltf" --white \
@@ -44,17 +51,17 @@ step render_top "$world" render --site "$out/site.json" --scene "$out/scene.gltf
 step render_camera0 "$world" render --site "$out/site.json" --scene "$out/scene.gltf" --white \
   --view camera:0 -o "$out/world_camera0_white.png"
 
-# 2. Structured light and unit calibration on the real procam captures.
+# 3. Structured light and unit calibration on the real procam captures.
 step structured_light "$bench/bench_structured_light" --data ../shared/data/procam-kamino410 \
   --out "$out" --repeats 5
 step calibrate_unit "$node" calibrate-unit --poses ../shared/data/procam-kamino410 \
   -o "$out/unit.json" --report "$out/unit_report.json"
 
-# 3. Geometry core: run time against error and breakdown sweeps, plotted.
+# 4. Geometry core: run time against error and breakdown sweeps, plotted.
 step numerics "$bench/sandtable_numerics_sweep" --out "$out/numerics"
 step numerics_plots bash tests/bench/plot_sweeps.sh "$out/numerics"
 
-# 4. Protocol: event fan-out latency coordinator -> 3 nodes at 120 Hz over loopback.
+# 5. Protocol: event fan-out latency coordinator -> 3 nodes at 120 Hz over loopback.
 step event_latency "$bench/bench_event_latency" 1200 120 3
 
 python3 "$root/deploy/demo_report.py" "$out"
