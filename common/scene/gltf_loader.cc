@@ -95,7 +95,8 @@ struct LoadContext {
   bool decode_images = true;
   uint64_t bytes_read = 0;
   uint64_t texture_pixels = 0;
-  std::string first_error;  // the first refusal in a callback, for the final message
+  const tinygltf::Model* model = nullptr;  // being filled: buffers and views come before images
+  std::string first_error;                 // the first refusal in a callback, for the final message
   void Refuse(const std::string& why) {
     if (first_error.empty()) first_error = why;
   }
@@ -180,8 +181,33 @@ bool BoundedImageLoader(tinygltf::Image* image, const int image_index, std::stri
                         std::string* warn, int req_width, int req_height,
                         const unsigned char* bytes, int size, void* user) {
   LoadContext* ctx = static_cast<LoadContext*>(user);
-  if (!ctx->decode_images) return true;  // textures not wanted: leave the image empty
   const std::string what = "image " + std::to_string(image_index);
+  // tinygltf hands over an image's bufferView without checking it against its buffer.
+  if (image->bufferView >= 0 && ctx->model != nullptr) {
+    const tinygltf::Model& m = *ctx->model;
+    std::string bad;
+    if (image->bufferView >= static_cast<int>(m.bufferViews.size())) {
+      bad = "bufferView " + std::to_string(image->bufferView) + " out of range";
+    } else {
+      const tinygltf::BufferView& view = m.bufferViews[image->bufferView];
+      const uint64_t buffer_size =
+          view.buffer >= 0 && view.buffer < static_cast<int>(m.buffers.size())
+              ? m.buffers[view.buffer].data.size()
+              : 0;
+      if (view.byteOffset > buffer_size || view.byteLength > buffer_size - view.byteOffset ||
+          view.byteLength > static_cast<uint64_t>(INT32_MAX)) {
+        bad = "bufferView " + std::to_string(image->bufferView) + ": byteOffset " +
+              Str(view.byteOffset) + " + byteLength " + Str(view.byteLength) +
+              " past its buffer of " + Str(buffer_size) + " bytes";
+      }
+    }
+    if (!bad.empty()) {
+      ctx->Refuse(what + ": " + bad);
+      if (err) *err += what + ": " + bad + "\n";
+      return false;
+    }
+  }
+  if (!ctx->decode_images) return true;  // textures not wanted: leave the image empty
   uint64_t w = 0, h = 0;
   const bool known = size > 0 && ImageSize(bytes, static_cast<size_t>(size), &w, &h);
   std::string why;
@@ -808,6 +834,7 @@ Expected<Scene> LoadFromBytes(const uint8_t* bytes, size_t size, const std::stri
   ctx.decode_images = options.load_textures;
   ctx.bytes_read = size;
   tinygltf::Model model;
+  ctx.model = &model;
   tinygltf::TinyGLTF gltf;
   gltf.SetFsCallbacks(tinygltf::FsCallbacks{&FsFileExists, &FsExpandFilePath, &FsReadWholeFile,
                                             &FsWriteWholeFile, &ctx});

@@ -306,6 +306,26 @@ TEST(GltfHostile, HugePngHeaderRefusedBeforeDecoding) {
   ExpectRefused(LoadBytes(d.Json()), "kMaxTextureSidePx");
 }
 
+TEST(GltfHostile, ImageBufferViewPastItsBuffer) {
+  // tinygltf passes &buffer.data[byteOffset] and byteLength on unchecked: checked here.
+  for (const std::string& view :
+       {std::string(R"({"buffer": 0, "byteOffset": 1000000000, "byteLength": 100})"),
+        std::string(R"({"buffer": 0, "byteOffset": 8, "byteLength": 100000})")}) {
+    Doc d;
+    d.extra_top = R"(, "images": [{"bufferView": 1, "mimeType": "image/png"}])";
+    d.view_extra = "}, " + view.substr(0, view.size() - 1);
+    for (bool textures : {true, false}) {
+      GltfLoadOptions options;
+      options.load_textures = textures;
+      Expected<Scene> scene = LoadGltfSceneFromBytes(d.Json(), kName, options);
+      ASSERT_FALSE(scene.ok()) << view;
+      EXPECT_NE(scene.status().message().find("image 0: bufferView 1: byteOffset"),
+                std::string::npos)
+          << scene.status().message();
+    }
+  }
+}
+
 TEST(GltfHostile, ExternalUriRefusedFromMemory) {
   Doc d;
   d.buffer_uri = "/dev/zero";
