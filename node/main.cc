@@ -1,23 +1,32 @@
-// sandtable-node: one projector unit. This issue brings up its network side: membership with
-// the coordinator, clock offset, and the peer mesh.
+// sandtable-node: one projector unit. Composes the node's services on its NodeRuntime:
+// membership, clock offset and the peer mesh (node/net), the coordinator's events kept for the
+// renderer (node/events), and the calibration it holds and exports (node/app).
 //
-//   sandtable-node --id N --coordinator REQUESTS_ENDPOINT,EVENTS_ENDPOINT
-//                  [--bind tcp://127.0.0.1:*] [--curve-keys site.key] [--heartbeat-ms 100]
+//   sandtable-node --id N --coordinator REQUESTS,EVENTS [--world ENDPOINT] [--factory FILE]
+//                  [--true-pose FILE] [--export-dir DIR] [--projector SPEC] [--camera SPEC]
+//                  [--bind ENDPOINT] [--curve-keys FILE] [--heartbeat-ms N] [--workers N]
+//   (--world E is short for --projector world:E --camera world:E; node/devices/device_factory.h)
+//   sandtable-node calibrate-unit --poses DIR -o unit.json ...   (the unit's factory calibration)
 //
-//   sandtable-node calibrate-unit --poses DIR -o unit.json [--report report.json] ...
-//     the unit (factory) calibration; see node/calibration/calibrate_unit_command.h.
-//
-// On start it prints one line on stdout, for operators and tests:
-//   sandtable-node id=3 peer=tcp://127.0.0.1:40123
-// SIGINT/SIGTERM: says Goodbye to the coordinator and exits 0.
+// On start it prints one JSON line on stdout (common/base/ready_line.h):
+//   {"ready":"sandtable-node","id":3,"peer":"tcp://127.0.0.1:40123"}
+// and, once it holds an exported calibration:
+//   {"calibrated":3,"source":"factory+true_pose","json":"DIR/unit-3.json","yaml":"DIR/unit-3.yaml"}
+// Exit status: 0 after SIGINT/SIGTERM (Goodbye said), 1 when it cannot start, 2 for a bad flag
+// or a bad input file.
 #include <csignal>
-#include <cstdlib>
 #include <iostream>
 #include <string>
 #include <vector>
 
 #include "common/base/log.h"
+#include "common/base/ready_line.h"
+#include "common/cli/command_line.h"
+#include "common/io/unit_calibration_file.h"
+#include "node/app/calibration_service.h"
 #include "node/calibration/calibrate_unit_command.h"
+#include "node/devices/device_factory.h"
+#include "node/events/event_state_service.h"
 #include "node/net/node_runtime.h"
 
 namespace {
@@ -25,71 +34,204 @@ namespace {
 std::atomic<bool> g_stop{false};
 void OnSignal(int) { g_stop = true; }
 
-int Usage(const std::string& why) {
-  std::cerr
-      << "sandtable-node: " << why << "\n"
-      << "usage: sandtable-node --id N --coordinator REQUESTS,EVENTS [--bind ENDPOINT]\n"
-      << "         [--curve-keys FILE] [--heartbeat-ms N]\n"
-      << "       sandtable-node calibrate-unit --poses DIR -o unit.json [--report FILE] ...\n";
-  return 2;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
   using namespace sandtable;
-  if (argc >= 2 && std::string(argv[1]) == "calibrate-unit") {
-    return node::RunCalibrateUnit(std::vector<std::string>(argv + 2, argv + argc));
-  }
+  CLI::App app{"sandtable-node: one projector unit of a Sandtable site", "sandtable-node"};
+  cli::Configure(app);
+  app.require_subcommand(0, 1);
+  CLI::App* calibrate = app.add_subcommand(
+      "calibrate-unit", "the unit's factory calibration from chessboard + Gray-code poses "
+                        "(sandtable-node calibrate-unit --help)");
+  calibrate->prefix_command();  // its own parser (node/calibration/calibrate_unit_command.h)
+  calibrate->set_help_flag();
+
   node::NodeOptions options;
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    if (i + 1 >= argc) return Usage("missing value after " + flag);
-    const std::string value = argv[++i];
-    if (flag == "--id") {
-      char* end = nullptr;
-      const unsigned long id = std::strtoul(value.c_str(), &end, 10);
-      if (end == value.c_str() || *end != '\0' || id >= kInvalidNodeId) {
-        return Usage("--id must be a number below " + std::to_string(kInvalidNodeId));
-      }
-      options.id = static_cast<NodeId>(id);
-    } else if (flag == "--coordinator") {
-      const size_t comma = value.find(',');
-      if (comma == std::string::npos) return Usage("--coordinator needs REQUESTS,EVENTS");
-      options.coordinator_requests = value.substr(0, comma);
-      options.coordinator_events = value.substr(comma + 1);
-    } else if (flag == "--bind") {
-      options.peer_bind = value;
-    } else if (flag == "--curve-keys") {
-      Expected<net::CurveKeyPair> keys = net::ReadCurveKeyFile(value);
-      if (!keys.ok()) return Usage(keys.status().ToString());
-      options.curve = *keys;
-    } else if (flag == "--heartbeat-ms") {
-      options.heartbeat_period = std::chrono::milliseconds(std::atoi(value.c_str()));
-    } else {
-      return Usage("unknown flag " + flag);
-    }
+  uint32_t id = 0;
+  std::string coordinator, curve_keys, world, factory_path, true_pose_path, export_dir;
+  std::string projector_spec, camera_spec;
+  int heartbeat_ms = 100;
+  app.add_option("--id", id, "this unit's node id (below 4294967280)")
+      ->check(cli::Integer<uint32_t>(0, kFirstReservedSenderId - 1));
+  app.add_option("--coordinator", coordinator,
+                 "the coordinator's REQUESTS,EVENTS endpoints (its ready line)")
+      ->check([](const std::string& v) {
+        return v.find(',') == std::string::npos ? std::string("needs REQUESTS,EVENTS") : "";
+      });
+  app.add_option("--bind", options.peer_bind, "own ROUTER for peers")->check(cli::Endpoint());
+  app.add_option("--curve-keys", curve_keys, "site CURVE key file (sandtable-coordinator "
+                                             "--generate-curve-keys)")
+      ->check(CLI::ExistingFile);
+  app.add_option("--heartbeat-ms", heartbeat_ms, "heartbeat period in ms")
+      ->check(cli::Integer(1, 60000));
+  app.add_option("--workers", options.worker_threads, "worker threads for long work")
+      ->check(cli::Integer(1, 64));
+  app.add_option("--world", world, "the simulated world's endpoint: projector and camera are "
+                                   "world-backed")
+      ->check(cli::Endpoint());
+  app.add_option("--projector", projector_spec,
+                 "the projector: " + std::string(node::kProjectorSpecForms) +
+                     " (default with --world: world:ENDPOINT)");
+  app.add_option("--camera", camera_spec,
+                 "the camera: " + std::string(node::kCameraSpecForms) +
+                     " (default with --world: world:ENDPOINT)");
+  app.add_option("--factory", factory_path, "the unit's factory calibration file")
+      ->check(CLI::ExistingFile);
+  app.add_option("--true-pose", true_pose_path,
+                 "LAB TEST MODE: the unit's true pose (source factory+true_pose); needs --factory")
+      ->check(CLI::ExistingFile);
+  app.add_option("--export-dir", export_dir, "where unit-<id>.json and .yaml are written");
+
+  if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
+  if (calibrate->parsed()) return node::RunCalibrateUnit(calibrate->remaining());
+  auto usage = [&](const std::string& why) { return cli::UsageError(app, why); };
+  if (app.count("--id") == 0) return usage("--id is required");
+  if (coordinator.empty()) return usage("--coordinator is required");
+  if (!true_pose_path.empty() && factory_path.empty()) {
+    return usage("--true-pose needs --factory (the pose goes beside the factory intrinsics)");
+  }
+  options.id = id;
+  const size_t comma = coordinator.find(',');
+  options.coordinator_requests = coordinator.substr(0, comma);
+  options.coordinator_events = coordinator.substr(comma + 1);
+  options.heartbeat_period = std::chrono::milliseconds(heartbeat_ms);
+  options.coordinator_timeout = std::max(options.coordinator_timeout, 5 * options.heartbeat_period);
+  options.peer_timeout = std::max(options.peer_timeout, 5 * options.heartbeat_period);
+  if (!curve_keys.empty()) {
+    Expected<net::CurveKeyPair> keys = net::ReadCurveKeyFile(curve_keys);
+    if (!keys.ok()) return usage("--curve-keys: " + keys.status().ToString());
+    options.curve = *keys;
   }
   SetLogTag("node-" + std::to_string(options.id));
+
+  // What the unit knows of itself: its factory calibration, and in the lab's test mode its
+  // true pose.
+  std::optional<UnitCalibration> calibration;
+  if (!factory_path.empty()) {
+    Expected<UnitCalibration> factory = LoadUnitCalibration(factory_path);
+    if (!factory.ok()) return usage("--factory: " + factory.status().ToString());
+    if (factory->unit_id != kInvalidNodeId && factory->unit_id != options.id) {
+      return usage("--factory: " + factory_path + " is unit " + std::to_string(factory->unit_id) +
+                   "'s, this node is " + std::to_string(options.id));
+    }
+    factory->unit_id = options.id;
+    calibration = *factory;
+    if (!true_pose_path.empty()) {
+      Expected<node::TruePose> pose = node::LoadTruePose(true_pose_path);
+      if (!pose.ok()) return usage("--true-pose: " + pose.status().ToString());
+      Expected<UnitCalibration> composed = node::ComposeTruePoseCalibration(*factory, *pose);
+      if (!composed.ok()) return usage("--true-pose: " + composed.status().ToString());
+      calibration = *composed;
+      ST_LOG(kWarning) << "TEST MODE: holding the true pose handed by the lab (source "
+                       << calibration->source << ")";
+    }
+    node::NodeCapabilities& caps = options.capabilities;
+    caps.projector_width_px = calibration->projector.width_px;
+    caps.projector_height_px = calibration->projector.height_px;
+    caps.camera_width_px = calibration->camera.width_px;
+    caps.camera_height_px = calibration->camera.height_px;
+  }
+  if (!world.empty()) {
+    if (projector_spec.empty()) projector_spec = "world:" + world;
+    if (camera_spec.empty()) camera_spec = "world:" + world;
+  }
+  if (!projector_spec.empty()) {
+    if (Expected<node::DeviceSpec> p = node::ParseProjectorSpec(projector_spec); !p.ok()) {
+      return usage("--projector: " + p.status().message());
+    }
+  }
+  if (!camera_spec.empty()) {
+    if (Expected<node::DeviceSpec> c = node::ParseCameraSpec(camera_spec); !c.ok()) {
+      return usage("--camera: " + c.status().message());
+    }
+  }
+  auto kind = [](const std::string& spec) {
+    return spec.empty() ? std::string("none") : spec.substr(0, spec.find(':'));
+  };
+  options.capabilities.projector_output = kind(projector_spec);
+  options.capabilities.camera_input = kind(camera_spec);
+
+  // The devices, through their interfaces only. The projector opens now (a missing display
+  // is one clear line and exit 1) and starts black; the camera opens on a worker, since the
+  // first capture of a world camera builds the world's light transport (seconds).
+  node::DeviceOptions device_options;
+  device_options.node_id = options.id;
+  if (calibration) {
+    device_options.projector_size_px =
+        cv::Size(calibration->projector.width_px, calibration->projector.height_px);
+    device_options.camera_size_px =
+        cv::Size(calibration->camera.width_px, calibration->camera.height_px);
+  }
+  std::unique_ptr<node::ProjectorOutput> projector;
+  if (!projector_spec.empty()) {
+    Expected<std::unique_ptr<node::ProjectorOutput>> opened =
+        node::MakeProjectorOutput(projector_spec, device_options);
+    if (!opened.ok()) {
+      std::cerr << "sandtable-node: projector " << projector_spec << ": "
+                << opened.status().message() << "\n";
+      return cli::kExitFailure;
+    }
+    projector = std::move(*opened);
+    const cv::Size size = projector->size();
+    options.capabilities.projector_width_px = size.width;
+    options.capabilities.projector_height_px = size.height;
+    Expected<node::ShownFrame> shown = projector->Show(cv::Mat::zeros(size, CV_8UC1));
+    if (!shown.ok()) {
+      std::cerr << "sandtable-node: projector " << projector->description() << ": "
+                << shown.status().message() << "\n";
+      return cli::kExitFailure;
+    }
+  }
+
   struct sigaction action {};
   action.sa_handler = OnSignal;
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
 
   node::NodeRuntime runtime(options);
+  node::EventStateService events;
+  runtime.AddService(&events);
   Status started = runtime.Start();
   if (!started.ok()) {
     ST_LOG(kError) << "cannot start: " << started.ToString();
-    return 1;
+    return cli::kExitFailure;
   }
-  std::cout << "sandtable-node id=" << options.id << " peer=" << runtime.peer_endpoint()
-            << std::endl;
+  std::unique_ptr<node::CameraInput> camera;
+  if (!camera_spec.empty()) {
+    runtime.workers().Run<Expected<std::unique_ptr<node::CameraInput>>>(
+        [camera_spec, device_options] { return node::MakeCameraInput(camera_spec, device_options); },
+        [&camera, camera_spec](Expected<std::unique_ptr<node::CameraInput>> opened) {
+          if (!opened.ok()) {
+            ST_LOG(kError) << "camera " << camera_spec << ": " << opened.status().message();
+            return;
+          }
+          camera = std::move(*opened);
+          ST_LOG(kInfo) << "camera " << camera->description() << " " << camera->size().width
+                        << "x" << camera->size().height << ", " << camera->bit_depth() << " bit";
+        });
+  }
+  WriteJsonLine(std::cout,
+                {{"ready", "sandtable-node"}, {"id", options.id}, {"peer", runtime.peer_endpoint()}});
+  if (calibration && !export_dir.empty()) {
+    Expected<node::ExportedCalibration> exported = node::ExportCalibration(*calibration, export_dir);
+    if (!exported.ok()) {
+      ST_LOG(kError) << "cannot export the calibration: " << exported.status().ToString();
+      runtime.SayGoodbye("export failed");
+      return cli::kExitFailure;
+    }
+    WriteJsonLine(std::cout, {{"calibrated", options.id},
+                              {"source", calibration->source},
+                              {"json", exported->json_path},
+                              {"yaml", exported->yaml_path}});
+  }
   Status ran = runtime.Run(g_stop);
   if (auto offset = runtime.clock_offset()) {
     ST_LOG(kInfo) << "clock offset to coordinator " << offset->offset_s * 1e3
                   << " ms, error <= " << offset->error_bound_s * 1e3 << " ms over "
                   << offset->samples << " samples";
   }
-  ST_LOG(kInfo) << "stopping; messages " << runtime.counters().ToString();
-  return ran.ok() ? 0 : 1;
+  ST_LOG(kInfo) << "stopping; messages " << runtime.counters().ToString() << "; annotations "
+                << events.annotations().strokes().size() << " strokes";
+  return ran.ok() ? 0 : cli::kExitFailure;
 }

@@ -183,7 +183,7 @@ NodeService* NodeRuntime::CoordinatorServiceFor(wire::Envelope::BodyCase body) c
 
 void NodeRuntime::SendTimers(Clock::time_point now) {
   if (!registered_ && now >= next_hello_) {
-    SendToCoordinator(MakeHello());
+    (void)SendToCoordinator(MakeHello());
     next_hello_ = now + options_.coordinator_timeout;
   }
   if (now >= next_heartbeat_) {
@@ -191,7 +191,7 @@ void NodeRuntime::SendTimers(Clock::time_point now) {
     if (registered_) {
       wire::Envelope hb;
       hb.mutable_heartbeat()->set_incarnation(incarnation_);
-      SendToCoordinator(std::move(hb));
+      (void)SendToCoordinator(std::move(hb));
     }
     for (auto& [id, peer] : peers_) {
       wire::Envelope hb;
@@ -209,7 +209,7 @@ void NodeRuntime::SendTimers(Clock::time_point now) {
     next_time_sync_ = now + options_.time_sync_period;
     wire::Envelope request;
     request.mutable_time_request()->set_t0_client_send_ns(proto::SteadyNowNs());
-    SendToCoordinator(std::move(request));
+    (void)SendToCoordinator(std::move(request));
   }
 }
 
@@ -382,7 +382,7 @@ void NodeRuntime::SayGoodbye(const std::string& reason) {
   if (!coordinator_) return;
   wire::Envelope bye;
   bye.mutable_goodbye()->set_reason(reason);
-  SendToCoordinator(std::move(bye));
+  (void)SendToCoordinator(std::move(bye));
 }
 
 Status NodeRuntime::Run(const std::atomic<bool>& stop) {

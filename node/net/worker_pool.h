@@ -11,6 +11,7 @@
 #include <condition_variable>
 #include <deque>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -34,10 +35,10 @@ class WorkerPool {
   template <typename Result>
   void Run(std::function<Result()> work, std::function<void(Result)> done) {
     Submit([work = std::move(work), done = std::move(done)]() mutable -> Completion {
-      Result result = work();
-      return [done = std::move(done), result = std::move(result)]() mutable {
-        done(std::move(result));
-      };
+      // Held by a shared_ptr so that move-only results (Expected<std::unique_ptr<...>>) fit
+      // in a std::function.
+      auto result = std::make_shared<Result>(work());
+      return [done = std::move(done), result]() mutable { done(std::move(*result)); };
     });
   }
   // Thread-safe: queue a closure for the network thread (e.g. from a device callback).
