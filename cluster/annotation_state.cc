@@ -218,8 +218,8 @@ Expected<AnnotationState> AnnotationState::FromSnapshot(const wire::Snapshot& sn
     }
     if (state.strokes_.count(b.stroke_id())) return InvalidArgumentError(where + "listed twice");
     if (!(b.width_m() > 0.f && b.width_m() <= kMaxStrokeWidth_m)) {
-      return InvalidArgumentError(where + "width_m out of (0, " + std::to_string(kMaxStrokeWidth_m) +
-                                  "]");
+      return InvalidArgumentError(where + "width_m out of (0, " +
+                                  std::to_string(kMaxStrokeWidth_m) + "]");
     }
     for (float c : {b.color_r(), b.color_g(), b.color_b()}) {
       if (!(c >= 0.f && c <= 1.f)) return InvalidArgumentError(where + "colour outside [0, 1]");

@@ -27,8 +27,7 @@ MediaClock::MediaClock(MediaClockOptions options) : options_(options) {
   ST_CHECK(ok.ok()) << ok.ToString() << "; check MediaClockOptions before constructing";
 }
 
-double MediaClock::MediaTimeOf(const MediaClockState& state, double duration_s,
-                               int64_t now_ns) {
+double MediaClock::MediaTimeOf(const MediaClockState& state, double duration_s, int64_t now_ns) {
   if (!state.playing) return state.media_time_s;
   // Integer difference first: ns since the anchor are exact in int64, and doubles keep
   // ns precision up to ~104 days of elapsed time.

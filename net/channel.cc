@@ -62,8 +62,8 @@ Expected<Received> Channel::Receive() {
   };
   if (parts.size() != expected_frames) {
     counters_->CountRejected(proto::RejectReason::kMalformed);
-    return refuse(ParseError("message with " + std::to_string(parts.size()) +
-                             " frames, expected " + std::to_string(expected_frames)),
+    return refuse(ParseError("message with " + std::to_string(parts.size()) + " frames, expected " +
+                             std::to_string(expected_frames)),
                   0);
   }
   Incoming incoming;

@@ -40,8 +40,7 @@ std::string DescribeHandshakeFailure(uint16_t event, uint32_t value) {
     }
   }
   std::ostringstream s;
-  s << "handshake failed (errno " << value << ": " << std::strerror(static_cast<int>(value))
-    << ")";
+  s << "handshake failed (errno " << value << ": " << std::strerror(static_cast<int>(value)) << ")";
   return s.str();
 }
 
@@ -95,8 +94,8 @@ void HandshakeMonitor::Run() {
         continue;
       }
       ++failed_;
-      ST_LOG(kWarning) << "CURVE: refused connection on " << name_ << " ("
-                       << address.to_string() << "): " << DescribeHandshakeFailure(event, value);
+      ST_LOG(kWarning) << "CURVE: refused connection on " << name_ << " (" << address.to_string()
+                       << "): " << DescribeHandshakeFailure(event, value);
     } catch (const zmq::error_t& e) {
       if (e.num() == ETERM) return;
       if (e.num() != EINTR) ST_LOG(kError) << "handshake monitor: " << e.what();

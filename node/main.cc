@@ -41,9 +41,10 @@ int main(int argc, char** argv) {
   CLI::App app{"sandtable-node: one projector unit of a Sandtable site", "sandtable-node"};
   cli::Configure(app);
   app.require_subcommand(0, 1);
-  CLI::App* calibrate = app.add_subcommand(
-      "calibrate-unit", "the unit's factory calibration from chessboard + Gray-code poses "
-                        "(sandtable-node calibrate-unit --help)");
+  CLI::App* calibrate =
+      app.add_subcommand("calibrate-unit",
+                         "the unit's factory calibration from chessboard + Gray-code poses "
+                         "(sandtable-node calibrate-unit --help)");
   calibrate->prefix_command();  // its own parser (node/calibration/calibrate_unit_command.h)
   calibrate->set_help_flag();
 
@@ -60,15 +61,17 @@ int main(int argc, char** argv) {
         return v.find(',') == std::string::npos ? std::string("needs REQUESTS,EVENTS") : "";
       });
   app.add_option("--bind", options.peer_bind, "own ROUTER for peers")->check(cli::Endpoint());
-  app.add_option("--curve-keys", curve_keys, "site CURVE key file (sandtable-coordinator "
-                                             "--generate-curve-keys)")
+  app.add_option("--curve-keys", curve_keys,
+                 "site CURVE key file (sandtable-coordinator "
+                 "--generate-curve-keys)")
       ->check(CLI::ExistingFile);
   app.add_option("--heartbeat-ms", heartbeat_ms, "heartbeat period in ms")
       ->check(cli::Integer(1, 60000));
   app.add_option("--workers", options.worker_threads, "worker threads for long work")
       ->check(cli::Integer(1, 64));
-  app.add_option("--world", world, "the simulated world's endpoint: projector and camera are "
-                                   "world-backed")
+  app.add_option("--world", world,
+                 "the simulated world's endpoint: projector and camera are "
+                 "world-backed")
       ->check(cli::Endpoint());
   app.add_option("--projector", projector_spec,
                  "the projector: " + std::string(node::kProjectorSpecForms) +
@@ -200,21 +203,25 @@ int main(int argc, char** argv) {
   std::unique_ptr<node::CameraInput> camera;
   if (!camera_spec.empty()) {
     runtime.workers().Run<Expected<std::unique_ptr<node::CameraInput>>>(
-        [camera_spec, device_options] { return node::MakeCameraInput(camera_spec, device_options); },
+        [camera_spec, device_options] {
+          return node::MakeCameraInput(camera_spec, device_options);
+        },
         [&camera, camera_spec](Expected<std::unique_ptr<node::CameraInput>> opened) {
           if (!opened.ok()) {
             ST_LOG(kError) << "camera " << camera_spec << ": " << opened.status().message();
             return;
           }
           camera = std::move(*opened);
-          ST_LOG(kInfo) << "camera " << camera->description() << " " << camera->size().width
-                        << "x" << camera->size().height << ", " << camera->bit_depth() << " bit";
+          ST_LOG(kInfo) << "camera " << camera->description() << " " << camera->size().width << "x"
+                        << camera->size().height << ", " << camera->bit_depth() << " bit";
         });
   }
-  WriteJsonLine(std::cout,
-                {{"ready", "sandtable-node"}, {"id", options.id}, {"peer", runtime.peer_endpoint()}});
+  WriteJsonLine(
+      std::cout,
+      {{"ready", "sandtable-node"}, {"id", options.id}, {"peer", runtime.peer_endpoint()}});
   if (calibration && !export_dir.empty()) {
-    Expected<node::ExportedCalibration> exported = node::ExportCalibration(*calibration, export_dir);
+    Expected<node::ExportedCalibration> exported =
+        node::ExportCalibration(*calibration, export_dir);
     if (!exported.ok()) {
       ST_LOG(kError) << "cannot export the calibration: " << exported.status().ToString();
       runtime.SayGoodbye("export failed");

@@ -30,7 +30,7 @@ struct Voidify {
 
 }  // namespace sandtable::internal
 
-#define ST_CHECK(condition)                                    \
-  (condition) ? (void)0                                        \
-              : ::sandtable::internal::Voidify() &             \
+#define ST_CHECK(condition)                        \
+  (condition) ? (void)0                            \
+              : ::sandtable::internal::Voidify() & \
                     ::sandtable::internal::CheckFailure(__FILE__, __LINE__, #condition)

@@ -47,7 +47,8 @@ struct LogVoidify {
 
 #define ST_LOG_IS_ON(level) (::sandtable::LogLevel::level >= ::sandtable::GetLogLevel())
 // ST_LOG(kInfo) << "text" << value;
-#define ST_LOG(level)                                  \
-  !ST_LOG_IS_ON(level) ? (void)0                       \
-                       : ::sandtable::internal::LogVoidify() & \
-                             ::sandtable::internal::LogMessage(::sandtable::LogLevel::level, __FILE__, __LINE__)
+#define ST_LOG(level)                         \
+  !ST_LOG_IS_ON(level)                        \
+      ? (void)0                               \
+      : ::sandtable::internal::LogVoidify() & \
+            ::sandtable::internal::LogMessage(::sandtable::LogLevel::level, __FILE__, __LINE__)

@@ -23,9 +23,9 @@ enum class StatusCode {
   kNotConverged,     // an iterative method did not reach its tolerance
   kOutOfRange,       // a value outside the domain of a model (behind the camera, off the image)
   kNotFound,
-  kParseError,       // malformed file or message
+  kParseError,  // malformed file or message
   kIoError,
-  kUnavailable,      // a device, peer or service is not there (may come back)
+  kUnavailable,  // a device, peer or service is not there (may come back)
   kPermissionDenied,
   kInternal,
 };
@@ -56,11 +56,15 @@ inline Status OkStatus() { return Status(); }
 inline Status InvalidArgumentError(std::string m) {
   return Status(StatusCode::kInvalidArgument, std::move(m));
 }
-inline Status DegenerateError(std::string m) { return Status(StatusCode::kDegenerate, std::move(m)); }
+inline Status DegenerateError(std::string m) {
+  return Status(StatusCode::kDegenerate, std::move(m));
+}
 inline Status NotConvergedError(std::string m) {
   return Status(StatusCode::kNotConverged, std::move(m));
 }
-inline Status OutOfRangeError(std::string m) { return Status(StatusCode::kOutOfRange, std::move(m)); }
+inline Status OutOfRangeError(std::string m) {
+  return Status(StatusCode::kOutOfRange, std::move(m));
+}
 inline Status NotFoundError(std::string m) { return Status(StatusCode::kNotFound, std::move(m)); }
 inline Status ParseError(std::string m) { return Status(StatusCode::kParseError, std::move(m)); }
 inline Status IoError(std::string m) { return Status(StatusCode::kIoError, std::move(m)); }
@@ -74,7 +78,7 @@ inline Status InternalError(std::string m) { return Status(StatusCode::kInternal
 template <typename T>
 class [[nodiscard]] Expected {
  public:
-  Expected(T value) : data_(std::move(value)) {}  // NOLINT(runtime/explicit)
+  Expected(T value) : data_(std::move(value)) {}        // NOLINT(runtime/explicit)
   Expected(Status status) : data_(std::move(status)) {  // NOLINT(runtime/explicit)
     ST_CHECK(!std::get<Status>(data_).ok()) << "Expected<T> built from an OK Status";
   }
@@ -112,8 +116,8 @@ class [[nodiscard]] Expected {
 }  // namespace sandtable
 
 // Returns the status of `expr` from the enclosing function if it is not OK.
-#define ST_RETURN_IF_ERROR(expr)                  \
-  do {                                            \
-    ::sandtable::Status st_status_ = (expr);      \
-    if (!st_status_.ok()) return st_status_;      \
+#define ST_RETURN_IF_ERROR(expr)             \
+  do {                                       \
+    ::sandtable::Status st_status_ = (expr); \
+    if (!st_status_.ok()) return st_status_; \
   } while (false)

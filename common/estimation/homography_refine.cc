@@ -6,8 +6,8 @@
 #include <ceres/ceres.h>
 #include <ceres/sphere_manifold.h>
 
-#include "common/estimation/homography.h"
 #include "common/estimation/ceres_solver_options.h"
+#include "common/estimation/homography.h"
 #include "common/estimation/homography_hartley.h"
 
 namespace sandtable {

@@ -30,8 +30,8 @@
 namespace sandtable {
 
 struct RansacOptions {
-  double max_error = 1.0;      // inlier threshold, in the estimator's residual unit (e.g. px)
-  double confidence = 0.999;   // probability that one all-inlier sample was drawn
+  double max_error = 1.0;     // inlier threshold, in the estimator's residual unit (e.g. px)
+  double confidence = 0.999;  // probability that one all-inlier sample was drawn
   int min_iterations = 10;
   int max_iterations = 10000;
   double min_inlier_ratio = 0.0;  // fail (DEGENERATE) when the best ratio is below this
@@ -66,12 +66,12 @@ struct RansacResult {
   Model model;
   std::vector<char> inlier_mask;  // 1 for inliers, size NumData()
   int num_inliers = 0;
-  double inlier_ratio = 0.0;      // num_inliers / NumData()
+  double inlier_ratio = 0.0;  // num_inliers / NumData()
   int iterations = 0;
   // 1 - (1 - w^k)^iterations for the final inlier ratio w: the probability that at least one
   // all-inlier minimal sample was drawn if w is the true ratio.
   double achieved_confidence = 0.0;
-  bool refined = false;           // FitInliers produced the final model
+  bool refined = false;  // FitInliers produced the final model
 };
 
 template <typename Estimator>
@@ -169,8 +169,8 @@ Expected<RansacResult<typename Estimator::Model>> Ransac(const Estimator& estima
     std::ostringstream s;
     s << "RANSAC: stopped at max_iterations = " << options.max_iterations
       << " with best inlier ratio " << best->inlier_ratio << " (" << best->num_inliers << " of "
-      << n << "); the chance that any clean sample was drawn is only "
-      << best->achieved_confidence << ": too many outliers for this budget, raise "
+      << n << "); the chance that any clean sample was drawn is only " << best->achieved_confidence
+      << ": too many outliers for this budget, raise "
       << "max_iterations or clean the data";
     return NotConvergedError(s.str());
   }

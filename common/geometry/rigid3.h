@@ -37,9 +37,7 @@ struct Rigid3d {
   // origin of the target frame in the source frame (e.g. a camera centre in the table frame
   // from camera_from_table) is Inverse().translation.
 
-  bool AllFinite() const {
-    return rotation.coeffs().allFinite() && translation.allFinite();
-  }
+  bool AllFinite() const { return rotation.coeffs().allFinite() && translation.allFinite(); }
 };
 
 // x_in_target = target_from_source * x_in_source.

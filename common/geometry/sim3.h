@@ -35,8 +35,7 @@ inline Eigen::Vector3d operator*(const Sim3d& b_from_a, const Eigen::Vector3d& x
 
 inline Sim3d operator*(const Sim3d& c_from_b, const Sim3d& b_from_a) {
   return Sim3d(c_from_b.scale * b_from_a.scale, c_from_b.rotation * b_from_a.rotation,
-               c_from_b.scale * (c_from_b.rotation * b_from_a.translation) +
-                   c_from_b.translation);
+               c_from_b.scale * (c_from_b.rotation * b_from_a.translation) + c_from_b.translation);
 }
 
 }  // namespace sandtable

@@ -21,8 +21,8 @@
 #include <string>
 #include <vector>
 
-#include "common/base/status.h"
 #include "cluster/annotation_state.h"
+#include "common/base/status.h"
 #include "proto/events.pb.h"
 
 struct sqlite3;

@@ -27,7 +27,6 @@
 
 namespace sandtable::coordinator {
 
-
 class CoordinatorServer;
 
 // A concern of the coordinator that serves some request bodies and/or does periodic work

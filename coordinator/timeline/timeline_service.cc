@@ -19,7 +19,8 @@ Status TimelineServiceOptions::Check() const {
 }
 
 namespace {
-cluster::MediaClockOptions ClockOptions(const PersonnelTracks& tracks, const TimelineServiceOptions& o) {
+cluster::MediaClockOptions ClockOptions(const PersonnelTracks& tracks,
+                                        const TimelineServiceOptions& o) {
   const Status ok = o.Check();
   ST_CHECK(ok.ok()) << ok.ToString() << "; check TimelineServiceOptions before constructing";
   cluster::MediaClockOptions clock;

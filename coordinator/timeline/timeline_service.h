@@ -10,8 +10,8 @@
 
 #include <cstdint>
 
-#include "coordinator/membership/coordinator_server.h"
 #include "cluster/media_clock.h"
+#include "coordinator/membership/coordinator_server.h"
 #include "coordinator/timeline/personnel_tracks.h"
 #include "proto/timeline.pb.h"
 

@@ -91,7 +91,8 @@ void EventStateService::OnAnnotationEvent(const wire::AnnotationEvent& event, No
 void EventStateService::OnCatchUpReply(const wire::CatchUpReply& reply) {
   cluster::AnnotationState next;
   if (reply.snapshot_sent()) {
-    Expected<cluster::AnnotationState> from = cluster::AnnotationState::FromSnapshot(reply.snapshot());
+    Expected<cluster::AnnotationState> from =
+        cluster::AnnotationState::FromSnapshot(reply.snapshot());
     if (!from.ok()) {
       ST_LOG(kWarning) << "catch-up snapshot refused: " << from.status().ToString();
       return;  // catch_up_wanted_ stays set: retried

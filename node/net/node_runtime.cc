@@ -101,8 +101,7 @@ Status NodeRuntime::Start() {
   ST_RETURN_IF_ERROR((*sub)->Connect(options_.coordinator_events));
   events_ = std::make_unique<net::Channel>(std::move(*sub), options_.id, incarnation_, &counters_,
                                            options_.limits);
-  loop_.Add(coordinator_.get(),
-            [this](net::Incoming in) { HandleCoordinatorReply(in.envelope); });
+  loop_.Add(coordinator_.get(), [this](net::Incoming in) { HandleCoordinatorReply(in.envelope); });
   loop_.Add(events_.get(), [this](net::Incoming in) { HandleEvent(in.envelope); });
   loop_.Add(
       peer_router_.get(), [this](net::Incoming in) { HandlePeerMessage(std::move(in)); },
@@ -238,8 +237,8 @@ void NodeRuntime::DrainPeerDealers() {
       if (!in.ok()) continue;
       if (!in->has_value()) break;
       if ((*in)->envelope.has_rejected()) {
-        ST_LOG(kDebug) << "peer " << id << " rejected our message: "
-                       << (*in)->envelope.rejected().reason();
+        ST_LOG(kDebug) << "peer " << id
+                       << " rejected our message: " << (*in)->envelope.rejected().reason();
         continue;
       }
       HandlePeerMessage(std::move(**in));

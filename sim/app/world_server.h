@@ -38,7 +38,6 @@
 
 namespace sandtable::sim {
 
-
 struct WorldServerOptions {
   std::string bind_endpoint = "tcp://127.0.0.1:*";
   bool noise = true;

@@ -23,7 +23,8 @@ TEST(Sim3dTest, InverseAndCompositionAcrossScales) {
                          Eigen::Vector3d(normal(rng), normal(rng), normal(rng)));
     const Eigen::Vector3d x_in_a(normal(rng), normal(rng), normal(rng));
     const Eigen::Vector3d x_in_c = c_from_b * (b_from_a * x_in_a);
-    EXPECT_LT(((c_from_b * b_from_a) * x_in_a - x_in_c).norm(), kTolerance_m * x_in_c.norm() + kTolerance_m);
+    EXPECT_LT(((c_from_b * b_from_a) * x_in_a - x_in_c).norm(),
+              kTolerance_m * x_in_c.norm() + kTolerance_m);
     EXPECT_LT((b_from_a.Inverse() * (b_from_a * x_in_a) - x_in_a).norm(), kTolerance_m);
     const Eigen::Vector4d h = b_from_a.ToMatrix4() * x_in_a.homogeneous();
     EXPECT_LT((h.head<3>() - b_from_a * x_in_a).norm(), kTolerance_m * (1.0 + h.norm()));

@@ -51,9 +51,9 @@ TEST_F(NodeProgramTest, StartsFromTheWorldsFactoryFileAndExportsItsCalibration) 
   // The lab's test-mode pose for unit 1.
   TruePose pose;
   pose.unit_id = 1;
-  pose.table_from_projector =
-      Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(2.5, Eigen::Vector3d(0.2, 0.9, 0.3).normalized())),
-              Eigen::Vector3d(0.4, -0.7, 1.55));
+  pose.table_from_projector = Rigid3d(
+      Eigen::Quaterniond(Eigen::AngleAxisd(2.5, Eigen::Vector3d(0.2, 0.9, 0.3).normalized())),
+      Eigen::Vector3d(0.4, -0.7, 1.55));
   pose.table_from_model = Rigid3d();
   const fs::path pose_file = dir_ / "pose-1.json";
   std::ofstream(pose_file) << TruePoseToJson(pose);
@@ -61,8 +61,8 @@ TEST_F(NodeProgramTest, StartsFromTheWorldsFactoryFileAndExportsItsCalibration) 
   ChildProcess coordinator({SANDTABLE_COORDINATOR_BIN, "--requests", "tcp://127.0.0.1:*",
                             "--events", "tcp://127.0.0.1:*"});
   std::string error;
-  std::optional<nlohmann::json> c = testing::ReadReadyLine(coordinator, "sandtable-coordinator",
-                                                           kStartDeadline, &error);
+  std::optional<nlohmann::json> c =
+      testing::ReadReadyLine(coordinator, "sandtable-coordinator", kStartDeadline, &error);
   ASSERT_TRUE(c.has_value()) << error;
   const std::string endpoints =
       testing::ReadyString(*c, "requests") + "," + testing::ReadyString(*c, "events");
@@ -87,9 +87,9 @@ TEST_F(NodeProgramTest, StartsFromTheWorldsFactoryFileAndExportsItsCalibration) 
   EXPECT_EQ(exported->source, "factory+true_pose");
   EXPECT_EQ(exported->unit_id, 1u);
   ASSERT_TRUE(exported->table_from_projector.has_value());
-  EXPECT_LT((exported->table_from_projector->translation - pose.table_from_projector.translation)
-                .norm(),
-            kExact);
+  EXPECT_LT(
+      (exported->table_from_projector->translation - pose.table_from_projector.translation).norm(),
+      kExact);
   EXPECT_NEAR(exported->projector.fx_px, loaded->projector.fx_px, kExact);
 
   // The YAML, read by OpenCV: x_in_projector = R x_in_model + T.
@@ -150,10 +150,9 @@ TEST_F(NodeProgramTest, HelpListsEveryFlag) {
   ChildProcess node({SANDTABLE_NODE_BIN, "--help"});
   std::string output;
   ASSERT_EQ(testing::RunToEnd(node, milliseconds(10000), &output), 0);
-  for (const char* flag : {"--id", "--coordinator", "--bind", "--curve-keys", "--heartbeat-ms",
-                           "--workers", "--world", "--projector", "--camera", "--factory", "--true-pose",
-                           "--export-dir",
-                           "calibrate-unit"}) {
+  for (const char* flag :
+       {"--id", "--coordinator", "--bind", "--curve-keys", "--heartbeat-ms", "--workers", "--world",
+        "--projector", "--camera", "--factory", "--true-pose", "--export-dir", "calibrate-unit"}) {
     EXPECT_NE(output.find(flag), std::string::npos) << flag << " missing from:\n" << output;
   }
 }

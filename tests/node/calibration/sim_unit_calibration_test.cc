@@ -20,11 +20,11 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common/base/units.h"
+#include "common/scene/scene.h"
 #include "common/structured_light/decoder.h"
 #include "common/structured_light/pattern_sequence.h"
 #include "node/calibration/board_observation.h"
 #include "node/calibration/unit_calibrator.h"
-#include "common/scene/scene.h"
 #include "sim/site/site_presets.h"
 #include "sim/transport/world.h"
 

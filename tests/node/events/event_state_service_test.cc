@@ -18,11 +18,11 @@
 namespace sandtable::node {
 namespace {
 
-using std::chrono::milliseconds;
 using cluster::testing::Begin;
 using cluster::testing::End;
 using cluster::testing::LinePoint;
 using cluster::testing::Points;
+using std::chrono::milliseconds;
 
 constexpr milliseconds kDeadline{5000};
 // Media time tolerance: the clock offset on loopback is known to well under 1 ms; at rate 2
