@@ -597,6 +597,17 @@ class Loader {
       const Item item = stack.back();
       stack.pop_back();
       const tinygltf::Node& node = model_.nodes[item.node];
+      for (const auto& [field, values] :
+           {std::pair<const char*, const std::vector<double>*>{"matrix", &node.matrix},
+            {"translation", &node.translation},
+            {"rotation", &node.rotation},
+            {"scale", &node.scale}}) {
+        for (double v : *values) {
+          if (!std::isfinite(v)) {
+            return ParseError("node " + std::to_string(item.node) + ": " + field + " not finite");
+          }
+        }
+      }
       const Eigen::Matrix4d table_from_node = item.table_from_parent * NodeMatrix(node);
       if (!table_from_node.allFinite()) {
         return ParseError("node " + std::to_string(item.node) + ": transform not finite");

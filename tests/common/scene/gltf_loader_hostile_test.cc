@@ -277,6 +277,12 @@ TEST(GltfHostile, TranslationMovesVertexOutOfRange) {
   ExpectRefused(LoadBytes(d.Json()), "kMaxCoordinate_m");
 }
 
+TEST(GltfHostile, JsonNumberOverflowThrownInsideTinygltfIsCaught) {
+  Doc d;
+  d.nodes = R"([{"mesh": 0, "rotation": [0, 0, 1e400, 1]}])";  // nlohmann throws out_of_range
+  ExpectRefused(LoadBytes(d.Json()), "number overflow");
+}
+
 TEST(GltfHostile, DeepJsonInExtras) {
   Doc d;
   d.extra_top = ", \"extras\": " + std::string(100000, '[') + std::string(100000, ']');
