@@ -52,8 +52,8 @@ void SweepUndistortion(const std::string& dir, bool quick) {
       for (double v = -0.5; v <= 799.5; v += step_px) {
         for (double u = -0.5; u <= 1279.5; u += step_px) pixels.emplace_back(u, v);
       }
-      for (const Eigen::Vector2d c : {Eigen::Vector2d(1279.5, -0.5), Eigen::Vector2d(-0.5, 799.5),
-                                      Eigen::Vector2d(1279.5, 799.5)}) {
+      for (const Eigen::Vector2d& c : {Eigen::Vector2d(1279.5, -0.5), Eigen::Vector2d(-0.5, 799.5),
+                                       Eigen::Vector2d(1279.5, 799.5)}) {
         pixels.push_back(c);
       }
       int refused = 0, wrong = 0;

@@ -15,17 +15,12 @@ namespace sandtable {
 namespace {
 
 using std::chrono::milliseconds;
-using testing::ChildOutput;
-using testing::ChildProcess;
 
 constexpr milliseconds kExitDeadline{30000};
 constexpr int kExitUsage = 2;
 
-// Runs the coordinator to its end; returns its exit status, stdout and stderr in *output.
 int RunCoordinator(std::vector<std::string> args, std::string* output) {
-  args.insert(args.begin(), SANDTABLE_COORDINATOR_BIN);
-  ChildProcess child(args, ChildOutput::kStdoutAndStderr);
-  return testing::RunToEnd(child, kExitDeadline, output);
+  return testing::RunProgram(SANDTABLE_COORDINATOR_BIN, std::move(args), kExitDeadline, output);
 }
 
 // Every flag main.cc registers (docs/coordinator.md).

@@ -119,6 +119,15 @@ inline int RunToEnd(ChildProcess& child, std::chrono::milliseconds deadline,
   return child.Wait();
 }
 
+// Runs `program` with `args` to its end (stdout and stderr both into *output); its exit status
+// as RunToEnd gives it.
+inline int RunProgram(const std::string& program, std::vector<std::string> args,
+                      std::chrono::milliseconds deadline, std::string* output) {
+  args.insert(args.begin(), program);
+  ChildProcess child(args, ChildOutput::kStdoutAndStderr);
+  return RunToEnd(child, deadline, output);
+}
+
 // The next stdout line of `child`, which must be its readiness line: a JSON object whose
 // "ready" member is `program`. nullopt (and *error says why) at the deadline, at the end of
 // output, or for any other line: the hand-shake is JSON, not free text.

@@ -17,16 +17,12 @@ namespace sandtable::sim {
 namespace {
 
 using std::chrono::milliseconds;
-using testing::ChildOutput;
-using testing::ChildProcess;
 
 constexpr milliseconds kExitDeadline{30000};
 constexpr int kExitUsage = 2;
 
 int RunWorld(std::vector<std::string> args, std::string* output) {
-  args.insert(args.begin(), SANDTABLE_WORLD_BIN);
-  ChildProcess child(args, ChildOutput::kStdoutAndStderr);
-  return testing::RunToEnd(child, kExitDeadline, output);
+  return testing::RunProgram(SANDTABLE_WORLD_BIN, std::move(args), kExitDeadline, output);
 }
 
 std::set<std::string> Registered(const CLI::App* command) {
