@@ -1,4 +1,4 @@
-// Scripted virtual wand for the lab (issue 6): a TrackerSource that plays a text script of
+// Scripted virtual wand for the lab: a TrackerSource that plays a text script of
 // wand-tip waypoints, pointing directions and button presses (format: docs/tracker-formats.md).
 //
 //   # comment; blank lines ignored

@@ -1,4 +1,4 @@
-// The registration metric of the site lab (../shared/DESIGN.md "Metrics", issue 9), computed
+// The registration metric of the site lab (../shared/DESIGN.md "Metrics", docs/lab.md), computed
 // on the lab's side with the world's ground truth. Nodes never see any of this.
 //
 // Definition. Points X are sampled on the model's surfaces where the model truly stands
