@@ -1,12 +1,15 @@
 #include "net/curve.h"
 
+#include <sys/stat.h>
 #include <zmq.h>
 
 #include <array>
-#include <fstream>
+#include <cerrno>
+#include <cstring>
 #include <sstream>
 #include <vector>
 
+#include "common/base/file_io.h"
 #include "common/base/log.h"
 
 namespace sandtable::net {
@@ -21,28 +24,65 @@ Expected<CurveKeyPair> GenerateCurveKeyPair() {
 }
 
 Status WriteCurveKeyFile(const std::string& path, const CurveKeyPair& keys) {
-  std::ofstream out(path, std::ios::trunc);
-  if (!out) return IoError("cannot write CURVE key file " + path);
-  out << "# Sandtable site CURVE key pair (Z85). Keep the secret key private.\n"
-      << "public = " << keys.public_key_z85 << "\n"
-      << "secret = " << keys.secret_key_z85 << "\n";
-  if (!out) return IoError("error writing CURVE key file " + path);
+  const std::string text =
+      "# Sandtable site CURVE key pair (Z85). Keep the secret key private (mode 0600).\n"
+      "public = " +
+      keys.public_key_z85 + "\nsecret = " + keys.secret_key_z85 + "\n";
+  Status written = WriteFileAtomically(path, text, kCurveKeyFileMode);
+  if (!written.ok()) return written.WithContext("CURVE key file");
+  return OkStatus();
+}
+
+Status CheckCurveKeyFilePermissions(const std::string& path) {
+  struct stat st;
+  if (::stat(path.c_str(), &st) != 0) {
+    if (errno == ENOENT) return NotFoundError(path + ": no such file (CURVE key file)");
+    return IoError(path + ": cannot stat CURVE key file (" + std::strerror(errno) + ")");
+  }
+  if (!S_ISREG(st.st_mode)) return OkStatus();  // ReadInputFile names what it is instead
+  if ((st.st_mode & kCurveKeyFileForbiddenBits) != 0) {
+    char mode[8];
+    std::snprintf(mode, sizeof mode, "%04o", static_cast<unsigned>(st.st_mode & 07777));
+    return Status(StatusCode::kPermissionDenied,
+                  path + ": CURVE key file holds a secret key but its permissions are " + mode +
+                      " (group or others may read or write it); refused. Run `chmod 600 " + path +
+                      "`");
+  }
+  return OkStatus();
+}
+
+Status CheckCurveKeyPair(const std::string& path, const CurveKeyPair& keys) {
+  std::array<char, 41> derived{};
+  if (zmq_curve_public(derived.data(), keys.secret_key_z85.c_str()) != 0) {
+    return UnavailableError(path +
+                            ": cannot derive the public key (libzmq built without CURVE support)");
+  }
+  if (keys.public_key_z85 != std::string(derived.data(), 40)) {
+    return ParseError(path +
+                      ": the public key is not the one of the secret key (the 'public' and "
+                      "'secret' lines come from different key pairs); regenerate the file with "
+                      "`sandtable-coordinator --generate-curve-keys FILE`");
+  }
   return OkStatus();
 }
 
 Expected<CurveKeyPair> ReadCurveKeyFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return IoError("cannot read CURVE key file " + path);
+  ST_RETURN_IF_ERROR(CheckCurveKeyFilePermissions(path));
+  Expected<std::string> text = ReadInputFile(path, kMaxCurveKeyFileBytes, "kMaxCurveKeyFileBytes");
+  if (!text.ok()) return text.status().WithContext("CURVE key file");
+  std::istringstream in(*text);
   CurveKeyPair keys;
   std::string line;
   int line_number = 0;
   while (std::getline(in, line)) {
     ++line_number;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty() || line[0] == '#') continue;
     std::istringstream fields(line);
-    std::string name, equals, value;
-    fields >> name >> equals >> value;
-    if (equals != "=" || value.size() != 40) {
+    std::string name, equals, value, extra;
+    fields >> name >> equals >> value >> extra;
+    if (name.empty()) continue;  // blank but for spaces
+    if (equals != "=" || value.size() != 40 || !extra.empty()) {
       return ParseError(path + ":" + std::to_string(line_number) +
                         ": expected 'public = <40 Z85 chars>' or 'secret = <40 Z85 chars>'");
     }
@@ -58,10 +98,13 @@ Expected<CurveKeyPair> ReadCurveKeyFile(const std::string& path) {
     return ParseError(path + ": needs both 'public' and 'secret' lines");
   }
   std::array<uint8_t, 32> decoded{};
-  if (zmq_z85_decode(decoded.data(), keys.public_key_z85.c_str()) == nullptr ||
-      zmq_z85_decode(decoded.data(), keys.secret_key_z85.c_str()) == nullptr) {
-    return ParseError(path + ": a key is not valid Z85");
+  if (zmq_z85_decode(decoded.data(), keys.public_key_z85.c_str()) == nullptr) {
+    return ParseError(path + ": the 'public' key is not valid Z85");
   }
+  if (zmq_z85_decode(decoded.data(), keys.secret_key_z85.c_str()) == nullptr) {
+    return ParseError(path + ": the 'secret' key is not valid Z85");
+  }
+  ST_RETURN_IF_ERROR(CheckCurveKeyPair(path, keys));
   return keys;
 }
 

@@ -10,6 +10,13 @@
 // Key file format (text, '#' comments):
 //   public = <40 Z85 characters>
 //   secret = <40 Z85 characters>
+//
+// Key file rules (docs/reliability/security.md): the file holds a secret, so it is written with
+// mode 0600 (owner read/write) through WriteFileAtomically, and a key file that group or others
+// may read or write (any of the bits 0077) is refused on load, as ssh refuses an unprotected
+// private key. The two halves must belong together: the public key derived from the secret
+// (zmq_curve_public) must equal the file's public key, else the file is refused naming it (a
+// mismatched pair would otherwise only show up as a client that never gets through).
 #pragma once
 
 #include <atomic>
@@ -31,10 +38,22 @@ struct CurveKeyPair {
   std::string secret_key_z85;
 };
 
+// Mode of a written key file, and the permission bits that make a key file refused on load.
+inline constexpr unsigned kCurveKeyFileMode = 0600;
+inline constexpr unsigned kCurveKeyFileForbiddenBits = 0077;
+// A key file is two lines and a comment; anything longer is not one.
+inline constexpr uint64_t kMaxCurveKeyFileBytes = 64 * 1024;
+
 Expected<CurveKeyPair> GenerateCurveKeyPair();
+// Writes atomically with mode kCurveKeyFileMode; IO_ERROR naming the path (old file kept).
 Status WriteCurveKeyFile(const std::string& path, const CurveKeyPair& keys);
-// IO_ERROR / PARSE_ERROR naming the file and line on failure.
+// Refuses, naming the file: NOT_FOUND (missing), PERMISSION_DENIED (readable or writable by
+// group/others), IO_ERROR (not a regular file, over kMaxCurveKeyFileBytes), PARSE_ERROR (bad
+// line, bad Z85, public key not derived from the secret key).
 Expected<CurveKeyPair> ReadCurveKeyFile(const std::string& path);
+// The parts of ReadCurveKeyFile, for callers that hold keys from elsewhere.
+Status CheckCurveKeyFilePermissions(const std::string& path);
+Status CheckCurveKeyPair(const std::string& path, const CurveKeyPair& keys);
 
 // Socket settings for a bound (server) or connecting (client) socket of a site.
 CurveSettings ServerCurve(const CurveKeyPair& site);

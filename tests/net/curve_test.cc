@@ -2,10 +2,16 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <set>
+#include <string>
+
+#include "common/base/file_io.h"
 
 #include "net/channel.h"
 #include "net/handshake_monitor.h"
@@ -36,7 +42,105 @@ TEST(CurveKeyFileTest, RoundTripsAndRejectsGarbage) {
   }
   EXPECT_EQ(ReadCurveKeyFile(path).status().code(), StatusCode::kParseError);
   std::filesystem::remove(path);
-  EXPECT_EQ(ReadCurveKeyFile(path).status().code(), StatusCode::kIoError);
+  EXPECT_EQ(ReadCurveKeyFile(path).status().code(), StatusCode::kNotFound);
+}
+
+std::string TempKeyPath(const std::string& name) {
+  return (std::filesystem::temp_directory_path() /
+          ("sandtable_curve_test_" + std::to_string(::getpid()) + "_" + name + ".key"))
+      .string();
+}
+
+unsigned ModeOf(const std::string& path) {
+  struct stat st {};
+  EXPECT_EQ(::stat(path.c_str(), &st), 0) << path;
+  return static_cast<unsigned>(st.st_mode & 07777);
+}
+
+std::string KeyText(const std::string& public_z85, const std::string& secret_z85) {
+  return "public = " + public_z85 + "\nsecret = " + secret_z85 + "\n";
+}
+
+TEST(CurveKeyFileTest, WrittenOwnerOnly) {
+  const std::string path = TempKeyPath("mode");
+  ASSERT_TRUE(WriteCurveKeyFile(path, *GenerateCurveKeyPair()).ok());
+  EXPECT_EQ(ModeOf(path), kCurveKeyFileMode);
+  // Overwriting an existing, too open file also leaves it 0600.
+  ASSERT_EQ(::chmod(path.c_str(), 0644), 0);
+  ASSERT_TRUE(WriteCurveKeyFile(path, *GenerateCurveKeyPair()).ok());
+  EXPECT_EQ(ModeOf(path), kCurveKeyFileMode);
+  EXPECT_TRUE(ReadCurveKeyFile(path).ok());
+  std::filesystem::remove(path);
+}
+
+TEST(CurveKeyFileTest, RefusesAFileOthersCanRead) {
+  const std::string path = TempKeyPath("open");
+  ASSERT_TRUE(WriteCurveKeyFile(path, *GenerateCurveKeyPair()).ok());
+  for (unsigned mode : {0644u, 0640u, 0604u, 0620u, 0602u, 0660u}) {
+    ASSERT_EQ(::chmod(path.c_str(), mode), 0);
+    Expected<CurveKeyPair> keys = ReadCurveKeyFile(path);
+    ASSERT_FALSE(keys.ok()) << std::oct << mode;
+    EXPECT_EQ(keys.status().code(), StatusCode::kPermissionDenied);
+    EXPECT_NE(keys.status().message().find(path), std::string::npos) << keys.status().ToString();
+    EXPECT_NE(keys.status().message().find("chmod 600"), std::string::npos)
+        << keys.status().ToString();
+  }
+  for (unsigned mode : {0600u, 0400u}) {
+    ASSERT_EQ(::chmod(path.c_str(), mode), 0);
+    EXPECT_TRUE(ReadCurveKeyFile(path).ok()) << std::oct << mode;
+  }
+  ::chmod(path.c_str(), 0600);
+  std::filesystem::remove(path);
+}
+
+TEST(CurveKeyFileTest, RefusesHalvesOfTwoPairs) {
+  const CurveKeyPair a = *GenerateCurveKeyPair();
+  const CurveKeyPair b = *GenerateCurveKeyPair();
+  const std::string path = TempKeyPath("mismatch");
+  ASSERT_TRUE(WriteFileAtomically(path, KeyText(a.public_key_z85, b.secret_key_z85), 0600).ok());
+  Expected<CurveKeyPair> keys = ReadCurveKeyFile(path);
+  ASSERT_FALSE(keys.ok());
+  EXPECT_EQ(keys.status().code(), StatusCode::kParseError);
+  EXPECT_NE(keys.status().message().find(path), std::string::npos) << keys.status().ToString();
+  EXPECT_NE(keys.status().message().find("not the one of the secret key"), std::string::npos)
+      << keys.status().ToString();
+  // The matching halves, in either order and with comments, load.
+  ASSERT_TRUE(WriteFileAtomically(
+                  path,
+                  "# site\nsecret = " + b.secret_key_z85 + "\npublic = " + b.public_key_z85 + "\n",
+                  0600)
+                  .ok());
+  Expected<CurveKeyPair> back = ReadCurveKeyFile(path);
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  EXPECT_EQ(back->public_key_z85, b.public_key_z85);
+  std::filesystem::remove(path);
+}
+
+TEST(CurveKeyFileTest, RefusesWhatIsNotAKeyFile) {
+  const std::string path = TempKeyPath("junk");
+  const CurveKeyPair a = *GenerateCurveKeyPair();
+  struct Case {
+    std::string text;
+    StatusCode code;
+  };
+  const std::string not_z85(40, '"');  // '"' is not in the Z85 alphabet
+  for (const Case& c : {Case{"public = short\n", StatusCode::kParseError},
+                        Case{"public = " + a.public_key_z85 + "\n", StatusCode::kParseError},
+                        Case{KeyText(not_z85, a.secret_key_z85), StatusCode::kParseError},
+                        Case{KeyText(a.public_key_z85, not_z85), StatusCode::kParseError},
+                        Case{"colour = " + a.public_key_z85 + "\n", StatusCode::kParseError},
+                        Case{std::string(kMaxCurveKeyFileBytes + 1, '#'), StatusCode::kIoError}}) {
+    ASSERT_TRUE(WriteFileAtomically(path, c.text, 0600).ok());
+    Expected<CurveKeyPair> keys = ReadCurveKeyFile(path);
+    ASSERT_FALSE(keys.ok()) << c.text.substr(0, 60);
+    EXPECT_EQ(keys.status().code(), c.code) << keys.status().ToString();
+    EXPECT_NE(keys.status().message().find(path), std::string::npos) << keys.status().ToString();
+  }
+  std::filesystem::remove(path);
+  // Not regular files: refused before reading, never a hang or a read of /dev/zero.
+  EXPECT_EQ(ReadCurveKeyFile("/dev/zero").status().code(), StatusCode::kIoError);
+  EXPECT_EQ(ReadCurveKeyFile(std::filesystem::temp_directory_path().string()).status().code(),
+            StatusCode::kIoError);
 }
 
 // A CURVE server with the site key answers a client holding the site key, and refuses (no
