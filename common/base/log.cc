@@ -1,5 +1,7 @@
 #include "common/base/log.h"
 
+#include "common/base/log_rate_limit.h"
+
 #include <algorithm>
 #include <atomic>
 #include <cctype>
@@ -7,7 +9,9 @@
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
+#include <map>
 #include <mutex>
+#include <utility>
 
 namespace sandtable {
 namespace {
@@ -31,6 +35,29 @@ std::mutex& OutputMutex() {
 std::string& Tag() {
   static std::string tag;
   return tag;
+}
+
+struct SiteWindow {
+  std::chrono::steady_clock::time_point start{};
+  int written = 0;
+  uint64_t suppressed = 0;
+};
+
+// Guarded by OutputMutex(). One entry per call site that logged a warning or an error: the
+// number of call sites is fixed at compile time, so the map is bounded.
+std::map<std::pair<const char*, int>, SiteWindow>& Sites() {
+  static std::map<std::pair<const char*, int>, SiteWindow> sites;
+  return sites;
+}
+
+std::atomic<int64_t>& RateIntervalMs() {
+  static std::atomic<int64_t> ms(kLogRateInterval.count());
+  return ms;
+}
+
+std::atomic<uint64_t>& SuppressedTotal() {
+  static std::atomic<uint64_t> total(0);
+  return total;
 }
 
 const char* Basename(const char* path) {
@@ -63,6 +90,14 @@ bool ParseLogLevel(std::string_view text, LogLevel* level) {
   return true;
 }
 
+void SetLogRateInterval(std::chrono::milliseconds interval) {
+  RateIntervalMs().store(interval.count());
+  std::lock_guard<std::mutex> lock(OutputMutex());
+  Sites().clear();
+}
+
+uint64_t SuppressedLogLines() { return SuppressedTotal().load(); }
+
 void SetLogTag(std::string tag) {
   std::lock_guard<std::mutex> lock(OutputMutex());
   Tag() = std::move(tag);
@@ -74,6 +109,24 @@ LogMessage::LogMessage(LogLevel level, const char* file, int line)
     : level_(level), file_(file), line_(line) {}
 
 LogMessage::~LogMessage() {
+  uint64_t suppressed = 0;
+  const int64_t interval_ms = RateIntervalMs().load();
+  if (level_ >= LogLevel::kWarning && interval_ms > 0) {
+    const auto now = std::chrono::steady_clock::now();
+    std::lock_guard<std::mutex> lock(OutputMutex());
+    SiteWindow& site = Sites()[{file_, line_}];
+    if (site.written == 0 || now - site.start >= std::chrono::milliseconds(interval_ms)) {
+      // A new interval: report what the last one suppressed on this line.
+      suppressed = site.suppressed;
+      site = SiteWindow{now, 1, 0};
+    } else if (site.written < kLogBurstLines) {
+      ++site.written;
+    } else {
+      ++site.suppressed;
+      SuppressedTotal().fetch_add(1);
+      return;
+    }
+  }
   using Clock = std::chrono::system_clock;
   const auto now = Clock::now();
   const std::time_t seconds = Clock::to_time_t(now);
@@ -85,9 +138,16 @@ LogMessage::~LogMessage() {
   std::strftime(stamp, sizeof(stamp), "%Y-%m-%dT%H:%M:%S", &utc);
   static constexpr char kLetters[] = {'D', 'I', 'W', 'E'};
   std::lock_guard<std::mutex> lock(OutputMutex());
+  std::string text = stream_.str();
+  if (suppressed > 0) {
+    std::ostringstream note;
+    note << " [" << suppressed << " similar lines suppressed (rate limit: " << kLogBurstLines
+         << " lines per " << RateIntervalMs().load() / 1000.0 << " s from one place)]";
+    text += note.str();
+  }
   std::fprintf(stderr, "%s.%03dZ %c %s%s%s:%d] %s\n", stamp, static_cast<int>(ms),
                kLetters[static_cast<int>(level_)], Tag().c_str(), Tag().empty() ? "" : " ",
-               Basename(file_), line_, stream_.str().c_str());
+               Basename(file_), line_, text.c_str());
   std::fflush(stderr);
 }
 
