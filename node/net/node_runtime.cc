@@ -1,6 +1,8 @@
 #include "node/net/node_runtime.h"
 
 #include <algorithm>
+#include <cstdlib>
+#include <utility>
 
 #include "common/base/log.h"
 
@@ -8,6 +10,13 @@ namespace sandtable::node {
 namespace {
 
 constexpr int kMaxPeerDrain = 100;
+constexpr size_t kMaxPeerEndpointBytes = 256;
+
+bool LinkableEndpoint(const std::string& endpoint) {
+  return !endpoint.empty() && endpoint.size() <= kMaxPeerEndpointBytes &&
+         (endpoint.rfind("tcp://", 0) == 0 || endpoint.rfind("ipc://", 0) == 0) &&
+         endpoint.find('*') == std::string::npos;
+}
 
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
@@ -19,6 +28,9 @@ Status NodeOptions::Check() const {
     return InvalidArgumentError("node: --id " + std::to_string(id) +
                                 " collides with the ids reserved for the site's services (>= " +
                                 std::to_string(kFirstReservedSenderId) + ")");
+  }
+  if (max_peer_links < 0 || max_peer_links > 512) {
+    return InvalidArgumentError("node: max_peer_links must be in [0, 512]");
   }
   if (worker_threads < 1 || worker_threads > 64) {
     return InvalidArgumentError("node: worker_threads must be in [1, 64]");
@@ -301,14 +313,31 @@ void NodeRuntime::ApplyMemberList(const wire::MemberList& list) {
   if (!last_member_list_ || &list != &*last_member_list_) last_member_list_ = list;
   const wire::MemberList& members = *last_member_list_;
   member_list_version_ = members.version();
-  std::map<NodeId, const wire::Member*> listed;
+  std::vector<const wire::Member*> candidates;
   for (const wire::Member& m : members.members()) {
     const bool neighbour = !neighbours_ || neighbours_->count(m.node_id()) > 0;
     if (m.node_id() != options_.id && IsValidNodeId(m.node_id()) && neighbour &&
-        !m.endpoints().peer_router().empty()) {
-      listed[m.node_id()] = &m;
+        LinkableEndpoint(m.endpoints().peer_router())) {
+      candidates.push_back(&m);
     }
   }
+  // At most max_peer_links: the nearest ids (a deterministic choice every node agrees on).
+  const auto distance = [this](const wire::Member* m) {
+    return std::abs(static_cast<int64_t>(m->node_id()) - static_cast<int64_t>(options_.id));
+  };
+  const size_t links = std::min(candidates.size(), static_cast<size_t>(options_.max_peer_links));
+  std::partial_sort(candidates.begin(), candidates.begin() + static_cast<std::ptrdiff_t>(links),
+                    candidates.end(), [&](const wire::Member* a, const wire::Member* b) {
+                      return std::make_pair(distance(a), a->node_id()) <
+                             std::make_pair(distance(b), b->node_id());
+                    });
+  if (candidates.size() > links && !peer_links_capped_) {
+    ST_LOG(kWarning) << candidates.size() << " members qualify as peers; linking the " << links
+                     << " nearest ids only (max_peer_links)";
+  }
+  peer_links_capped_ = candidates.size() > links;
+  std::map<NodeId, const wire::Member*> listed;
+  for (size_t i = 0; i < links; ++i) listed[candidates[i]->node_id()] = candidates[i];
   for (auto it = peers_.begin(); it != peers_.end();) {
     auto found = listed.find(it->first);
     const bool gone = found == listed.end() ||

@@ -5,9 +5,13 @@
 // ROUTER for peers; one DEALER per peer it links to. Membership comes from the coordinator's
 // member list; the node links only to its neighbours (SetNeighbours: the nodes whose
 // footprints overlap its own, known once calibrated; until then every member), so peer
-// traffic grows with neighbours, not with the site. The peer mesh does not depend on the
-// coordinator: when it is down, peers keep heartbeating each other from the last member list;
-// when it returns the node says Hello again and membership resumes.
+// traffic grows with neighbours, not with the site. Bounded: at most max_peer_links peers are
+// linked (one socket each; ZeroMQ's default limit is 1023 sockets per context): when more
+// members qualify, the ones with the nearest ids (|id - own id|, ties to the lower id) are
+// linked, so a member list flooded with fake members cannot crowd out the node's sockets. A
+// member whose endpoint is not tcp:// or ipc:// (or is over 256 bytes) is not linked. The peer mesh
+// does not depend on the coordinator: when it is down, peers keep heartbeating each other from the
+// last member list; when it returns the node says Hello again and membership resumes.
 //
 // Services (node/net/node_service.h) consume coordinator replies and events and serve peer
 // requests; long work runs on workers() and its completions run on the network thread in
@@ -58,6 +62,7 @@ struct NodeOptions {
   std::chrono::milliseconds peer_timeout{500};         // silent this long: peer down
   std::chrono::milliseconds time_sync_period{100};
   int worker_threads = 1;
+  int max_peer_links = 32;  // kMaxPeerLinks: peers linked at most (sockets)
   NodeCapabilities capabilities;
   std::optional<net::CurveKeyPair> curve;
   proto::CodecLimits limits;
@@ -139,6 +144,7 @@ class NodeRuntime {
   WorkerPool workers_;
   ClockOffsetEstimator clock_;
   bool registered_ = false;
+  bool peer_links_capped_ = false;
   uint64_t registrations_ = 0;
   uint64_t member_list_version_ = 0;
   Clock::time_point last_coordinator_message_{};
