@@ -8,21 +8,37 @@
 // acknowledged event survives a process kill AND a power cut or kernel crash); NORMAL survives
 // a process kill (SIGKILL) but may lose the last transactions on power loss; it is offered
 // for sites on slow disks (measured costs in docs/coordinator.md).
-// Schema (version 1):
-//   meta(key TEXT PRIMARY KEY, value TEXT)        -- "schema_version" = "1"
-//   events(sequence INTEGER PRIMARY KEY, time_ns INTEGER, kind TEXT, body BLOB)
-// body is the serialized wire::AnnotationEvent (sequence included).
+// Schema (version 2):
+//   meta(key TEXT PRIMARY KEY, value TEXT)   -- "schema_version" = "2"
+//   events(sequence INTEGER PRIMARY KEY, time_ns INTEGER, kind TEXT, body BLOB,
+//          checksum INTEGER)                 -- EventChecksum of the other four columns
+// body is the serialized wire::AnnotationEvent (sequence and time_ns included). A version 1
+// database (no checksum column) is upgraded in place at open, in one transaction.
+// Integrity, checked at Open() (docs/reliability/store.md):
+//   - every row: its checksum (event_checksum.h) over sequence, time_ns, kind and body; body
+//     parses; body's sequence, time and kind equal the columns; sequences are 1, 2, 3 ... with
+//     no gap; every event applies to the state of those before it;
+//   - the log against PATH.seq (sequence_record.h), the last acknowledged sequence written
+//     beside the database after every commit and before any acknowledgement: the database must
+//     hold that event, with the recorded checksum. A deleted, truncated or damaged -wal file
+//     (or an older copy of the database) leaves the log short of the record.
+//   - PATH.lock: a second store (another coordinator) on the same file is refused.
 // Failure: Open() of a file that is not a SQLite database, of a damaged database (quick_check
-// fails), of a newer schema, or holding an event that does not parse or does not apply,
-// returns an error naming the file and what to do; never aborts. Not thread-safe.
+// fails), of a newer schema, of a changed or missing row, or of a log shorter than the record,
+// returns an error naming the file, the event and what to do; never aborts. Only the loss of
+// acknowledged events (and a missing or damaged record) may be accepted, explicitly, with
+// AnnotationStoreOptions::accept_lost_events (logged, the record then reset); a changed row
+// never is. Not thread-safe. ":memory:" keeps no side files.
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "cluster/annotation_state.h"
 #include "common/base/status.h"
+#include "coordinator/annotations/sequence_record.h"
 #include "proto/events.pb.h"
 
 struct sqlite3;
@@ -33,8 +49,15 @@ enum class SyncMode { kFull, kNormal };
 
 struct AnnotationStoreOptions {
   SyncMode sync = SyncMode::kFull;
+  // Start even though the record says acknowledged events are missing (after a lost -wal,
+  // or a database restored from an older backup on purpose): logged as an error naming the
+  // lost sequences, and the record is reset to the database's last event.
+  bool accept_lost_events = false;
   Status Check() const { return OkStatus(); }
 };
+
+// Bound of a database file opened by the store (CheckInputFile): 64 GiB.
+inline constexpr uint64_t kMaxAnnotationDatabaseBytes = uint64_t{64} << 30;
 
 struct CommitReport {
   // One per event of the batch: OK (the event now holds its event_sequence and time_ns), or
@@ -56,7 +79,12 @@ class AnnotationStore {
   // sequences, persists (one transaction) and applies those that pass. An error return means
   // the transaction failed (disk full, I/O error): nothing of the batch is durable, and the
   // state is rebuilt from the database, so it again equals what is on disk.
-  Expected<CommitReport> Commit(std::vector<wire::AnnotationEvent>* events);
+  // After the commit the sequence record is rewritten (fdatasync with SyncMode::kFull); a
+  // failure to write it is logged and counted (record_write_failures), the events stay
+  // committed. With `all_or_nothing`, an event that does not apply rolls back the whole batch
+  // and comes back as INVALID_ARGUMENT naming its index.
+  Expected<CommitReport> Commit(std::vector<wire::AnnotationEvent>* events,
+                                bool all_or_nothing = false);
 
   // Events with sequence > `after`, oldest first, at most `limit`.
   Expected<std::vector<wire::AnnotationEvent>> EventsAfter(SequenceNumber after,
@@ -66,18 +94,28 @@ class AnnotationStore {
   SequenceNumber last_sequence() const { return state_.last_sequence(); }
   const std::string& path() const { return path_; }
   uint64_t events_loaded() const { return events_loaded_; }
+  uint64_t record_write_failures() const { return record_write_failures_; }
 
  private:
   AnnotationStore(sqlite3* db, std::string path) : db_(db), path_(std::move(path)) {}
   Status Initialise(const AnnotationStoreOptions& options);
+  Status CreateSchema();
+  Status UpgradeFromVersion1();
   Status Replay();
+  Status VerifyRecord(const AnnotationStoreOptions& options);
+  void WriteRecord();
   Status Exec(const std::string& sql);
   Status Error(const std::string& what) const;
 
   sqlite3* db_;
   std::string path_;
+  std::optional<SequenceRecord> record_;  // absent for ":memory:"
+  bool sync_full_ = true;
+  bool upgraded_ = false;  // a version 1 file was upgraded at this open (no record yet)
+  uint64_t last_checksum_ = 0;
   cluster::AnnotationState state_;
   uint64_t events_loaded_ = 0;
+  uint64_t record_write_failures_ = 0;
 };
 
 // The event kind as stored in events.kind ("stroke_begin", ...).

@@ -144,7 +144,8 @@ TEST_F(AnnotationStoreTest, SessionExportImportRoundTrip) {
 
 TEST_F(AnnotationStoreTest, SessionImportNamesTheBadLineAndImportsNothing) {
   const std::string session = Path("bad.jsonl");
-  std::ofstream(session) << "{\"format\":\"sandtable-annotation-session\",\"version\":1}\n"
+  std::ofstream(session) << "{\"format\":\"sandtable-annotation-session\",\"version\":1,"
+                            "\"event_count\":2}\n"
                          << AnnotationEventToJsonLine(Begin(1)) << "\n"
                          << "{\"kind\":\"stroke_points\",\"stroke_id\":1,"
                             "\"first_point_index\":0,\"points_in_table_m\":[[1,2]]}\n";
