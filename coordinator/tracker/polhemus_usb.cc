@@ -9,8 +9,9 @@
 namespace sandtable::coordinator {
 namespace {
 
-constexpr unsigned char kEndpointOut = 0x02;
-constexpr unsigned char kEndpointIn = 0x88;
+// Bulk endpoints of VRPN's vrpn_Tracker_LibertyHS.h (product 0xff20): OUT 0x04, IN 0x88.
+constexpr unsigned char kEndpointOut = kPolhemusEndpointOut;
+constexpr unsigned char kEndpointIn = kPolhemusEndpointIn;
 constexpr int kReadChunkBytes = 4096;
 
 std::string Hex(uint16_t v) {
@@ -124,7 +125,7 @@ class LibusbBackend : public UsbBackend {
 const char* PolhemusModelName(PolhemusModel model) {
   switch (model) {
     case PolhemusModel::kLiberty:
-      return "Liberty";
+      return "Liberty / Liberty Latus";
     case PolhemusModel::kLibertyHs:
       return "Liberty HS";
     case PolhemusModel::kPatriot:
@@ -142,7 +143,8 @@ const char* PolhemusModelName(PolhemusModel model) {
 }
 
 PolhemusModel PolhemusModelFromProductId(uint16_t product_id) {
-  // Product ids as listed by third-party drivers; not verified against hardware.
+  // 0xff20: VRPN's vrpn_Tracker_LibertyHS.h (Liberty Latus, the Liberty family's P-frames).
+  // The others: not in VRPN, not verified against hardware (docs/tracker-formats.md).
   switch (product_id) {
     case 0xff20:
       return PolhemusModel::kLiberty;
@@ -170,7 +172,7 @@ bool ModelSpeaksPFrames(PolhemusModel model) {
 std::unique_ptr<UsbBackend> MakeLibusbBackend() { return std::make_unique<LibusbBackend>(); }
 
 Status PolhemusUsbOptions::Check() const {
-  if (format.items.empty()) return InvalidArgumentError("polhemus: empty output item list");
+  ST_RETURN_IF_ERROR(format.Check());
   if (rescan_period.count() <= 0) return InvalidArgumentError("polhemus: rescan_period <= 0");
   if (!(nominal_rate_hz > 0.0)) return InvalidArgumentError("polhemus: nominal_rate_hz <= 0");
   return OkStatus();

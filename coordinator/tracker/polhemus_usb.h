@@ -7,11 +7,13 @@
 //   kStreaming --(read fails: unplugged)--> kNoDevice (rescans every rescan_period)
 // so a tracker unplugged and plugged back in resumes without a restart (polling, which also
 // works where libusb has no hotplug support). With no device it says so once (WARNING, then
-// DEBUG) and keeps polling; nothing aborts. Models (product ids are NOT verified against
-// hardware; an unknown product of the vendor is still tried, named "Polhemus 0x....").
-// Endpoints: bulk OUT 0x02, bulk IN 0x88 (Liberty/Patriot family as documented by third-party
-// drivers; unverified). G4 and FASTRAK USB are discovered and named, but their record formats
-// differ from the implemented P-frame layout: they report kError with that message.
+// DEBUG) and keeps polling; nothing aborts. Models: vendor 0x0f44 and product 0xff20 (Liberty
+// family, VRPN's Liberty Latus driver) are checked against VRPN; the other product ids are not
+// (docs/tracker-formats.md); an unknown product of the vendor is still tried, named
+// "Polhemus 0x....". Endpoints: bulk OUT 0x04, bulk IN 0x88 (VRPN vrpn_Tracker_LibertyHS.h).
+// G4 and FASTRAK USB are discovered and named, but their record formats differ from the
+// P-frame layout (FASTRAK's binary record, per VRPN's vrpn_Tracker_Fastrak.C, starts with '0'
+// and an ASCII station): they report kError with that message.
 #pragma once
 
 #include <chrono>
@@ -27,6 +29,8 @@
 namespace sandtable::coordinator {
 
 constexpr uint16_t kPolhemusVendorId = 0x0F44;
+constexpr unsigned char kPolhemusEndpointOut = 0x04;  // bulk OUT (host -> device)
+constexpr unsigned char kPolhemusEndpointIn = 0x88;   // bulk IN (device -> host)
 
 enum class PolhemusModel { kLiberty, kLibertyHs, kPatriot, kPatriotHs, kFastrakUsb, kG4, kUnknown };
 const char* PolhemusModelName(PolhemusModel model);

@@ -10,10 +10,17 @@
 //   time_s,sensor,x_m,y_m,z_m,qw,qx,qy,qz,button
 // one sample per line, tracker_from_sensor with quaternion (w, x, y, z) (normalised; |q| must
 // be within kCsvQuaternionTolerance of 1), button 0/1, time_s non-decreasing.
+// Limits (docs/reliability/security.md): files are read through ReadInputFile (a directory,
+// FIFO or /dev/zero is IO_ERROR before a byte is read; missing is NOT_FOUND) and at most
+// kMaxTrackerReplayBytes; at most kMaxTrackerReplaySamples samples spanning at most
+// kMaxTrackerReplaySpan_s; positions within kMaxTrackerCoordinate_m per axis. Each limit is a
+// PARSE_ERROR / IO_ERROR naming it, before the samples past it are kept.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "coordinator/tracker/tracker_source.h"
@@ -23,10 +30,19 @@ namespace sandtable::coordinator {
 constexpr double kFastrakTrajRate_hz = 100.0;
 constexpr double kTrajRotationTolerance = 1e-4;
 constexpr double kCsvQuaternionTolerance = 1e-3;
+constexpr uint64_t kMaxTrackerReplayBytes = uint64_t{256} << 20;  // 256 MiB of text
+constexpr uint64_t kMaxTrackerReplaySamples = 2'000'000;          // 5.5 h at 100 Hz, ~160 MB
+constexpr double kMaxTrackerReplaySpan_s = 86400.0;               // one day
+constexpr double kMaxTrackerCoordinate_m = 1e3;
 
 Expected<std::vector<TrackerSample>> LoadFastrakTraj(const std::string& path);
 Expected<std::vector<TrackerSample>> LoadTrackerCsv(const std::string& path);
-// Writes samples in the CSV format above (for recording and tests).
+// The parsers behind the loaders, from text (`name` is used in messages; fuzzing, tests).
+Expected<std::vector<TrackerSample>> ParseFastrakTraj(std::string_view text,
+                                                      const std::string& name);
+Expected<std::vector<TrackerSample>> ParseTrackerCsv(std::string_view text,
+                                                     const std::string& name);
+// Writes samples in the CSV format above (for recording and tests), atomically.
 Status WriteTrackerCsv(const std::string& path, const std::vector<TrackerSample>& samples);
 
 class ReplaySource : public TrackerSource {

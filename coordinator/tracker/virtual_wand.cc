@@ -1,19 +1,19 @@
 #include "coordinator/tracker/virtual_wand.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
-#include <fstream>
 #include <sstream>
 #include <utility>
 
 #include <Eigen/Geometry>
 
 #include "common/base/check.h"
+#include "common/base/file_io.h"
 
 namespace sandtable::coordinator {
 namespace {
 
-constexpr double kMaxRate_hz = 10000.0;
 constexpr double kEndSlack_s = 1e-9;  // t_k within this of t_last is still sampled
 
 Status LineError(const std::string& name, int line, const std::string& field,
@@ -38,6 +38,15 @@ Status ReadNumbers(std::istringstream& in, const std::vector<const char*>& field
   }
   std::string extra;
   if (in >> extra) return LineError(name, line, "line", "unexpected extra token '" + extra + "'");
+  return OkStatus();
+}
+
+Status CheckTime(const std::string& name, int line, double time_s) {
+  if (std::abs(time_s) > kMaxVirtualWandTime_s) {
+    return LineError(
+        name, line, "time_s",
+        "beyond kMaxVirtualWandTime_s (" + std::to_string(kMaxVirtualWandTime_s) + " s)");
+  }
   return OkStatus();
 }
 
@@ -68,7 +77,7 @@ Expected<VirtualWandScript> ParseVirtualWandScript(const std::string& text,
         return LineError(name, line, "rate_hz", "must come once, before waypoints and buttons");
       }
       ST_RETURN_IF_ERROR(ReadNumbers(in, {"rate_hz"}, name, line, &v));
-      if (!(v[0] > 0.0) || v[0] > kMaxRate_hz) {
+      if (!(v[0] > 0.0) || v[0] > kMaxVirtualWandRate_hz) {
         return LineError(name, line, "rate_hz", "must be in (0, 10000]");
       }
       script.rate_hz = v[0];
@@ -83,12 +92,21 @@ Expected<VirtualWandScript> ParseVirtualWandScript(const std::string& text,
       if (!(w.direction_in_table.norm() > 0.0)) {
         return LineError(name, line, "direction", "must be non-zero");
       }
+      ST_RETURN_IF_ERROR(CheckTime(name, line, w.time_s));
+      for (int i = 0; i < 3; ++i) {
+        if (std::abs(w.tip_in_table_m[i]) > kMaxVirtualWandCoordinate_m) {
+          return LineError(name, line, i == 0 ? "x_m" : (i == 1 ? "y_m" : "z_m"),
+                           "beyond kMaxVirtualWandCoordinate_m (" +
+                               std::to_string(kMaxVirtualWandCoordinate_m) + " m)");
+        }
+      }
       if (!script.waypoints.empty() && !(w.time_s > script.waypoints.back().time_s)) {
         return LineError(name, line, "time_s", "waypoint times must increase strictly");
       }
       script.waypoints.push_back(w);
     } else if (keyword == "down" || keyword == "up") {
       ST_RETURN_IF_ERROR(ReadNumbers(in, {"time_s"}, name, line, &v));
+      ST_RETURN_IF_ERROR(CheckTime(name, line, v[0]));
       VirtualWandButtonEvent e{v[0], keyword == "down"};
       const bool was_down = !script.button.empty() && script.button.back().down;
       if (e.down == was_down) {
@@ -107,15 +125,34 @@ Expected<VirtualWandScript> ParseVirtualWandScript(const std::string& text,
   if (script.waypoints.empty()) {
     return ParseError(name + ": no waypoints (add lines 'at T_s X_m Y_m Z_m DX DY DZ')");
   }
+  const double span_s = script.waypoints.back().time_s - script.waypoints.front().time_s;
+  if (span_s > kMaxVirtualWandSpan_s) {
+    return ParseError(name + ": waypoints span " + std::to_string(span_s) +
+                      " s, more than kMaxVirtualWandSpan_s (" +
+                      std::to_string(kMaxVirtualWandSpan_s) + " s)");
+  }
+  const uint64_t samples = VirtualWandSampleCount(script);
+  if (samples > kMaxVirtualWandSamples) {
+    return ParseError(name + ": the script gives " + std::to_string(samples) +
+                      " samples or more, more than kMaxVirtualWandSamples (" +
+                      std::to_string(kMaxVirtualWandSamples) + "); lower rate_hz or the span");
+  }
   return script;
 }
 
+uint64_t VirtualWandSampleCount(const VirtualWandScript& script) {
+  if (script.waypoints.empty() || !(script.rate_hz > 0.0)) return 0;
+  const double span_s = script.waypoints.back().time_s - script.waypoints.front().time_s;
+  const double n = std::floor((span_s + kEndSlack_s) * script.rate_hz) + 1.0;
+  if (!(n <= static_cast<double>(kMaxVirtualWandSamples))) return kMaxVirtualWandSamples + 1;
+  return static_cast<uint64_t>(n);
+}
+
 Expected<VirtualWandScript> LoadVirtualWandScript(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return IoError(path + ": cannot open virtual wand script");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return ParseVirtualWandScript(text.str(), path);
+  Expected<std::string> text =
+      ReadInputFile(path, kMaxVirtualWandScriptBytes, "kMaxVirtualWandScriptBytes");
+  if (!text.ok()) return text.status().WithContext("virtual wand script");
+  return ParseVirtualWandScript(*text, path);
 }
 
 std::vector<TrackerSample> SampleVirtualWand(const VirtualWandScript& script) {
@@ -125,9 +162,11 @@ std::vector<TrackerSample> SampleVirtualWand(const VirtualWandScript& script) {
   const double t_first = w.front().time_s;
   const double t_last = w.back().time_s;
   std::vector<TrackerSample> out;
+  const uint64_t count = std::min(VirtualWandSampleCount(script), kMaxVirtualWandSamples);
+  out.reserve(count);
   size_t segment = 0;  // w[segment].time_s <= t < w[segment + 1].time_s
   size_t button = 0;   // button events at or before t: [0, button)
-  for (int64_t k = 0;; ++k) {
+  for (uint64_t k = 0; k < kMaxVirtualWandSamples; ++k) {
     // t_k from k (not accumulated) so the times carry no summed rounding error.
     const double t = t_first + static_cast<double>(k) / script.rate_hz;
     if (t > t_last + kEndSlack_s) break;

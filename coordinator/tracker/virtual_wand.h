@@ -19,9 +19,15 @@
 // direction; the sensor sits at the tip (tip_in_sensor_m = 0).
 // Errors: PARSE_ERROR "NAME:LINE: FIELD: cause" (waypoint times strictly increasing, button
 // times non-decreasing and alternating down/up, direction non-zero, numbers finite, at least
-// one waypoint, 0 < rate_hz <= 10000).
+// one waypoint, 0 < rate_hz <= 10000, tip coordinates within kMaxVirtualWandCoordinate_m,
+// times within kMaxVirtualWandTime_s). Limits of what a script may generate, checked after
+// parsing and before any sample is made (PARSE_ERROR naming the limit): the waypoints span at
+// most kMaxVirtualWandSpan_s, and the script gives at most kMaxVirtualWandSamples samples.
+// A script file is read through ReadInputFile: not a regular file (a directory, FIFO,
+// /dev/zero) or larger than kMaxVirtualWandScriptBytes is IO_ERROR, missing is NOT_FOUND.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -34,6 +40,12 @@
 namespace sandtable::coordinator {
 
 constexpr double kDefaultVirtualWandRate_hz = 100.0;
+constexpr double kMaxVirtualWandRate_hz = 10000.0;
+constexpr uint64_t kMaxVirtualWandScriptBytes = uint64_t{4} << 20;  // 4 MiB of text
+constexpr double kMaxVirtualWandSpan_s = 3600.0;                    // last - first waypoint
+constexpr uint64_t kMaxVirtualWandSamples = 1'000'000;              // ~80 MB of samples
+constexpr double kMaxVirtualWandTime_s = 1e6;        // |time_s| of any waypoint or button
+constexpr double kMaxVirtualWandCoordinate_m = 1e3;  // |x|, |y|, |z| of a tip
 
 struct VirtualWandWaypoint {
   double time_s = 0.0;
@@ -57,7 +69,13 @@ Expected<VirtualWandScript> ParseVirtualWandScript(const std::string& text,
                                                    const std::string& name);
 Expected<VirtualWandScript> LoadVirtualWandScript(const std::string& path);
 
-// The samples of a script (see the sampling rule above); source_time_s = t_k.
+// Number of samples the sampling rule gives for `script` (0 for no waypoints; saturates at
+// kMaxVirtualWandSamples + 1 for absurd spans or rates).
+uint64_t VirtualWandSampleCount(const VirtualWandScript& script);
+
+// The samples of a script (see the sampling rule above); source_time_s = t_k. Never more
+// than kMaxVirtualWandSamples (a script that would give more is cut there; parsed scripts
+// never do).
 std::vector<TrackerSample> SampleVirtualWand(const VirtualWandScript& script);
 
 // Plays the samples like a replay (each when its time has come after the first Poll).

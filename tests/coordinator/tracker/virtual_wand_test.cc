@@ -4,7 +4,15 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+
+#include "common/base/file_io.h"
 
 namespace sandtable::coordinator {
 namespace {
@@ -88,7 +96,7 @@ TEST(VirtualWandTest, ErrorsNameLineAndField) {
     EXPECT_NE(script.status().message().find(c.expected), std::string::npos)
         << script.status().ToString() << " (expected '" << c.expected << "')";
   }
-  EXPECT_EQ(LoadVirtualWandScript("/nonexistent/wand.txt").status().code(), StatusCode::kIoError);
+  EXPECT_EQ(LoadVirtualWandScript("/nonexistent/wand.txt").status().code(), StatusCode::kNotFound);
 }
 
 TEST(VirtualWandTest, SourcePlaysSamplesWhenDue) {
@@ -105,6 +113,66 @@ TEST(VirtualWandTest, SourcePlaysSamplesWhenDue) {
   ASSERT_TRUE(source.Poll(t0 + std::chrono::seconds(1), &out).ok());
   EXPECT_EQ(out.size(), 11u);
   EXPECT_EQ(source.state(), TrackerState::kEnded);
+}
+
+// What a script may generate is bounded before any sample is made: the span of its
+// waypoints, the number of samples (span x rate), times and coordinates; each refusal names
+// its limit.
+TEST(VirtualWandTest, ScriptsThatWouldGenerateTooMuchAreRefusedNamingTheLimit) {
+  struct Case {
+    std::string text;
+    std::string limit;
+  };
+  const std::vector<Case> cases = {
+      {"at 0 0 0 0 0 0 -1\nat 3601 0 0 0 0 0 -1\n", "kMaxVirtualWandSpan_s"},
+      {"at 0 0 0 0 0 0 -1\nat 1e300 0 0 0 0 0 -1\n", "kMaxVirtualWandTime_s"},
+      {"rate_hz 10000\nat 0 0 0 0 0 0 -1\nat 1000 0 0 0 0 0 -1\n", "kMaxVirtualWandSamples"},
+      {"at 0 1e19 0 0 0 0 -1\n", "kMaxVirtualWandCoordinate_m"},
+      {"at 0 0 0 0 0 0 -1\ndown 1e12\n", "kMaxVirtualWandTime_s"},
+  };
+  for (const Case& c : cases) {
+    Expected<VirtualWandScript> script = ParseVirtualWandScript(c.text, "big.txt");
+    ASSERT_FALSE(script.ok()) << c.text;
+    EXPECT_EQ(script.status().code(), StatusCode::kParseError);
+    EXPECT_NE(script.status().message().find(c.limit), std::string::npos)
+        << script.status().ToString();
+    EXPECT_NE(script.status().message().find("big.txt"), std::string::npos);
+  }
+  // Just inside the limits: an hour at 250 Hz is 900 001 samples, accepted and generated.
+  Expected<VirtualWandScript> hour =
+      ParseVirtualWandScript("rate_hz 250\nat 0 0 0 0 0 0 -1\nat 3600 0 0 0 0 0 -1\n", "h.txt");
+  ASSERT_TRUE(hour.ok()) << hour.status().ToString();
+  EXPECT_EQ(VirtualWandSampleCount(*hour), 900'001u);
+  EXPECT_EQ(SampleVirtualWand(*hour).size(), 900'001u);
+  // A script built in code past the limits is cut at kMaxVirtualWandSamples, never more.
+  VirtualWandScript huge = *hour;
+  huge.rate_hz = 1e9;
+  EXPECT_GT(VirtualWandSampleCount(huge), kMaxVirtualWandSamples);
+  EXPECT_EQ(SampleVirtualWand(huge).size(), kMaxVirtualWandSamples);
+}
+
+TEST(VirtualWandTest, ScriptFilesAreReadThroughTheBoundedReader) {
+  // /dev/zero would never end: refused before a byte is read.
+  Expected<VirtualWandScript> zero = LoadVirtualWandScript("/dev/zero");
+  ASSERT_FALSE(zero.ok());
+  EXPECT_EQ(zero.status().code(), StatusCode::kIoError);
+  EXPECT_NE(zero.status().message().find("not a regular file"), std::string::npos)
+      << zero.status().ToString();
+  const std::filesystem::path dir = std::filesystem::temp_directory_path();
+  EXPECT_EQ(LoadVirtualWandScript(dir.string()).status().code(), StatusCode::kIoError);
+  const std::string fifo = (dir / ("sandtable_wand_fifo_" + std::to_string(::getpid()))).string();
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  EXPECT_EQ(LoadVirtualWandScript(fifo).status().code(), StatusCode::kIoError);  // no hang
+  std::filesystem::remove(fifo);
+  const std::string big = (dir / ("sandtable_wand_big_" + std::to_string(::getpid()))).string();
+  ASSERT_TRUE(WriteFileAtomically(big, std::string(kMaxVirtualWandScriptBytes + 1, '#')).ok());
+  Expected<VirtualWandScript> too_big = LoadVirtualWandScript(big);
+  ASSERT_FALSE(too_big.ok());
+  EXPECT_NE(too_big.status().message().find("kMaxVirtualWandScriptBytes"), std::string::npos)
+      << too_big.status().ToString();
+  ASSERT_TRUE(WriteFileAtomically(big, kScript).ok());
+  EXPECT_TRUE(LoadVirtualWandScript(big).ok());
+  std::filesystem::remove(big);
 }
 
 }  // namespace
