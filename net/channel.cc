@@ -14,7 +14,10 @@ Channel::Channel(std::unique_ptr<Socket> socket, uint32_t sender_id, uint64_t in
   ST_CHECK(counters_ != nullptr) << "Channel needs message counters";
 }
 
+void Channel::ReplaceSocket(std::unique_ptr<Socket> socket) { socket_ = std::move(socket); }
+
 Status Channel::Send(wire::Envelope envelope, const std::string& routing_id) {
+  if (socket_ == nullptr) return UnavailableError("channel: socket closed (being rebuilt)");
   wire::Envelope header = stamper_.Next();
   envelope.set_protocol_version(header.protocol_version());
   envelope.set_sender_id(header.sender_id());
@@ -72,7 +75,9 @@ Expected<Received> Channel::Receive() {
   incoming.wire_bytes = payload.size();
   Expected<wire::Envelope> envelope = proto::DecodeEnvelope(payload, limits_, counters_);
   if (!envelope.ok()) return refuse(envelope.status(), 0);
-  if (Status in_order = tracker_.Accept(*envelope, counters_); !in_order.ok()) {
+  if (Status in_order = tracker_.Accept(*envelope, counters_, proto::SequenceTracker::Clock::now(),
+                                        incoming.routing_id);
+      !in_order.ok()) {
     return refuse(std::move(in_order), envelope->sequence());
   }
   counters_->CountAccepted();

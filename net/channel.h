@@ -69,6 +69,13 @@ class Channel {
 
   // Forget a sender's sequence (it left or restarted).
   void ForgetSender(uint32_t sender_id) { tracker_.Forget(sender_id); }
+  // Senders whose sequence state is kept (bounded, proto/sequence_tracker.h).
+  size_t tracked_senders() const { return tracker_.size(); }
+
+  // Replaces the socket (e.g. a publisher rebuilt to shed its subscribers' state) keeping the
+  // numbering of sent messages, so receivers see one sender with one incarnation. nullptr
+  // closes it: Send() is then UNAVAILABLE, and socket() must not be called until replaced.
+  void ReplaceSocket(std::unique_ptr<Socket> socket);
 
   Socket& socket() { return *socket_; }
   const ChannelStats& stats() const { return stats_; }

@@ -17,6 +17,8 @@ zmq::socket_type ToZmq(SocketType type) {
       return zmq::socket_type::sub;
     case SocketType::kPair:
       return zmq::socket_type::pair;
+    case SocketType::kXPub:
+      return zmq::socket_type::xpub;
   }
   return zmq::socket_type::pair;
 }
@@ -57,11 +59,12 @@ Expected<std::unique_ptr<Socket>> Socket::Create(zmq::context_t* context, Socket
     socket.set(zmq::sockopt::reconnect_ivl_max,
                static_cast<int>(options.reconnect_interval_max.count()));
     if (type == SocketType::kRouter) {
-      // Fail sends to unknown routing ids instead of dropping them silently, and let a
-      // restarted peer with the same routing id take over its old connection.
+      // Fail sends to unknown routing ids instead of dropping them silently. No handover:
+      // a connection claiming a routing id in use must not take over (forged membership).
       socket.set(zmq::sockopt::router_mandatory, 1);
-      socket.set(zmq::sockopt::router_handover, 1);
+      socket.set(zmq::sockopt::router_handover, 0);
     }
+    if (type == SocketType::kXPub) socket.set(zmq::sockopt::xpub_manual, 1);
     if (!options.routing_id.empty()) socket.set(zmq::sockopt::routing_id, options.routing_id);
     if (type == SocketType::kSub && options.subscribe_all) socket.set(zmq::sockopt::subscribe, "");
     if (options.curve.enabled) {
@@ -121,9 +124,23 @@ Status Socket::Send(const std::vector<std::string>& frames) {
     return OkStatus();
   } catch (const zmq::error_t& e) {
     if (e.num() == EHOSTUNREACH) {
-      return UnavailableError("socket: routing id not connected (peer gone); message dropped");
+      return NotFoundError("socket: routing id not connected (peer gone); message dropped");
     }
     return FromZmq(e, "socket: send");
+  }
+}
+
+Status Socket::Subscribe(const std::string& topic, bool subscribe) {
+  if (type_ != SocketType::kXPub) return InvalidArgumentError("socket: Subscribe needs an XPUB");
+  try {
+    if (subscribe) {
+      socket_.set(zmq::sockopt::subscribe, topic);
+    } else {
+      socket_.set(zmq::sockopt::unsubscribe, topic);
+    }
+    return OkStatus();
+  } catch (const zmq::error_t& e) {
+    return FromZmq(e, "socket: subscribe");
   }
 }
 

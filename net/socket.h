@@ -3,7 +3,10 @@
 // Every endpoint is a string ("tcp://127.0.0.1:*", "ipc:///tmp/x", "inproc://y"). Binding to
 // port 0 or "*" lets the OS pick a free port; Bind() returns the real endpoint (from
 // ZMQ_LAST_ENDPOINT), so many processes can run on one machine. ZMQ_MAXMSGSIZE is always set:
-// a peer sending a larger message is disconnected by libzmq before we allocate it.
+// a peer sending a larger message is disconnected by libzmq before we allocate it. A ROUTER
+// never hands a connected routing id over to a new connection (ZMQ_ROUTER_HANDOVER off): a
+// second connection claiming a routing id in use is ignored, so no process can take over
+// another's connection (membership binds a member to its connection).
 // Not thread-safe (ZeroMQ sockets belong to one thread).
 #pragma once
 
@@ -20,7 +23,10 @@
 
 namespace sandtable::net {
 
-enum class SocketType { kRouter, kDealer, kPub, kSub, kPair };
+// kXPub: a PUB whose subscriptions the owner applies itself (ZMQ_XPUB_MANUAL): it receives
+// each subscription message ("\x01topic", "\x00topic" to cancel) and calls Subscribe() for
+// the ones it accepts (net/subscription_filter.h), so subscribers cannot grow its memory.
+enum class SocketType { kRouter, kDealer, kPub, kSub, kPair, kXPub };
 
 // CURVE settings of one socket (net/curve.h loads them from site key files). Keys are Z85
 // text (40 characters).
@@ -59,7 +65,7 @@ class Socket {
   Status Disconnect(const std::string& endpoint);
 
   // Sends a multipart message without blocking; UNAVAILABLE when the queue is full (high
-  // water mark) or, for ROUTER, when the routing id is not connected.
+  // water mark); NOT_FOUND, for ROUTER, when the routing id is not connected.
   Status Send(const std::vector<std::string>& frames);
   // Receives one multipart message if one is waiting (nullopt otherwise); never blocks.
   Expected<std::optional<std::vector<std::string>>> TryReceive();
@@ -68,6 +74,10 @@ class Socket {
   // OK also on timeout (all false) and on EINTR (a signal arrived: the caller checks it).
   static Status Poll(const std::vector<Socket*>& sockets, std::chrono::milliseconds timeout,
                      std::vector<bool>* readable);
+
+  // kXPub only: applies (or cancels) `topic` for the subscriber whose subscription message
+  // was received last.
+  Status Subscribe(const std::string& topic, bool subscribe = true);
 
   zmq::socket_t& raw() { return socket_; }
   SocketType type() const { return type_; }

@@ -26,6 +26,10 @@ std::string_view RejectReasonName(RejectReason reason) {
       return "invalid_content";
     case RejectReason::kUnknownSender:
       return "unknown_sender";
+    case RejectReason::kOverLimit:
+      return "over_limit";
+    case RejectReason::kForged:
+      return "forged";
     case RejectReason::kCount:
       break;
   }

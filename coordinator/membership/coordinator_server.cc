@@ -1,8 +1,16 @@
 #include "coordinator/membership/coordinator_server.h"
 
+#include <thread>
+
 #include "common/base/log.h"
 
 namespace sandtable::coordinator {
+namespace {
+
+// Subscription messages queued per subscriber connection before libzmq stops reading it.
+constexpr int kPublisherReceiveHighWaterMark = 64;
+
+}  // namespace
 
 Status CoordinatorOptions::Check() const {
   ST_RETURN_IF_ERROR(membership.Check());
@@ -16,7 +24,9 @@ Status CoordinatorOptions::Check() const {
 }
 
 CoordinatorServer::CoordinatorServer(CoordinatorOptions options)
-    : options_(std::move(options)), members_(options_.membership) {}
+    : options_(std::move(options)),
+      members_(options_.membership),
+      subscription_filter_(options_.subscriptions) {}
 
 CoordinatorServer::~CoordinatorServer() {
   for (auto& monitor : handshake_monitors_) monitor->Stop();
@@ -49,6 +59,7 @@ Status CoordinatorServer::Start() {
   Expected<std::unique_ptr<net::Socket>> router =
       net::Socket::Create(&context_, net::SocketType::kRouter, socket_options);
   if (!router.ok()) return router.status();
+  socket_options_ = socket_options;
   ST_RETURN_IF_ERROR(MonitorHandshakes(router->get(), "coordinator requests"));
   Expected<std::string> request_endpoint = (*router)->Bind(options_.request_endpoint);
   if (!request_endpoint.ok()) return request_endpoint.status().WithContext("requests");
@@ -57,12 +68,8 @@ Status CoordinatorServer::Start() {
                                              &counters_, options_.limits);
 
   Expected<std::unique_ptr<net::Socket>> pub =
-      net::Socket::Create(&context_, net::SocketType::kPub, socket_options);
+      CreatePublisher(options_.event_endpoint, &event_endpoint_);
   if (!pub.ok()) return pub.status();
-  ST_RETURN_IF_ERROR(MonitorHandshakes(pub->get(), "coordinator events"));
-  Expected<std::string> event_endpoint = (*pub)->Bind(options_.event_endpoint);
-  if (!event_endpoint.ok()) return event_endpoint.status().WithContext("events");
-  event_endpoint_ = *event_endpoint;
   events_ = std::make_unique<net::Channel>(std::move(*pub), kCoordinatorSenderId, incarnation,
                                            &counters_, options_.limits);
   loop_.Add(
@@ -71,12 +78,80 @@ Status CoordinatorServer::Start() {
   return OkStatus();
 }
 
+Expected<std::unique_ptr<net::Socket>> CoordinatorServer::CreatePublisher(
+    const std::string& endpoint, std::string* bound) {
+  net::SocketOptions options = socket_options_;
+  // Subscribers send only subscriptions: a few bytes each, and one each (net/
+  // subscription_filter.h). A short inbound queue bounds what libzmq reads ahead of the filter.
+  options.max_message_bytes = options_.subscriptions.max_subscription_message_bytes;
+  options.receive_high_water_mark = kPublisherReceiveHighWaterMark;
+  Expected<std::unique_ptr<net::Socket>> pub =
+      net::Socket::Create(&context_, net::SocketType::kXPub, options);
+  if (!pub.ok()) return pub.status();
+  // One monitor, on the first publisher (a rebuilt one is not monitored: its refusals are
+  // rare, and monitors must not grow with rebuilds).
+  if (events_ == nullptr) ST_RETURN_IF_ERROR(MonitorHandshakes(pub->get(), "coordinator events"));
+  Expected<std::string> bound_endpoint = (*pub)->Bind(endpoint);
+  if (!bound_endpoint.ok()) return bound_endpoint.status().WithContext("events");
+  *bound = *bound_endpoint;
+  return pub;
+}
+
+Status CoordinatorServer::ServeSubscriptions() {
+  Expected<bool> rebuild = subscription_filter_.Drain(events_->socket(), &counters_);
+  if (!rebuild.ok()) return rebuild.status();
+  if (!*rebuild) return OkStatus();
+  ST_LOG(kWarning) << "events: subscribers asked for more than "
+                   << options_.subscriptions.max_foreign_topic_bytes
+                   << " bytes of topics the site does not use; rebuilding the publisher on "
+                   << event_endpoint_ << " (subscribers reconnect)";
+  // Close first (frees every subscription), then bind the same endpoint again: libzmq closes
+  // the listener on its I/O thread, so the port may be busy for a moment.
+  events_->ReplaceSocket(nullptr);
+  constexpr auto kRebindDeadline = std::chrono::seconds(2);
+  const auto until = Clock::now() + kRebindDeadline;
+  while (true) {
+    std::string bound;
+    Expected<std::unique_ptr<net::Socket>> pub = CreatePublisher(event_endpoint_, &bound);
+    if (pub.ok()) {
+      events_->ReplaceSocket(std::move(*pub));
+      subscription_filter_.Rebuilt();
+      return OkStatus();
+    }
+    if (Clock::now() >= until) return pub.status().WithContext("rebuilding the publisher");
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+}
+
+void CoordinatorServer::CountPublishFailure(const Status& status, const char* what) {
+  if (status.ok()) return;
+  ++publish_failures_;
+  ST_LOG(kWarning) << what << " not published (" << publish_failures_
+                   << " failed publishes so far; still serving): " << status.ToString();
+}
+
+bool CoordinatorServer::StillConnected(const std::string& routing_id) {
+  // ROUTER_MANDATORY: a send to a routing id without a connection fails with NOT_FOUND. The
+  // probe is a HeartbeatAck{known}, which a member takes as a sign of life.
+  wire::Envelope probe;
+  probe.mutable_heartbeat_ack()->set_known(true);
+  probe.mutable_heartbeat_ack()->set_member_list_version(members_.version());
+  const Status sent = requests_->Send(std::move(probe), routing_id);
+  return sent.code() != StatusCode::kNotFound;
+}
+
 Status CoordinatorServer::Step(std::chrono::milliseconds max_wait) {
   ST_CHECK(requests_ != nullptr) << "CoordinatorServer::Step before a successful Start()";
   // Never sleep past the next expiry check: dead nodes must be found within a period.
   const auto wait = std::min(max_wait, options_.membership.heartbeat_period / 2);
   ST_RETURN_IF_ERROR(loop_.RunOnce(wait));
-  for (CoordinatorService* service : services_) ST_RETURN_IF_ERROR(service->OnStep(*this));
+  ST_RETURN_IF_ERROR(ServeSubscriptions());
+  for (CoordinatorService* service : services_) {
+    // A service's failure (e.g. a publish over the codec limit) is logged, not fatal.
+    if (Status stepped = service->OnStep(*this); !stepped.ok()) {
+      CountPublishFailure(stepped, "service step:");
+    }
+  }
   const Clock::time_point now = Clock::now();
   for (NodeId id : members_.ExpireSilent(now)) {
     ST_LOG(kInfo) << "node " << id << " declared dead (silent for more than "
@@ -85,7 +160,7 @@ Status CoordinatorServer::Step(std::chrono::milliseconds max_wait) {
   }
   if (members_.version() != published_version_ ||
       now - last_publish_ >= options_.republish_period) {
-    ST_RETURN_IF_ERROR(PublishMemberList());
+    CountPublishFailure(PublishMemberList(), "member list");
   }
   return OkStatus();
 }
@@ -124,14 +199,36 @@ void CoordinatorServer::HandleRequest(net::Incoming request) {
   wire::Envelope reply;
   switch (in.body_case()) {
     case wire::Envelope::kHello: {
-      const HelloOutcome outcome = members_.OnHello(sender, in.hello(), now);
-      if (outcome != HelloOutcome::kRepeated) {
+      if (Status valid = CheckHello(in.hello()); !valid.ok()) {
+        counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kOverLimit);
+        ST_LOG(kWarning) << "refused a Hello claiming node " << sender << ": " << valid.message();
+        auto* rejected = reply.mutable_rejected();
+        rejected->set_rejected_sequence(in.sequence());
+        rejected->set_reason(valid.message());
+        break;
+      }
+      const HelloOutcome outcome =
+          members_.OnHello(sender, in.hello(), request.routing_id, now,
+                           [this](const std::string& id) { return StillConnected(id); });
+      auto* ack = reply.mutable_hello_ack();
+      ack->set_accepted(Accepted(outcome));
+      if (outcome == HelloOutcome::kSiteFull) {
+        counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kOverLimit);
+        ack->set_reason("site full: " + std::to_string(options_.membership.max_members) +
+                        " members already (--max-members)");
+        ST_LOG(kWarning) << "refused node " << sender << ": " << ack->reason();
+      } else if (outcome == HelloOutcome::kIdInUse || outcome == HelloOutcome::kConnectionInUse) {
+        counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kForged);
+        ack->set_reason(outcome == HelloOutcome::kIdInUse
+                            ? "node id " + std::to_string(sender) +
+                                  " is held by another live connection (two nodes with one --id?)"
+                            : "this connection already holds another node id (one per node)");
+        ST_LOG(kWarning) << "refused a Hello claiming node " << sender << ": " << ack->reason();
+      } else if (outcome == HelloOutcome::kJoined || outcome == HelloOutcome::kRestarted) {
         ST_LOG(kInfo) << "node " << sender
                       << (outcome == HelloOutcome::kJoined ? " joined" : " restarted")
                       << " (peer endpoint " << in.hello().endpoints().peer_router() << ")";
       }
-      auto* ack = reply.mutable_hello_ack();
-      ack->set_accepted(true);
       ack->set_heartbeat_period_s(
           std::chrono::duration<double>(options_.membership.heartbeat_period).count());
       ack->set_heartbeat_misses_allowed(static_cast<uint32_t>(options_.membership.misses_allowed));
@@ -140,15 +237,25 @@ void CoordinatorServer::HandleRequest(net::Incoming request) {
     }
     case wire::Envelope::kHeartbeat: {
       auto* ack = reply.mutable_heartbeat_ack();
-      ack->set_known(members_.OnHeartbeat(sender, in.heartbeat().incarnation(), now));
+      ack->set_known(
+          members_.OnHeartbeat(sender, in.heartbeat().incarnation(), request.routing_id, now));
       ack->set_member_list_version(members_.version());
       break;
     }
     case wire::Envelope::kGoodbye:
-      if (members_.OnGoodbye(sender)) {
-        ST_LOG(kInfo) << "node " << sender << " left: " << in.goodbye().reason();
+      switch (members_.OnGoodbye(sender, in.sender_incarnation(), request.routing_id)) {
+        case GoodbyeOutcome::kLeft:
+          ST_LOG(kInfo) << "node " << sender << " left: " << in.goodbye().reason().substr(0, 200);
+          requests_->ForgetSender(sender);
+          break;
+        case GoodbyeOutcome::kForged:
+          counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kForged);
+          ST_LOG(kWarning) << "ignored a Goodbye for node " << sender
+                           << " from another connection or incarnation than the member's";
+          break;
+        case GoodbyeOutcome::kUnknown:
+          break;
       }
-      requests_->ForgetSender(sender);
       return;  // no reply: the node is closing
     case wire::Envelope::kTimeRequest: {
       auto* time = reply.mutable_time_reply();

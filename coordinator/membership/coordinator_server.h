@@ -7,6 +7,15 @@
 // wrong_type, unless a CoordinatorService added with AddService() serves it (annotations,
 // tracker calibration, timeline); invalid messages are counted and answered with Rejected
 // (net/server_loop.h).
+//
+// Hostile peers (docs/reliability/dos.md): a Hello whose fields exceed the limits of
+// membership_table.h is answered with Rejected and counted over_limit; a full site or an id
+// bound to another live connection gets HelloAck{accepted: false} (counted over_limit /
+// forged); a Goodbye or Heartbeat for an id from another connection or incarnation changes
+// nothing (counted forged). The PUB is an XPUB whose subscriptions net::SubscriptionFilter
+// bounds. A publish that fails (a message over the codec limit, a full queue) is logged and
+// counted (publish_failures()), and the server keeps serving: Step() fails only when a socket
+// itself fails.
 // Single-threaded: call Step() in a loop (or Run()). Never throws; failures of sockets come back as
 // Status.
 #pragma once
@@ -24,6 +33,7 @@
 #include "net/curve.h"
 #include "net/handshake_monitor.h"
 #include "net/server_loop.h"
+#include "net/subscription_filter.h"
 
 namespace sandtable::coordinator {
 
@@ -51,6 +61,7 @@ struct CoordinatorOptions {
   std::chrono::milliseconds step_period{50};
   std::optional<net::CurveKeyPair> curve;  // site keys: require CURVE on both sockets
   proto::CodecLimits limits;
+  net::SubscriptionLimits subscriptions;  // what the PUB accepts from subscribers
 
   Status Check() const;
 };
@@ -80,10 +91,22 @@ class CoordinatorServer {
 
   const MembershipTable& members() const { return members_; }
   const proto::MessageCounters& counters() const { return counters_; }
+  // Publishes that failed (logged; the server kept serving).
+  uint64_t publish_failures() const { return publish_failures_; }
+  const net::SubscriptionStats& subscriptions() const { return subscription_filter_.stats(); }
+  // Senders whose sequence state the request socket keeps (bounded).
+  size_t tracked_senders() const { return requests_ ? requests_->tracked_senders() : 0; }
 
  private:
   void HandleRequest(net::Incoming request);
   Status PublishMemberList();
+  void CountPublishFailure(const Status& status, const char* what);
+  Expected<std::unique_ptr<net::Socket>> CreatePublisher(const std::string& endpoint,
+                                                         std::string* bound);
+  // Drains the publisher's subscriptions; rebuilds it when they hold too much.
+  Status ServeSubscriptions();
+  // True when the connection with this routing id is still up (a probe send).
+  bool StillConnected(const std::string& routing_id);
   // With CURVE, logs and counts refused handshakes on `socket` (net/handshake_monitor.h).
   Status MonitorHandshakes(net::Socket* socket, const char* name);
 
@@ -98,6 +121,9 @@ class CoordinatorServer {
   std::string request_endpoint_, event_endpoint_;
   MembershipTable members_;
   std::vector<CoordinatorService*> services_;
+  net::SocketOptions socket_options_;
+  net::SubscriptionFilter subscription_filter_;
+  uint64_t publish_failures_ = 0;
   uint64_t published_version_ = ~uint64_t{0};
   Clock::time_point last_publish_{};
 };

@@ -5,11 +5,25 @@
 // entry (restart: new incarnation, maybe new endpoints): one entry per id, never two. Every
 // change bumps version(). Pure logic, no sockets, no clock of its own (times are passed in),
 // so tests drive it directly. Not thread-safe.
+//
+// Bounds (docs/reliability/dos.md): at most max_members members (a site's size is known;
+// --max-members); every field that is stored and re-published in the member list is checked by
+// CheckHello() (endpoint, capability names and sizes), so the member list stays far below the
+// codec's message limit (max_members x ~600 bytes).
+//
+// Binding: a member is bound to the connection (ROUTER routing id) its Hello came on and to
+// its incarnation. Heartbeats and Goodbyes count only from that connection and incarnation: a
+// process claiming another's id cannot keep it alive or take it off the list. A Hello for a
+// bound id from another connection is refused while the bound connection is still up
+// (`still_connected`, asked by the server); once it is gone (the node reconnected, or was
+// restarted) the new connection takes the id.
 #pragma once
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <map>
+#include <string>
 #include <vector>
 
 #include "common/base/ids.h"
@@ -20,42 +34,77 @@ namespace sandtable::coordinator {
 
 using Clock = std::chrono::steady_clock;
 
+// Limits of what a Hello may carry (the member list re-publishes them).
+constexpr int kDefaultMaxMembers = 256;          // --max-members
+constexpr int kMaxMembersLimit = 4096;           // largest --max-members accepted
+constexpr size_t kMaxEndpointBytes = 256;        // Endpoints.peer_router
+constexpr size_t kMaxCapabilityNameBytes = 64;   // projector_output, camera_input
+constexpr size_t kMaxSoftwareVersionBytes = 64;  // Hello.software_version
+constexpr uint32_t kMaxCapabilitySize_px = 65536;
+constexpr double kMaxFrameRate_hz = 10000.0;
+
 struct MembershipOptions {
   std::chrono::milliseconds heartbeat_period{100};
   int misses_allowed = 5;  // dead after heartbeat_period * misses_allowed of silence
+  int max_members = kDefaultMaxMembers;
 
   std::chrono::milliseconds Timeout() const { return heartbeat_period * misses_allowed; }
   Status Check() const;
 };
 
-enum class HelloOutcome { kJoined, kRestarted, kRepeated };
+// OK when every field of `hello` is within the limits above; else INVALID_ARGUMENT naming the
+// field, its size and the limit.
+Status CheckHello(const wire::Hello& hello);
+
+enum class HelloOutcome {
+  kJoined,           // a new member
+  kRestarted,        // a known id with a new incarnation (entry replaced)
+  kRepeated,         // the same member again (its HelloAck was lost)
+  kReconnected,      // the same member on a new connection (the old one is gone)
+  kSiteFull,         // refused: max_members members already
+  kIdInUse,          // refused: the id is bound to another connection that is still up
+  kConnectionInUse,  // refused: this connection already holds another member id
+};
+bool Accepted(HelloOutcome outcome);
+
+enum class GoodbyeOutcome { kLeft, kUnknown, kForged };
 
 class MembershipTable {
  public:
+  using StillConnected = std::function<bool(const std::string& routing_id)>;
+
   explicit MembershipTable(MembershipOptions options) : options_(options) {}
 
-  HelloOutcome OnHello(NodeId id, const wire::Hello& hello, Clock::time_point now);
-  // True when `id` is a member of this incarnation (its silence timer restarts); false asks
-  // the sender to Hello again (unknown to us, e.g. after a coordinator restart).
-  bool OnHeartbeat(NodeId id, uint64_t incarnation, Clock::time_point now);
-  // True when `id` was a member.
-  bool OnGoodbye(NodeId id);
+  // `hello` must have passed CheckHello(). `routing_id` is the connection it came on.
+  HelloOutcome OnHello(NodeId id, const wire::Hello& hello, const std::string& routing_id,
+                       Clock::time_point now, const StillConnected& still_connected);
+  // True when `id` is a member of this incarnation on this connection (its silence timer
+  // restarts); false asks the sender to Hello again (unknown to us, e.g. after a coordinator
+  // restart, or a new connection).
+  bool OnHeartbeat(NodeId id, uint64_t incarnation, const std::string& routing_id,
+                   Clock::time_point now);
+  // kLeft when `id` was a member and the Goodbye came from its connection and incarnation.
+  GoodbyeOutcome OnGoodbye(NodeId id, uint64_t incarnation, const std::string& routing_id);
   // Removes members silent for longer than the timeout; returns their ids.
   std::vector<NodeId> ExpireSilent(Clock::time_point now);
 
   bool Contains(NodeId id) const { return members_.count(id) > 0; }
   size_t size() const { return members_.size(); }
   uint64_t version() const { return version_; }
+  const MembershipOptions& options() const { return options_; }
   // Sorted by node id. joined_time_ns is on the steady clock of this process.
   wire::MemberList ToWire() const;
 
  private:
   struct Entry {
     wire::Member member;
+    std::string routing_id;
     Clock::time_point last_heard;
   };
   MembershipOptions options_;
+  void Erase(std::map<NodeId, Entry>::iterator it);
   std::map<NodeId, Entry> members_;
+  std::map<std::string, NodeId> by_connection_;
   uint64_t version_ = 0;
 };
 

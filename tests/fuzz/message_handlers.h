@@ -36,13 +36,15 @@ inline bool HandleUntrustedMessage(const uint8_t* data, size_t size, HandlerStat
   const auto now = coordinator::Clock::now();
   switch (e.body_case()) {
     case wire::Envelope::kHello:
-      state->members.OnHello(e.sender_id(), e.hello(), now);
+      if (coordinator::CheckHello(e.hello()).ok()) {
+        state->members.OnHello(e.sender_id(), e.hello(), "fuzz", now, nullptr);
+      }
       break;
     case wire::Envelope::kHeartbeat:
-      state->members.OnHeartbeat(e.sender_id(), e.heartbeat().incarnation(), now);
+      state->members.OnHeartbeat(e.sender_id(), e.heartbeat().incarnation(), "fuzz", now);
       break;
     case wire::Envelope::kGoodbye:
-      state->members.OnGoodbye(e.sender_id());
+      state->members.OnGoodbye(e.sender_id(), e.sender_incarnation(), "fuzz");
       break;
     case wire::Envelope::kTimeReply:
       state->clock.AddSample(e.time_reply().t0_client_send_ns(),

@@ -70,7 +70,7 @@ TEST(ChannelTest, RequestReplyRoundTrip) {
   ASSERT_TRUE(reply.has_value());
   EXPECT_TRUE(reply->envelope.hello_ack().accepted());
   // Sending to a routing id that is not connected is a Status, not an exception.
-  EXPECT_EQ(p->server->Send(ack, "nobody").code(), StatusCode::kUnavailable);
+  EXPECT_EQ(p->server->Send(ack, "nobody").code(), StatusCode::kNotFound);
 }
 
 TEST(ChannelTest, BadInputIsRejectedCountedAndTheChannelKeepsWorking) {

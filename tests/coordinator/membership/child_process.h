@@ -57,6 +57,7 @@ class ChildProcess {
   ChildProcess& operator=(const ChildProcess&) = delete;
 
   bool running() const { return pid_ > 0 && !exited_; }
+  pid_t pid() const { return pid_; }
   void Signal(int sig) {
     if (running()) kill(pid_, sig);
   }
