@@ -3,11 +3,17 @@
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 
 #include <cstdlib>
 
+// httplib's default listen backlog is 5: a burst of connections (held-open clients) while its
+// accept loop starts overflowed it, and the kernel then made a real client retry its SYN after
+// 1 s. Only this file includes httplib.h.
+#define CPPHTTPLIB_LISTEN_BACKLOG 1024
 #include <httplib.h>
 
+#include "common/base/file_io.h"
 #include "common/base/log.h"
 
 namespace sandtable::coordinator {
@@ -59,12 +65,52 @@ std::string ErrorBody(int status) {
       return "only GET /status\n";
     case 413:
       return "request body too large\n";
+    case 401:
+      return "unauthorized: send Authorization: Bearer TOKEN\n";
     default:
       return "bad request: not an HTTP/1.x request for GET /status\n";
   }
 }
 
+// Compares without an early exit, so the time taken does not tell how much of a guess matched.
+bool SameToken(const std::string& a, const std::string& b) {
+  unsigned diff = a.size() == b.size() ? 0u : 1u;
+  for (size_t i = 0; i < a.size(); ++i) diff |= unsigned(a[i] ^ (i < b.size() ? b[i] : 0));
+  return diff == 0;
+}
+
+constexpr uint64_t kMaxStatusTokenFileBytes = 4096;
+constexpr size_t kMinStatusTokenChars = 16, kMaxStatusTokenChars = 256;
+
 }  // namespace
+
+bool IsLoopbackAddress(const std::string& address) {
+  Expected<Address> parsed = ParseAddress(address);
+  return parsed.ok() && parsed->host.rfind("127.", 0) == 0;
+}
+
+Expected<std::string> LoadStatusToken(const std::string& path) {
+  Expected<std::string> text =
+      ReadInputFile(path, kMaxStatusTokenFileBytes, "kMaxStatusTokenFileBytes");
+  if (!text.ok()) return text.status().WithContext("status token");
+  struct stat info {};
+  if (::stat(path.c_str(), &info) == 0 && (info.st_mode & 077) != 0) {
+    return InvalidArgumentError("status token " + path +
+                                ": readable by group or others; chmod 600 it");
+  }
+  std::string token = *text;
+  while (!token.empty() && (token.back() == '\n' || token.back() == '\r' || token.back() == ' ')) {
+    token.pop_back();
+  }
+  bool printable = true;
+  for (const char c : token) printable = printable && c > ' ' && c < 127;
+  if (!printable || token.size() < kMinStatusTokenChars || token.size() > kMaxStatusTokenChars) {
+    return InvalidArgumentError(
+        "status token " + path + ": must be one line of " + std::to_string(kMinStatusTokenChars) +
+        ".." + std::to_string(kMaxStatusTokenChars) + " printable characters without spaces");
+  }
+  return token;
+}
 
 Status HttpStatusOptions::Check() const {
   if (worker_threads < 1 || worker_threads > 256) {
@@ -86,6 +132,11 @@ Expected<std::unique_ptr<HttpStatusServer>> HttpStatusServer::Start(const std::s
   Expected<Address> parsed = ParseAddress(address);
   if (!parsed.ok()) return parsed.status();
   if (Status valid = options.Check(); !valid.ok()) return valid;
+  if (options.token.empty() && parsed->host.rfind("127.", 0) != 0) {
+    return InvalidArgumentError("status: " + parsed->host +
+                                " is beyond loopback; serving it needs a token "
+                                "(--status-token-file), or bind 127.0.0.1");
+  }
   auto server = std::make_unique<httplib::Server>();
   const int threads = options.worker_threads;
   server->new_task_queue = [threads] { return new httplib::ThreadPool(threads); };
@@ -117,18 +168,24 @@ Expected<std::unique_ptr<HttpStatusServer>> HttpStatusServer::Start(const std::s
                             std::to_string(parsed->port) +
                             " (in use? choose another port, or 0 for any free one)");
   }
-  return std::unique_ptr<HttpStatusServer>(
-      new HttpStatusServer(std::move(server), parsed->host, static_cast<uint16_t>(port)));
+  return std::unique_ptr<HttpStatusServer>(new HttpStatusServer(
+      std::move(server), parsed->host, static_cast<uint16_t>(port), std::move(options.token)));
 }
 
 HttpStatusServer::HttpStatusServer(std::unique_ptr<httplib::Server> server, std::string host,
-                                   uint16_t port)
-    : server_(std::move(server)), host_(std::move(host)), port_(port) {
+                                   uint16_t port, std::string token)
+    : server_(std::move(server)), host_(std::move(host)), port_(port), token_(std::move(token)) {
   // Routing of its own before httplib's: the path decides 404 before the method decides 405,
   // and a target that is not a path is a bad request.
   server_->set_pre_routing_handler(
       [this](const httplib::Request& request, httplib::Response& response) {
         using Result = httplib::Server::HandlerResponse;
+        if (!token_.empty() &&
+            !SameToken(request.get_header_value("Authorization"), "Bearer " + token_)) {
+          response.status = 401;
+          response.set_header("WWW-Authenticate", "Bearer");
+          return Result::Handled;
+        }
         if (request.path.empty() || request.path.front() != '/') {
           response.status = 400;
           return Result::Handled;
@@ -153,6 +210,8 @@ HttpStatusServer::HttpStatusServer(std::unique_ptr<httplib::Server> server, std:
       [this](const httplib::Request&, httplib::Response& response) {
         if (response.status == 404) {
           ++counters_.not_found;
+        } else if (response.status == 401) {
+          ++counters_.unauthorized;
         } else {
           ++counters_.bad_request;
         }

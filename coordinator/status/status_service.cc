@@ -48,6 +48,11 @@ std::string StatusService::BuildJson(const CoordinatorServer& server) const {
   }
   doc["messages"] = {
       {"accepted", c.accepted()}, {"rejected", rejected}, {"rejected_total", c.total_rejected()}};
+  doc["limits"] = {{"publish_failures", server.publish_failures()},
+                   {"subscriptions_refused", server.subscriptions().refused},
+                   {"publisher_rebuilds", server.subscriptions().rebuilds},
+                   {"tracked_senders", server.tracked_senders()},
+                   {"max_members", server.members().options().max_members}};
 
   if (sources_.annotations != nullptr) {
     const AnnotationCounters& a = sources_.annotations->counters();

@@ -6,6 +6,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "common/base/file_io.h"
+
 namespace sandtable::coordinator {
 namespace {
 
@@ -39,6 +41,7 @@ Expected<PersonnelTracks> PersonnelTracks::Parse(std::string_view text,
   PersonnelTracks result;
   bool header_seen = false;
   size_t line_number = 0;
+  size_t sample_total = 0;
   size_t start = 0;
   while (start <= text.size()) {
     size_t end = text.find('\n', start);
@@ -98,6 +101,16 @@ Expected<PersonnelTracks> PersonnelTracks::Parse(std::string_view text,
       return ParseError(where + "field t_s: " + std::string(fields[1]) +
                         " is negative; media time starts at 0");
     }
+    if (result.tracks_.size() >= kMaxTimelineTracks && result.tracks_.count(track_id) == 0) {
+      return ParseError(where + "track " + std::to_string(track_id) + " is one more than " +
+                        std::to_string(kMaxTimelineTracks) +
+                        " tracks (kMaxTimelineTracks: every timeline clock carries one "
+                        "position per track)");
+    }
+    if (++sample_total > kMaxTimelineSamples) {
+      return ParseError(where + "more than " + std::to_string(kMaxTimelineSamples) +
+                        " samples (kMaxTimelineSamples)");
+    }
     std::vector<TrackSample>& samples = result.tracks_[track_id];
     if (!samples.empty() && values[0] <= samples.back().t_s) {
       return ParseError(where + "field t_s: " + std::string(fields[1]) + " of track " +
@@ -115,12 +128,9 @@ Expected<PersonnelTracks> PersonnelTracks::Parse(std::string_view text,
 }
 
 Expected<PersonnelTracks> PersonnelTracks::Load(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return IoError("personnel tracks: cannot open '" + path + "'");
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (in.bad()) return IoError("personnel tracks: cannot read '" + path + "'");
-  return Parse(text.str(), path);
+  Expected<std::string> text = ReadInputFile(path, kMaxTimelineFileBytes, "kMaxTimelineFileBytes");
+  if (!text.ok()) return text.status().WithContext("personnel tracks");
+  return Parse(*text, path);
 }
 
 Expected<TrackPositionAt> PersonnelTracks::PositionAt(uint32_t track_id, double t_s) const {

@@ -7,6 +7,12 @@
 // z_m the position in the table frame in metres (finite). Blank lines and lines starting
 // with '#' are skipped. Any other line is a PARSE_ERROR naming the file, line number and field.
 //
+// Limits (docs/reliability/dos.md): the file at most kMaxTimelineFileBytes, at most
+// kMaxTimelineTracks tracks (every clock event on the PUB carries one position per track, so
+// this bounds that message: ~40 bytes per track, far below the codec's 64 MiB) and at most
+// kMaxTimelineSamples samples (memory: 32 bytes each). Past a limit: PARSE_ERROR naming the file,
+// the line and the limit.
+//
 // Position at a media time: linear interpolation between the two samples around it; before a
 // track's first sample or after its last, the end sample (reported inactive).
 #pragma once
@@ -22,6 +28,10 @@
 #include "common/base/status.h"
 
 namespace sandtable::coordinator {
+
+constexpr uint64_t kMaxTimelineFileBytes = uint64_t{256} << 20;
+constexpr size_t kMaxTimelineTracks = 1024;
+constexpr size_t kMaxTimelineSamples = 4'000'000;
 
 struct TrackSample {
   double t_s = 0.0;

@@ -1,6 +1,7 @@
 #include "coordinator/timeline/personnel_tracks.h"
 
 #include <cmath>
+#include <string>
 
 #include <gtest/gtest.h>
 
@@ -102,8 +103,33 @@ TEST(TimelinePersonnelTracksTest, MalformedFilesNameLineAndField) {
   }
 }
 
-TEST(TimelinePersonnelTracksTest, MissingFileIsAnIoError) {
-  EXPECT_EQ(PersonnelTracks::Load("/nonexistent/tracks.csv").status().code(), StatusCode::kIoError);
+TEST(TimelinePersonnelTracksTest, MissingFileIsNotFoundNamingIt) {
+  const Status missing = PersonnelTracks::Load("/nonexistent/tracks.csv").status();
+  EXPECT_EQ(missing.code(), StatusCode::kNotFound);  // common/base/file_io.h
+  EXPECT_NE(missing.message().find("/nonexistent/tracks.csv"), std::string::npos);
+}
+
+// The report: a 2.6-million-track file made every timeline clock exceed the codec limit. One
+// track past kMaxTimelineTracks is refused, naming the limit and the line.
+TEST(TimelinePersonnelTracksTest, TracksPastTheLimitAreRefusedNamingIt) {
+  std::string text = "track_id,t_s,x_m,y_m,z_m\n";
+  for (size_t track = 0; track <= kMaxTimelineTracks; ++track) {
+    text += std::to_string(track) + ",0,0,0,0\n";
+  }
+  Expected<PersonnelTracks> t = PersonnelTracks::Parse(text, "many.csv");
+  ASSERT_FALSE(t.ok());
+  EXPECT_NE(t.status().message().find("kMaxTimelineTracks"), std::string::npos)
+      << t.status().ToString();
+  EXPECT_NE(t.status().message().find("many.csv:" + std::to_string(kMaxTimelineTracks + 2)),
+            std::string::npos)
+      << t.status().ToString();
+  // Exactly at the limit is fine.
+  text = "track_id,t_s,x_m,y_m,z_m\n";
+  for (size_t track = 0; track < kMaxTimelineTracks; ++track) {
+    text += std::to_string(track) + ",0,0,0,0\n";
+  }
+  EXPECT_TRUE(PersonnelTracks::Parse(text, "max.csv").ok());
+  EXPECT_FALSE(PersonnelTracks::Load("/dev/zero").ok());  // not a regular file
 }
 
 }  // namespace
