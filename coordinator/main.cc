@@ -5,6 +5,7 @@
 //                         [--annotations FILE.db] [--annotation-sync full|normal]
 //                         [--export-session FILE.jsonl | --import-session FILE.jsonl]
 //                         [--timeline TRACKS.csv] [--status PORT|IPv4:PORT]
+//                         [--status-token-file FILE] [--max-members 256]
 //                         [--tracker-replay FILE.traj|FILE.csv [--table-from-tracker FILE.json]
 //                          | --virtual-wand SCRIPT.txt] [--scene SCENE.gltf|SCENE.glb]
 //   sandtable-coordinator --generate-curve-keys site.key
@@ -20,7 +21,11 @@
 //
 // --timeline: personnel tracks (CSV, docs/coordinator.md) replayed with play/pause/seek/rate
 // requests and a timeline_clock on the PUB. --status: JSON at http://HOST:PORT/status (port 0:
-// any free port; a bare PORT binds loopback).
+// any free port; a bare PORT binds loopback). --status-token-file: a token (one line, 16..256
+// printable characters, file mode 0600) every status request must send as "Authorization:
+// Bearer TOKEN"; required with --curve-keys and for any address beyond loopback (exit 2
+// otherwise). --max-members: the site's size; Hellos past it are refused (default 256).
+// Limits against hostile peers: docs/reliability/dos.md.
 //
 // --tracker-replay: replays a recorded tracker trajectory (FASTRAK .traj at 100 Hz, or the CSV
 // of docs/tracker-formats.md) in real time from the start, publishing tracker_pose and cursor
@@ -77,7 +82,7 @@ int main(int argc, char** argv) {
   coordinator::AnnotationStoreOptions store_options;
   std::string export_path, import_path, timeline_path, status_address;
   std::string tracker_replay_path, table_from_tracker_path, virtual_wand_path, scene_path;
-  std::string curve_keys_path, generate_keys_path, sync_name = "full";
+  std::string curve_keys_path, generate_keys_path, sync_name = "full", status_token_path;
   int heartbeat_ms = static_cast<int>(options.membership.heartbeat_period.count());
   int misses = options.membership.misses_allowed;
 
@@ -118,6 +123,11 @@ int main(int argc, char** argv) {
             return valid.ok() ? std::string() : valid.message();
           },
           "PORT|IPv4:PORT", "StatusAddress"));
+  app.add_option("--status-token-file", status_token_path,
+                 "token file for --status (required with --curve-keys or beyond loopback)");
+  app.add_option("--max-members", options.membership.max_members,
+                 "most members of the site; further Hellos are refused")
+      ->check(cli::Integer(1, coordinator::kMaxMembersLimit));
   CLI::Option* replay = app.add_option("--tracker-replay", tracker_replay_path,
                                        "replay a tracker recording (FASTRAK .traj or .csv)");
   CLI::Option* table_from_tracker_option =
@@ -143,6 +153,23 @@ int main(int argc, char** argv) {
     Expected<net::CurveKeyPair> keys = net::ReadCurveKeyFile(curve_keys_path);
     if (!keys.ok()) return cli::UsageError(app, "--curve-keys: " + keys.status().ToString());
     options.curve = *keys;
+  }
+  coordinator::HttpStatusOptions status_options;
+  if (!status_token_path.empty()) {
+    Expected<std::string> token = coordinator::LoadStatusToken(status_token_path);
+    if (!token.ok())
+      return cli::UsageError(app, "--status-token-file: " + token.status().ToString());
+    status_options.token = *token;
+  }
+  if (!status_address.empty() && status_options.token.empty()) {
+    if (options.curve) {
+      return cli::UsageError(app,
+                             "--status on a CURVE site (--curve-keys) needs --status-token-file");
+    }
+    if (!coordinator::IsLoopbackAddress(status_address)) {
+      return cli::UsageError(
+          app, "--status " + status_address + " is beyond loopback: it needs --status-token-file");
+    }
   }
   options.membership.heartbeat_period = std::chrono::milliseconds(heartbeat_ms);
   options.membership.misses_allowed = misses;
@@ -180,7 +207,7 @@ int main(int argc, char** argv) {
         coordinator::PersonnelTracks::Load(timeline_path);
     if (!tracks.ok()) {
       std::cerr << "sandtable-coordinator: --timeline: " << tracks.status().ToString() << "\n";
-      return 1;
+      return 2;  // bad input file
     }
     ST_LOG(kInfo) << "timeline: " << timeline_path << ", " << tracks->tracks().size() << " tracks, "
                   << tracks->sample_count() << " samples, " << tracks->duration_s() << " s";
@@ -256,7 +283,7 @@ int main(int argc, char** argv) {
   std::unique_ptr<coordinator::StatusService> status;
   if (!status_address.empty()) {
     Expected<std::unique_ptr<coordinator::HttpStatusServer>> started =
-        coordinator::HttpStatusServer::Start(status_address);
+        coordinator::HttpStatusServer::Start(status_address, status_options);
     if (!started.ok()) {
       std::cerr << "sandtable-coordinator: --status: " << started.status().ToString() << "\n";
       return 1;

@@ -67,6 +67,10 @@ TEST(CoordinatorCommandLineTest, BadValuesExitTwoNamingTheFlag) {
       {{"--annotation-sync", "sometimes"}, "--annotation-sync"},
       {{"--status", "99999"}, "--status"},
       {{"--status", "localhost:80"}, "--status"},
+      {{"--status", "0.0.0.0:0"}, "--status-token-file"},  // beyond loopback without a token
+      {{"--status", "0", "--status-token-file", "/nonexistent/token"}, "--status-token-file"},
+      {{"--max-members", "0"}, "--max-members"},
+      {{"--max-members", "100000"}, "--max-members"},
       {{"--requests", "localhost"}, "--requests"},
       {{"--events", "tcp://"}, "--events"},
       {{"--colour", "red"}, "--colour"},
