@@ -4,6 +4,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "common/base/file_io.h"
+
 namespace sandtable::io {
 
 using nlohmann::json;
@@ -204,21 +206,16 @@ Expected<json> ParseJsonText(std::string_view text, std::string_view source) {
 }
 
 Expected<json> ReadJsonFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return IoError(path + ": cannot open for reading");
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (in.bad()) return IoError(path + ": read failed");
-  return ParseJsonText(text.str(), path);
+  Expected<std::string> text = ReadInputFile(path, kMaxJsonFileBytes, "kMaxJsonFileBytes");
+  if (!text.ok()) return IoError(text.status().message());  // the message names the path
+  if (text->find_first_not_of(" \t\r\n") == std::string::npos) {
+    return ParseError(path + ": empty file, JSON is expected");
+  }
+  return ParseJsonText(*text, path);
 }
 
 Status WriteTextFile(const std::string& text, const std::string& path) {
-  std::ofstream out(path);
-  if (!out) return IoError(path + ": cannot open for writing");
-  out << text;
-  out.close();
-  if (!out) return IoError(path + ": write failed");
-  return OkStatus();
+  return WriteFileAtomically(path, text);
 }
 
 Status WriteJsonFile(const json& value, const std::string& path) {

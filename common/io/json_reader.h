@@ -89,9 +89,14 @@ Expected<int> ReadFormatVersion(ObjectReader* root, std::string_view format, int
 
 // JSON text -> value; PARSE_ERROR "<source>: not valid JSON (<parser's message>)".
 Expected<nlohmann::json> ParseJsonText(std::string_view text, std::string_view source);
-// Reads and parses a file; IO_ERROR naming the path when it cannot be read.
+// Largest JSON file read (site, unit calibration, factory, true pose, table_from_tracker): 64 MiB.
+inline constexpr uint64_t kMaxJsonFileBytes = uint64_t{64} << 20;
+// Reads (through ReadInputFile: regular files only, at most kMaxJsonFileBytes) and parses a
+// file; IO_ERROR naming the path when it is missing, not a regular file (a directory, FIFO,
+// /dev/zero), over the limit or unreadable; PARSE_ERROR when empty or not JSON.
 Expected<nlohmann::json> ReadJsonFile(const std::string& path);
-// Writes the value pretty-printed (2 spaces) with a final newline; IO_ERROR naming the path.
+// Writes the value pretty-printed (2 spaces) with a final newline through WriteFileAtomically
+// (temporary file, fsync, rename: the previous file stays on failure); IO_ERROR naming the path.
 Status WriteTextFile(const std::string& text, const std::string& path);
 Status WriteJsonFile(const nlohmann::json& value, const std::string& path);
 

@@ -5,6 +5,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "common/base/file_io.h"
 #include "common/io/json_reader.h"
 
 namespace sandtable {
@@ -61,6 +62,14 @@ class YamlReader {
     const std::string field = prefix + key;
     const cv::FileNode node = parent[key];
     if (node.empty()) return Error(field, "is missing");
+    // The size the file states is checked before OpenCV allocates it (rows: 99999, cols: 99999
+    // would ask for 80 GB before the data is looked at).
+    if (!node.isMap() || !node["rows"].isInt() || !node["cols"].isInt() ||
+        static_cast<int>(node["rows"]) != rows || static_cast<int>(node["cols"]) != cols ||
+        !node["data"].isSeq() || node["data"].size() != static_cast<size_t>(rows) * cols) {
+      return Error(field, "must be a " + std::to_string(rows) + "x" + std::to_string(cols) +
+                              " matrix {rows, cols, dt, data}");
+    }
     cv::Mat m;
     try {
       node >> m;
@@ -183,15 +192,38 @@ Status WriteOpenCvYaml(const UnitCalibration& calibration, const std::string& pa
   return io::WriteTextFile(*text, path);
 }
 
+// The fields of a parsed file (below; cv::FileNode conversions may throw).
+static Expected<OpenCvYamlCalibration> ParseOpenCvYamlRoot(const cv::FileStorage& fs,
+                                                           const std::string& path);
+
 Expected<OpenCvYamlCalibration> ReadOpenCvYaml(const std::string& path) {
+  Expected<std::string> text = ReadInputFile(path, kMaxTextInputBytes, "kMaxTextInputBytes");
+  if (!text.ok()) return IoError(text.status().message());  // the message names the path
+  return ParseOpenCvYaml(*text, path);
+}
+
+Expected<OpenCvYamlCalibration> ParseOpenCvYaml(const std::string& text, const std::string& path) {
+  if (text.find_first_not_of(" \t\r\n") == std::string::npos) {
+    return ParseError(path + ": empty file, OpenCV YAML is expected");
+  }
   cv::FileStorage fs;
   try {
-    if (!fs.open(path, cv::FileStorage::READ | cv::FileStorage::FORMAT_YAML)) {
-      return IoError(path + ": cannot open for reading");
+    if (!fs.open(text,
+                 cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML)) {
+      return ParseError(path + ": not an OpenCV YAML file");
     }
   } catch (const cv::Exception& e) {
     return ParseError(path + ": not an OpenCV YAML file (" + e.what() + ")");
   }
+  try {
+    return ParseOpenCvYamlRoot(fs, path);
+  } catch (const cv::Exception& e) {
+    return ParseError(path + ": not an OpenCV YAML calibration (" + e.what() + ")");
+  }
+}
+
+static Expected<OpenCvYamlCalibration> ParseOpenCvYamlRoot(const cv::FileStorage& fs,
+                                                           const std::string& path) {
   const YamlReader reader(path);
   const cv::FileNode root = fs.root();
   const cv::FileNode format = root["format"];

@@ -49,7 +49,11 @@ struct OpenCvYamlCalibration {
 // The YAML text (what WriteOpenCvYaml writes).
 Expected<std::string> OpenCvYamlText(const UnitCalibration& calibration);
 Status WriteOpenCvYaml(const UnitCalibration& calibration, const std::string& path);
-// For tests and tools: reads what WriteOpenCvYaml writes (through cv::FileStorage).
+// For tests and tools: reads what WriteOpenCvYaml writes (the file through ReadInputFile:
+// regular files only, at most kMaxTextInputBytes; then cv::FileStorage from memory). IO_ERROR
+// naming the path when it cannot be read, PARSE_ERROR/INVALID_ARGUMENT naming the field.
 Expected<OpenCvYamlCalibration> ReadOpenCvYaml(const std::string& path);
+// The same from text; `path` names the source in messages. Never throws.
+Expected<OpenCvYamlCalibration> ParseOpenCvYaml(const std::string& text, const std::string& path);
 
 }  // namespace sandtable

@@ -1,18 +1,16 @@
 #include "common/scene/gltf_loader.h"
 
-#include <fcntl.h>
 #include <sys/stat.h>
-#include <unistd.h>
 
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
-#include <cstring>
 #include <optional>
 #include <sstream>
 #include <vector>
 
 #include <tiny_gltf.h>
+
+#include "common/base/file_io.h"
 
 namespace sandtable {
 
@@ -45,50 +43,6 @@ uint64_t SaturatingMul(uint64_t a, uint64_t b) {
 // ---------------------------------------------------------------------------------------------
 // Files: every file the loader reads (the scene file and each external URI) goes through here.
 
-// Reads a regular file of at most `max_bytes`. A directory, FIFO, device (/dev/zero) or socket
-// is refused before it is opened for reading; the file is opened non-blocking and checked again
-// on the open descriptor (no race with a swapped path), and reading stops past the bound.
-Status ReadBoundedFile(const std::string& path, uint64_t max_bytes, std::vector<uint8_t>* out) {
-  struct stat st;
-  if (::stat(path.c_str(), &st) != 0) {
-    return IoError(path + ": cannot open (" + std::strerror(errno) + ")");
-  }
-  if (!S_ISREG(st.st_mode)) {
-    return IoError(path + ": not a regular file (a directory, FIFO, device or socket)");
-  }
-  if (static_cast<uint64_t>(st.st_size) > max_bytes) {
-    return IoError(path + ": " + Str(st.st_size) + " bytes, more than the limit of " +
-                   Str(max_bytes) + " bytes (kMaxGltfFileBytes or kMaxGltfTotalBytes)");
-  }
-  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
-  if (fd < 0) return IoError(path + ": cannot open (" + std::strerror(errno) + ")");
-  struct stat fst;
-  if (::fstat(fd, &fst) != 0 || !S_ISREG(fst.st_mode)) {
-    ::close(fd);
-    return IoError(path + ": not a regular file");
-  }
-  out->clear();
-  out->resize(static_cast<size_t>(std::min<uint64_t>(fst.st_size, max_bytes)) + 1);
-  size_t got = 0;
-  while (got < out->size()) {
-    const ssize_t n = ::read(fd, out->data() + got, out->size() - got);
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) {
-      const std::string why = std::strerror(errno);
-      ::close(fd);
-      return IoError(path + ": read failed (" + why + ")");
-    }
-    if (n == 0) break;
-    got += static_cast<size_t>(n);
-  }
-  ::close(fd);
-  if (got > max_bytes) {
-    return IoError(path + ": grew past the limit of " + Str(max_bytes) + " bytes while read");
-  }
-  out->resize(got);
-  return OkStatus();
-}
-
 // State shared by the tinygltf callbacks of one load.
 struct LoadContext {
   bool allow_files = false;  // external URIs (only for LoadGltfScene)
@@ -119,7 +73,13 @@ bool FsReadWholeFile(std::vector<unsigned char>* out, std::string* err, const st
     status = ParseError("external URI '" + path + "' not allowed when loading from memory");
   } else {
     const uint64_t left = kMaxGltfTotalBytes - std::min(ctx->bytes_read, kMaxGltfTotalBytes);
-    status = ReadBoundedFile(path, std::min(kMaxGltfFileBytes, left), out);
+    Expected<std::string> bytes = ReadInputFile(path, std::min(kMaxGltfFileBytes, left),
+                                                "kMaxGltfFileBytes or kMaxGltfTotalBytes");
+    if (bytes.ok()) {
+      out->assign(bytes->begin(), bytes->end());
+    } else {
+      status = bytes.status();
+    }
   }
   if (!status.ok()) {
     ctx->Refuse(status.message());
@@ -908,11 +868,10 @@ Expected<Scene> LoadGltfScene(const std::string& path, const GltfLoadOptions& op
                               GltfLoadReport* report) {
   ST_RETURN_IF_ERROR(options.Check());
   const std::string file = BaseName(path);
-  std::vector<uint8_t> bytes;
-  Status read = ReadBoundedFile(path, kMaxGltfFileBytes, &bytes);
-  if (!read.ok()) return read;  // the message names the path
-  return LoadFromBytes(bytes.data(), bytes.size(), file, DirName(path), /*allow_files=*/true,
-                       options, report);
+  Expected<std::string> bytes = ReadInputFile(path, kMaxGltfFileBytes, "kMaxGltfFileBytes");
+  if (!bytes.ok()) return bytes.status();  // the message names the path
+  return LoadFromBytes(reinterpret_cast<const uint8_t*>(bytes->data()), bytes->size(), file,
+                       DirName(path), /*allow_files=*/true, options, report);
 }
 
 Expected<Scene> LoadGltfSceneFromBytes(std::string_view bytes, const std::string& name,

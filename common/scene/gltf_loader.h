@@ -52,7 +52,7 @@ inline constexpr uint64_t kMaxInstances = 1'000'000;
 inline constexpr uint64_t kMaxSceneTriangles = 20'000'000;
 inline constexpr uint64_t kMaxSceneVertices = 30'000'000;
 // Every vertex in the table frame (after the node transforms and the scale): |x|, |y|, |z|.
-inline constexpr double kMaxCoordinate_m = 1e4;
+inline constexpr double kMaxCoordinate_m = kMaxSceneCoordinate_m;  // scene.h
 // Images, from their PNG/JPEG headers before decoding: each side, one image, all images.
 inline constexpr int kMaxTextureSidePx = 16384;
 inline constexpr uint64_t kMaxTexturePixels = uint64_t{64} << 20;

@@ -2,9 +2,11 @@
 
 #include <cstring>
 #include <limits>
+#include <sstream>
 
 #include <tiny_gltf.h>
 
+#include "common/base/file_io.h"
 #include "common/scene/gltf_loader.h"
 
 namespace sandtable {
@@ -114,15 +116,18 @@ Status WriteGltfScene(const Scene& scene, const std::string& path) {
 
   const bool binary = path.size() >= 4 && path.compare(path.size() - 4, 4, ".glb") == 0;
   tinygltf::TinyGLTF gltf;
+  // Serialised in memory (buffers and images embedded), then written all or nothing: a full
+  // disk leaves the previous file and an error, never a cut or empty scene.
+  std::ostringstream bytes;
   bool ok = false;
   try {
-    ok = gltf.WriteGltfSceneToFile(&model, path, /*embedImages=*/true, /*embedBuffers=*/true,
-                                   /*prettyPrint=*/!binary, /*writeBinary=*/binary);
+    ok = gltf.WriteGltfSceneToStream(&model, bytes, /*prettyPrint=*/!binary,
+                                     /*writeBinary=*/binary);
   } catch (const std::exception& e) {
     return IoError(path + ": " + e.what());
   }
-  if (!ok) return IoError(path + ": could not write glTF");
-  return OkStatus();
+  if (!ok || !bytes) return IoError(path + ": could not serialise glTF");
+  return WriteFileAtomically(path, bytes.view());
 }
 
 }  // namespace sandtable

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 
 #include <embree3/rtcore.h>
 
@@ -29,6 +30,7 @@ bool MakeRay(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, do
              double far_m, RTCRay* ray, Eigen::Vector3d* unit_dir) {
   const double norm = direction.norm();
   if (!(norm > 0) || !std::isfinite(norm) || !origin.allFinite()) return false;
+  if (origin.cwiseAbs().maxCoeff() > kMaxRayOrigin_m) return false;
   near_m = std::max(0.0, near_m);
   far_m = std::min(far_m, kMaxFar_m);
   if (!(far_m >= near_m)) return false;  // also false for NaN
@@ -74,8 +76,16 @@ Expected<std::unique_ptr<RayCaster>> RayCaster::Create(std::shared_ptr<const Sce
   if (!scene) return InvalidArgumentError("ray caster: no scene");
   if (scene->NumTriangles() == 0) return InvalidArgumentError("ray caster: scene has no triangles");
   for (int i = 0; i < scene->NumVertices(); ++i) {
-    if (!scene->positions_in_table_m[i].allFinite()) {
+    const Eigen::Vector3f& p = scene->positions_in_table_m[i];
+    if (!p.allFinite()) {
       return InvalidArgumentError("ray caster: vertex " + std::to_string(i) + " is not finite");
+    }
+    if (p.cwiseAbs().maxCoeff() > kMaxSceneCoordinate_m) {
+      std::ostringstream s;
+      s << "ray caster: vertex " << i << " at (" << p.x() << ", " << p.y() << ", " << p.z()
+        << ") m is outside |x|, |y|, |z| <= kMaxSceneCoordinate_m = " << kMaxSceneCoordinate_m
+        << " m";
+      return InvalidArgumentError(s.str());
     }
   }
   for (int t = 0; t < scene->NumTriangles(); ++t) {

@@ -14,8 +14,10 @@
 // Threading: every const query may run concurrently from any number of threads once Create()
 // has returned (Embree's committed scenes are read-only); the caster is immutable.
 // Failure: Create() returns INVALID_ARGUMENT for a scene without triangles, a vertex index out
-// of range or a non-finite vertex, and UNAVAILABLE when Embree cannot start or build. Queries
-// never fail: a zero or non-finite direction or origin, or an empty [near, far] range, is a miss.
+// of range, a non-finite vertex or one outside |x|, |y|, |z| <= kMaxSceneCoordinate_m (scene.h),
+// before Embree sees it, and UNAVAILABLE when Embree cannot start or build. Queries never fail:
+// a zero or non-finite direction, a non-finite origin or one outside |x|, |y|, |z| <=
+// kMaxRayOrigin_m, or an empty [near, far] range, is a miss.
 // Cost: build O(T log T) (Embree's high-quality BVH); a query visits O(log T) nodes.
 #pragma once
 
@@ -33,6 +35,10 @@
 #include "common/scene/scene.h"
 
 namespace sandtable {
+
+// The farthest ray origin cast, each coordinate, m (100 x kMaxSceneCoordinate_m): beyond it the
+// float ray would lose all precision at the scene, so such a ray is a miss.
+inline constexpr double kMaxRayOrigin_m = 1e6;
 
 // The far end of a ray that has none.
 inline constexpr double kRayNoFar_m = std::numeric_limits<double>::infinity();

@@ -18,6 +18,11 @@
 
 namespace sandtable {
 
+// The range of every vertex a scene may hold, table frame: finite and |x|, |y|, |z| <= this
+// (10 km; Embree's float BVH asserts on coordinates near 1e19). The glTF loader refuses vertices
+// outside it while loading, the ray caster refuses a scene holding one before building.
+inline constexpr double kMaxSceneCoordinate_m = 1e4;
+
 // An 8-bit RGBA image (sRGB-encoded colour, linear alpha), row-major, top row first.
 struct Texture {
   int width_px = 0;

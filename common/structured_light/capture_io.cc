@@ -5,6 +5,8 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "common/io/image_file.h"
+
 namespace sandtable {
 
 std::string CaptureSequenceNames::PathOf(const std::string& folder, int index) const {
@@ -17,23 +19,22 @@ std::string CaptureSequenceNames::PathOf(const std::string& folder, int index) c
 
 Expected<std::vector<cv::Mat>> LoadCaptureSequence(const std::string& folder, int count,
                                                    const CaptureSequenceNames& names) {
-  if (count < 1) {
-    return InvalidArgumentError("capture sequence: count " + std::to_string(count) + " < 1");
+  if (count < 1 || count > kMaxCaptureFrames) {
+    return InvalidArgumentError(
+        "capture sequence: count " + std::to_string(count) +
+        " is outside [1, kMaxCaptureFrames = " + std::to_string(kMaxCaptureFrames) + "]");
   }
   std::vector<cv::Mat> frames;
   frames.reserve(static_cast<size_t>(count));
   for (int i = 0; i < count; ++i) {
     const std::string path = names.PathOf(folder, i);
-    cv::Mat image;
-    try {
-      image = cv::imread(path, cv::IMREAD_GRAYSCALE);
-    } catch (const cv::Exception& e) {
-      return IoError("capture sequence: cannot read " + path + ": " + e.what());
+    // Regular files only, the size in the header bounded before decoding (image_file.h).
+    Expected<cv::Mat> read = io::ReadImageFile(path, cv::IMREAD_GRAYSCALE);
+    if (!read.ok()) {
+      return IoError("capture sequence: cannot read " + read.status().message() +
+                     (read.status().code() == StatusCode::kNotFound ? " (missing)" : ""));
     }
-    if (image.empty()) {
-      return IoError("capture sequence: cannot read " + path +
-                     (std::filesystem::exists(path) ? " (not a decodable image)" : " (missing)"));
-    }
+    cv::Mat image = std::move(*read);
     if (!frames.empty() && image.size() != frames[0].size()) {
       return InvalidArgumentError("capture sequence: " + path + " is " +
                                   std::to_string(image.cols) + "x" + std::to_string(image.rows) +

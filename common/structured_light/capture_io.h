@@ -11,6 +11,9 @@
 
 namespace sandtable {
 
+// The most frames one capture sequence may hold.
+inline constexpr int kMaxCaptureFrames = 4096;
+
 struct CaptureSequenceNames {
   std::string prefix = "graycode_";
   int digits = 2;  // zero-padded index width
@@ -19,9 +22,12 @@ struct CaptureSequenceNames {
   std::string PathOf(const std::string& folder, int index) const;
 };
 
-// Reads frames 0..count-1 as 8-bit grayscale (cv::IMREAD_GRAYSCALE).
-// Errors: INVALID_ARGUMENT for count < 1; IO_ERROR naming the first file that is missing or
-// unreadable; INVALID_ARGUMENT naming a frame whose size differs from frame 0's.
+// Reads frames 0..count-1 as 8-bit grayscale (cv::IMREAD_GRAYSCALE), each through
+// io::ReadImageFile (regular files only; a directory, FIFO or /dev/zero is refused by name; the
+// header's size bounded by kMaxImageSide_px / kMaxImagePixels before decoding).
+// Errors: INVALID_ARGUMENT for count < 1 or count > kMaxCaptureFrames; IO_ERROR naming the first
+// file that is missing, not a regular file, too large or undecodable; INVALID_ARGUMENT naming a
+// frame whose size differs from frame 0's.
 Expected<std::vector<cv::Mat>> LoadCaptureSequence(const std::string& folder, int count,
                                                    const CaptureSequenceNames& names = {});
 

@@ -46,6 +46,34 @@ bool SeesTable(const TableSpec& table, const ProjectorSpec& projector) {
   return false;
 }
 
+// The image size and pose limits of one device (kMaxSiteImageSide_px, kMaxSiteImagePixels,
+// kMaxSiteCoordinate_m); `field` is "projector" or "camera".
+Status CheckDeviceLimits(const std::string& label, const std::string& field,
+                         const CameraModel& model, const Rigid3d& pose, const char* pose_name) {
+  const std::string size = std::to_string(model.width_px) + "x" + std::to_string(model.height_px);
+  if (model.width_px > kMaxSiteImageSide_px || model.height_px > kMaxSiteImageSide_px) {
+    return InvalidArgumentError(
+        label + ": " + field + " image " + size +
+        " px has a side over kMaxSiteImageSide_px = " + std::to_string(kMaxSiteImageSide_px));
+  }
+  if (int64_t{model.width_px} * model.height_px > kMaxSiteImagePixels) {
+    return InvalidArgumentError(
+        label + ": " + field + " image " + size +
+        " px is more than kMaxSiteImagePixels = " + std::to_string(kMaxSiteImagePixels));
+  }
+  if (!pose.AllFinite()) {
+    return InvalidArgumentError(label + ": " + field + "." + pose_name + " is not finite");
+  }
+  if (pose.translation.cwiseAbs().maxCoeff() > kMaxSiteCoordinate_m) {
+    std::ostringstream s;
+    s << label << ": " << field << "." << pose_name << ".translation_m = (" << pose.translation.x()
+      << ", " << pose.translation.y() << ", " << pose.translation.z()
+      << ") is outside |x|, |y|, |z| <= kMaxSiteCoordinate_m = " << kMaxSiteCoordinate_m << " m";
+    return InvalidArgumentError(s.str());
+  }
+  return OkStatus();
+}
+
 }  // namespace
 
 bool TableSpec::Contains(const Eigen::Vector2d& xy) const {
@@ -72,6 +100,11 @@ Status Site::Check() const {
     return FieldError("site", "ambient_luminance_nits", ambient_luminance_nits, "must be >= 0");
   }
   if (units.empty()) return InvalidArgumentError("site: no units");
+  if (units.size() > kMaxSiteUnits) {
+    return InvalidArgumentError(
+        "site: " + std::to_string(units.size()) +
+        " units, more than kMaxSiteUnits = " + std::to_string(kMaxSiteUnits));
+  }
   std::set<NodeId> ids;
   for (size_t i = 0; i < units.size(); ++i) {
     const UnitSpec& unit = units[i];
@@ -85,9 +118,8 @@ Status Site::Check() const {
     if (Status s = p.model.Check(); !s.ok()) {
       return InvalidArgumentError(label + ": projector." + s.message());
     }
-    if (!p.table_from_projector.AllFinite()) {
-      return InvalidArgumentError(label + ": projector.table_from_projector is not finite");
-    }
+    ST_RETURN_IF_ERROR(CheckDeviceLimits(label, "projector", p.model, p.table_from_projector,
+                                         "table_from_projector"));
     if (!(p.gamma > 0) || !std::isfinite(p.gamma)) {
       return FieldError(label, "projector.gamma", p.gamma, "must be > 0");
     }
@@ -119,9 +151,8 @@ Status Site::Check() const {
       if (Status s = c.model.Check(); !s.ok()) {
         return InvalidArgumentError(label + ": camera." + s.message());
       }
-      if (!c.projector_from_camera.AllFinite()) {
-        return InvalidArgumentError(label + ": camera.projector_from_camera is not finite");
-      }
+      ST_RETURN_IF_ERROR(CheckDeviceLimits(label, "camera", c.model, c.projector_from_camera,
+                                           "projector_from_camera"));
       if (!(c.read_noise_dn >= 0))
         return FieldError(label, "camera.read_noise_dn", c.read_noise_dn, "must be >= 0");
       if (!(c.exposure_s > 0))

@@ -13,6 +13,8 @@
 //   the linear signal), then the encoding s^(1/gamma), quantised to bit_depth bits.
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -25,6 +27,18 @@
 #include "common/geometry/rigid3.h"
 
 namespace sandtable::sim {
+
+// Limits of a site (Site::Check refuses past them, naming the limit; the site parser refuses a
+// units array longer than kMaxSiteUnits before reading one unit).
+// Units in one site (ids are also bounded: [0, 2^30]).
+inline constexpr size_t kMaxSiteUnits = 256;
+// Each side of a projector or camera image, px, and its area (4096 x 4096 = 16 Mpx: the world
+// holds a transport map of ~30 bytes plus 32 bytes per lit projector per camera pixel).
+inline constexpr int kMaxSiteImageSide_px = 8192;
+inline constexpr int64_t kMaxSiteImagePixels = int64_t{4096} * 4096;
+// Every translation of a site (table_from_projector, projector_from_camera): finite and each
+// coordinate within this, m (as kMaxSceneCoordinate_m of a scene).
+inline constexpr double kMaxSiteCoordinate_m = 1e4;
 
 struct ProjectorSpec {
   CameraModel model;  // resolution, intrinsics, Brown distortion
@@ -71,7 +85,8 @@ struct Site {
   std::vector<UnitSpec> units;
 
   // OK, or the first problem, naming unit and field: "unit 2 (p2): projector.fx_px = -3 must
-  // be > 0", "unit 1: projector sees nothing of the table ...", "units[3]: duplicate id 1".
+  // be > 0", "unit 1: projector sees nothing of the table ...", "units[3]: duplicate id 1",
+  // or the limit: "site: 2000 units, more than kMaxSiteUnits = 256".
   Status Check() const;
 
   const UnitSpec* FindUnit(NodeId id) const;

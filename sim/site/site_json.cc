@@ -97,6 +97,11 @@ Expected<Site> SiteFromJson(const json& j) {
   if (units == nullptr || !units->is_array()) {
     return ParseError(r.Field("units") + " must be an array of units");
   }
+  if (units->size() > kMaxSiteUnits) {  // before reading (and allocating) any unit
+    return InvalidArgumentError(
+        r.Field("units") + ": " + std::to_string(units->size()) +
+        " units, more than kMaxSiteUnits = " + std::to_string(kMaxSiteUnits));
+  }
   for (size_t i = 0; i < units->size(); ++i) {
     UnitSpec unit;
     ST_RETURN_IF_ERROR(ReadUnit((*units)[i], io::JoinIndex(r.Field("units"), i), &unit));

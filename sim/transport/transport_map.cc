@@ -141,9 +141,7 @@ Status TransportOptions::Check() const {
 Expected<TransportMap> BuildTransportMap(const Site& site, const RayCaster& caster,
                                          const View& view, const TransportOptions& options) {
   ST_RETURN_IF_ERROR(options.Check());
-  if (view.width_px() <= 0 || view.height_px() <= 0) {
-    return InvalidArgumentError("transport: view has no pixels");
-  }
+  if (Status valid = view.Check(); !valid.ok()) return valid.WithContext("transport");
   const Scene& scene = caster.scene();
   const int width = view.width_px(), height = view.height_px();
   const size_t num_pixels = static_cast<size_t>(width) * height;

@@ -1,6 +1,66 @@
 #include "sim/transport/view.h"
 
+#include <cmath>
+#include <sstream>
+#include <string>
+
 namespace sandtable::sim {
+
+namespace {
+
+std::string SizeText(int64_t width_px, int64_t height_px) {
+  return std::to_string(width_px) + "x" + std::to_string(height_px) + " px";
+}
+
+Status CheckSize(int64_t width_px, int64_t height_px) {
+  if (width_px <= 0 || height_px <= 0) {
+    return InvalidArgumentError("view " + SizeText(width_px, height_px) + " has no pixels");
+  }
+  if (width_px > kMaxViewSide_px || height_px > kMaxViewSide_px) {
+    return InvalidArgumentError(
+        "view " + SizeText(width_px, height_px) +
+        ": a side over kMaxViewSide_px = " + std::to_string(kMaxViewSide_px));
+  }
+  if (width_px * height_px > kMaxViewPixels) {
+    return InvalidArgumentError("view " + SizeText(width_px, height_px) +
+                                ": more than kMaxViewPixels = " + std::to_string(kMaxViewPixels));
+  }
+  return OkStatus();
+}
+
+}  // namespace
+
+Status View::Check() const { return CheckSize(width_px_, height_px_); }
+
+Expected<View> View::TopOver(const Eigen::AlignedBox3d& bounds, int width_px, int height_px) {
+  if (bounds.isEmpty() || !bounds.min().allFinite() || !bounds.max().allFinite()) {
+    return InvalidArgumentError("top view: the scene has no finite extent");
+  }
+  const Eigen::AlignedBox2d area(bounds.min().head<2>(), bounds.max().head<2>());
+  const Eigen::Vector2d size = area.sizes();
+  if (!(size.x() > 0) || !(size.y() > 0)) {
+    std::ostringstream s;
+    s << "top view: the scene's x-y extent " << size.x() << " x " << size.y()
+      << " m is flat; a top view needs both sides > 0";
+    return InvalidArgumentError(s.str());
+  }
+  double height = height_px;
+  if (height_px <= 0) {
+    height = std::max(16.0, std::round(width_px * size.y() / size.x()));  // may be huge
+  }
+  if (!(height <= static_cast<double>(kMaxViewSide_px))) {
+    std::ostringstream s;
+    s << "top view: " << width_px << " px wide over the scene's " << size.x() << " x " << size.y()
+      << " m needs " << height << " rows, more than kMaxViewSide_px = " << kMaxViewSide_px
+      << " (give a height, or a scene less thin)";
+    return InvalidArgumentError(s.str());
+  }
+  const int rows = static_cast<int>(height);
+  if (Status valid = CheckSize(width_px, rows); !valid.ok()) {
+    return valid.WithContext("top view");
+  }
+  return OrthographicTop(area, width_px, rows, bounds.max().z() + 10.0);
+}
 
 View View::Perspective(const CameraModel& model, const Rigid3d& table_from_camera) {
   View v;

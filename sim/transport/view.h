@@ -9,16 +9,34 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "common/base/status.h"
 #include "common/camera/camera_model.h"
 #include "common/geometry/rigid3.h"
 
 namespace sandtable::sim {
+
+// The largest raster the world computes (a render, a top view, a camera's transport map): each
+// side, px, and the area (16 Mpx; a transport map holds ~30 bytes per pixel plus 32 bytes per
+// pixel a projector lights, so a 3-unit site at the limit needs about 2 GB). A view past these is
+// refused, naming the limit, before anything is allocated.
+inline constexpr int kMaxViewSide_px = 8192;
+inline constexpr int64_t kMaxViewPixels = int64_t{4096} * 4096;
 
 class View {
  public:
   static View Perspective(const CameraModel& model, const Rigid3d& table_from_camera);
   static View OrthographicTop(const Eigen::AlignedBox2d& area_in_table_m, int width_px,
                               int height_px, double eye_height_m = 10.0);
+
+  // An orthographic top view over the x-y extent of `bounds` (a scene's), looking down from
+  // 10 m above its top. height_px 0: from the extent's aspect (at least 16 px). INVALID_ARGUMENT
+  // for an empty, flat or non-finite extent, or a size past kMaxViewSide_px / kMaxViewPixels
+  // (a thin scene asking for 1e10 rows is refused here, not allocated).
+  static Expected<View> TopOver(const Eigen::AlignedBox3d& bounds, int width_px, int height_px);
+
+  // OK, or INVALID_ARGUMENT naming the limit the size breaks (no pixels, kMaxViewSide_px,
+  // kMaxViewPixels).
+  Status Check() const;
 
   int width_px() const { return width_px_; }
   int height_px() const { return height_px_; }

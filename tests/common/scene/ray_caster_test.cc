@@ -268,6 +268,33 @@ TEST(RayCasterTest, BadScenesAreRejected) {
   EXPECT_EQ(RayCaster::Create(not_finite).status().code(), StatusCode::kInvalidArgument);
 }
 
+// Absurd but finite coordinates (1e19 m tripped Embree's assertions) and NaN are refused as a
+// Status before Embree builds; rays from absurd origins are misses.
+TEST(RayCasterTest, RefusesAbsurdCoordinates) {
+  for (float bad : {1e19f, -2e4f, std::numeric_limits<float>::quiet_NaN()}) {
+    auto scene = std::make_shared<Scene>(MakeRectangleMesh({1.0, 1.0}, 0));
+    scene->positions_in_table_m[2].y() = bad;
+    Expected<std::unique_ptr<RayCaster>> caster = RayCaster::Create(scene, "threads=1");
+    ASSERT_FALSE(caster.ok()) << bad;
+    EXPECT_EQ(caster.status().code(), StatusCode::kInvalidArgument);
+    EXPECT_NE(caster.status().message().find("vertex 2"), std::string::npos)
+        << caster.status().ToString();
+    if (std::isfinite(bad)) {
+      EXPECT_NE(caster.status().message().find("kMaxSceneCoordinate_m"), std::string::npos)
+          << caster.status().ToString();
+    }
+  }
+  auto at_limit = std::make_shared<Scene>(MakeRectangleMesh({1.0, 1.0}, 0));
+  at_limit->positions_in_table_m[0].x() = static_cast<float>(kMaxSceneCoordinate_m);
+  EXPECT_TRUE(RayCaster::Create(at_limit, "threads=1").ok());
+  const std::unique_ptr<RayCaster> caster =
+      MakeCaster(std::make_shared<Scene>(MakeRectangleMesh({1.0, 1.0}, 0)));
+  const Eigen::Vector3d down(0, 0, -1);
+  EXPECT_FALSE(caster->Intersect(Eigen::Vector3d(0, 0, 1e19), down).has_value());
+  EXPECT_FALSE(caster->Intersect(Eigen::Vector3d(0, 0, 2 * kMaxRayOrigin_m), down).has_value());
+  EXPECT_TRUE(caster->Intersect(Eigen::Vector3d(0, 0, 1), down).has_value());
+}
+
 TEST(RayCasterTest, DegenerateTrianglesNeverHit) {
   auto scene = std::make_shared<Scene>();
   scene->positions_in_table_m = {{0, 0, 0}, {1, 0, 0}, {2, 0, 0}};  // collinear
