@@ -5,6 +5,7 @@
 
 #include "common/cli/command_line.h"
 #include "common/scene/procedural_scene.h"
+#include "sim/transport/view.h"
 
 namespace sandtable::sim {
 namespace {
@@ -95,9 +96,11 @@ void AddWorldCommands(CLI::App& app, WorldCommandLine& line) {
   render->add_option("--view", r.view, "top (orthographic) or camera:ID")
       ->required()
       ->check(ViewName());
-  render->add_option("--width", r.width_px, "image width, px")->check(cli::Integer(16, 16384));
+  // kMaxViewSide_px per side; the area is bounded by kMaxViewPixels when the view is made.
+  render->add_option("--width", r.width_px, "image width, px (at most 8192, 16 Mpx in all)")
+      ->check(cli::Integer(16, kMaxViewSide_px));
   render->add_option("--height", r.height_px, "image height, px (default: from the aspect)")
-      ->check(cli::Integer(16, 16384));
+      ->check(cli::Integer(16, kMaxViewSide_px));
   render
       ->add_option("--white-nits", r.white_nits,
                    "luminance shown as white, cd/m^2 (0: the 99th percentile)")

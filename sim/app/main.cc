@@ -7,6 +7,7 @@
 #include <iostream>
 
 #include "common/base/log.h"
+#include "common/base/main_guard.h"
 #include "common/cli/command_line.h"
 #include "sim/app/flags.h"
 #include "sim/app/world_commands.h"
@@ -18,7 +19,7 @@ void OnSignal(int) { g_stop = true; }
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int Run(int argc, char** argv) {
   using namespace sandtable::sim;
   sandtable::SetLogTag("world");
   CLI::App app("The simulated site: scenes, sites, renders, and the world server.",
@@ -38,4 +39,8 @@ int main(int argc, char** argv) {
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
   return ServeCommand(line.serve, g_stop, std::cout, std::cerr);
+}
+
+int main(int argc, char** argv) {
+  return sandtable::GuardedMain(argc, argv, "sandtable-world", Run);
 }

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
@@ -11,6 +10,8 @@
 
 #include "common/base/log.h"
 #include "common/base/ready_line.h"
+#include "common/io/image_file.h"
+#include "common/io/json_reader.h"
 #include "common/scene/gltf_loader.h"
 #include "common/scene/gltf_writer.h"
 #include "common/scene/procedural_scene.h"
@@ -107,9 +108,10 @@ int MakeSiteCommand(const MakeSiteArgs& args, std::ostream& out, std::ostream& e
       if (!calibration.ok()) return Failure(err, kName, calibration.status().ToString());
       const std::filesystem::path file =
           dir / ("unit-" + std::to_string(unit.id) + ".factory.json");
-      std::ofstream stream(file);
-      stream << FactoryCalibrationToJson(*calibration).dump(2) << "\n";
-      if (!stream.good()) return Failure(err, kName, "cannot write " + file.string());
+      if (Status written = io::WriteJsonFile(FactoryCalibrationToJson(*calibration), file);
+          !written.ok()) {
+        return Failure(err, kName, written.ToString());
+      }
     }
     out << "wrote " << site->units.size() << " factory calibrations to " << dir.string()
         << " (seed " << args.seed << ")\n";
@@ -140,8 +142,9 @@ int RenderCommand(const RenderArgs& args, std::ostream& out, std::ostream& err) 
       return Usage(err, kName, "--frame: projector id '" + id_text + "' is not a number");
     }
     const std::string file = assignment.substr(equals + 1);
-    cv::Mat image = cv::imread(file, cv::IMREAD_UNCHANGED);
-    if (image.empty()) return Usage(err, kName, "--frame: cannot read image " + file);
+    Expected<cv::Mat> read = io::ReadImageFile(file, cv::IMREAD_UNCHANGED);
+    if (!read.ok()) return Usage(err, kName, "--frame: " + read.status().message());
+    cv::Mat image = std::move(*read);
     if (image.depth() != CV_8U) return Usage(err, kName, "--frame: " + file + " is not 8-bit");
     if (image.channels() == 4) cv::cvtColor(image, image, cv::COLOR_BGRA2BGR);
     const Status set = world.SetProjectorFrame(static_cast<NodeId>(id), image);
@@ -152,14 +155,9 @@ int RenderCommand(const RenderArgs& args, std::ostream& out, std::ostream& err) 
   const std::string& view_name = args.view;
   std::optional<View> view;
   if (view_name == "top") {
-    const Eigen::AlignedBox3d bounds = world.scene().Bounds();
-    const Eigen::AlignedBox2d area(bounds.min().head<2>(), bounds.max().head<2>());
-    const Eigen::Vector2d size = area.sizes();
-    const int w = args.width_px;
-    const int h = args.height_px > 0
-                      ? args.height_px
-                      : std::max(16, static_cast<int>(std::lround(w * size.y() / size.x())));
-    view = View::OrthographicTop(area, w, h, bounds.max().z() + 10.0);
+    Expected<View> top = View::TopOver(world.scene().Bounds(), args.width_px, args.height_px);
+    if (!top.ok()) return Usage(err, kName, "--width/--height: " + top.status().message());
+    view = *top;
   } else if (view_name.rfind("camera:", 0) == 0) {
     const std::string id_text = view_name.substr(7);
     char* end = nullptr;
@@ -170,6 +168,9 @@ int RenderCommand(const RenderArgs& args, std::ostream& out, std::ostream& err) 
       return Usage(err, kName, "--view " + view_name + ": no camera with that id in the site");
     }
     view = View::Perspective(unit->camera->model, world.site().TableFromCamera(*unit));
+    if (Status valid = view->Check(); !valid.ok()) {
+      return Usage(err, kName, "--view " + view_name + ": " + valid.message());
+    }
   } else {
     return Usage(err, kName, "--view must be top or camera:ID, not '" + view_name + "'");
   }
@@ -194,13 +195,9 @@ int RenderCommand(const RenderArgs& args, std::ostream& out, std::ostream& err) 
   const cv::Mat image = LuminanceToImage(*luminance, view->width_px(), view->height_px(), white);
   lit = static_cast<size_t>(cv::countNonZero(image));
   const std::string& path = args.output;
-  bool written = false;
-  try {
-    written = cv::imwrite(path, image);
-  } catch (const cv::Exception& e) {
-    return Failure(err, kName, "cannot write " + path + ": " + e.what());
+  if (Status written = io::WritePngFile(path, image); !written.ok()) {
+    return Failure(err, kName, written.ToString());
   }
-  if (!written) return Failure(err, kName, "cannot write " + path);
   out << "wrote " << path << " " << image.cols << "x" << image.rows << " white_nits=" << white
       << " lit_pixels=" << lit << "\n";
   return kExitOk;
