@@ -241,7 +241,7 @@ int main(int argc, char** argv) {
         coordinator::LoadVirtualWandScript(virtual_wand_path);
     if (!script.ok()) {
       std::cerr << "sandtable-coordinator: --virtual-wand: " << script.status().ToString() << "\n";
-      return 1;
+      return 2;  // bad input file (docs/reliability/security.md)
     }
     auto source = std::make_unique<coordinator::VirtualWandSource>(virtual_wand_path, *script);
     ST_LOG(kInfo) << "tracker: " << source->Describe();
@@ -257,7 +257,7 @@ int main(int argc, char** argv) {
     if (!samples.ok()) {
       std::cerr << "sandtable-coordinator: --tracker-replay: " << samples.status().ToString()
                 << "\n";
-      return 1;
+      return 2;  // bad input file (docs/reliability/security.md)
     }
     coordinator::WandServiceOptions wand_options;
     if (!table_from_tracker_path.empty()) {

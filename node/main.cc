@@ -160,6 +160,7 @@ int main(int argc, char** argv) {
   // first capture of a world camera builds the world's light transport (seconds).
   node::DeviceOptions device_options;
   device_options.node_id = options.id;
+  device_options.world_curve = options.curve;  // the site key also admits the node to the world
   if (calibration) {
     device_options.projector_size_px =
         cv::Size(calibration->projector.width_px, calibration->projector.height_px);

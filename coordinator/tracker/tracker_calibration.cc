@@ -7,6 +7,7 @@
 #include "common/estimation/umeyama.h"
 #include "common/io/json_codec.h"
 #include "common/io/json_reader.h"
+#include "coordinator/tracker/replay_source.h"
 
 namespace sandtable::coordinator {
 
@@ -148,13 +149,32 @@ Status SaveTableFromTracker(const Rigid3d& table_from_tracker, const std::string
   return io::WriteJsonFile(TableFromTrackerToJson(table_from_tracker), path);
 }
 
+namespace {
+
+// A translation past kMaxTrackerCoordinate_m would carry every wand ray out of any scene (and
+// into the ray caster's range checks): refused naming the field.
+Status CheckTranslationRange(const Rigid3d& table_from_tracker, const std::string& where) {
+  if (!table_from_tracker.AllFinite() ||
+      table_from_tracker.translation.cwiseAbs().maxCoeff() > kMaxTrackerCoordinate_m) {
+    return ParseError(where +
+                      " table_from_tracker.translation_m: beyond kMaxTrackerCoordinate_m (" +
+                      std::to_string(kMaxTrackerCoordinate_m) + " m per axis)");
+  }
+  return OkStatus();
+}
+
+}  // namespace
+
 Expected<Rigid3d> TableFromTrackerFromJson(const nlohmann::json& json, std::string_view source) {
   const std::string where = std::string(source) + ":";
   io::ObjectReader root(json, where);
   ST_RETURN_IF_ERROR(root.Begin());
   if (!root.Has("format")) {
     // The older file: the transform itself, {"rotation_wxyz": [w, x, y, z], "translation_m"}.
-    return io::RigidFromJson(json, where);
+    Expected<Rigid3d> old_file = io::RigidFromJson(json, where);
+    if (!old_file.ok()) return old_file.status();
+    ST_RETURN_IF_ERROR(CheckTranslationRange(*old_file, where));
+    return *old_file;
   }
   Expected<int> version = io::ReadFormatVersion(&root, kTableFromTrackerFormat,
                                                 kTableFromTrackerVersion, kTableFromTrackerVersion);
@@ -162,6 +182,7 @@ Expected<Rigid3d> TableFromTrackerFromJson(const nlohmann::json& json, std::stri
   Expected<Rigid3d> table_from_tracker = io::ReadRigid(&root, "table_from_tracker");
   if (!table_from_tracker.ok()) return table_from_tracker.status();
   ST_RETURN_IF_ERROR(root.End());
+  ST_RETURN_IF_ERROR(CheckTranslationRange(*table_from_tracker, where));
   return *table_from_tracker;
 }
 

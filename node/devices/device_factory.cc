@@ -51,6 +51,7 @@ Expected<std::shared_ptr<WorldLink>> LinkFor(const DeviceSpec& spec, const Devic
   link.node_id = options.node_id;
   link.connect_timeout = options.world_connect_timeout;
   link.reply_timeout = options.world_reply_timeout;
+  link.curve = options.world_curve;
   return WorldLink::Shared(link);
 }
 

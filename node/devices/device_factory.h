@@ -24,6 +24,7 @@
 #include <string_view>
 
 #include "common/base/ids.h"
+#include "net/curve.h"
 #include "node/devices/camera_input.h"
 #include "node/devices/projector_output.h"
 
@@ -41,6 +42,7 @@ struct DeviceOptions {
   std::optional<int> camera_bit_depth;
   std::chrono::milliseconds world_connect_timeout{2000};
   std::chrono::milliseconds world_reply_timeout{60000};
+  std::optional<net::CurveKeyPair> world_curve;  // world: connect with CURVE (site keys)
 };
 
 // A parsed spec (exposed for tests and for --help texts).

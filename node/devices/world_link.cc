@@ -69,6 +69,7 @@ Status WorldLink::OpenSocket() {
   channel_.reset();
   net::SocketOptions socket_options;
   socket_options.max_message_bytes = static_cast<int64_t>(options_.limits.max_message_bytes);
+  if (options_.curve) socket_options.curve = net::ClientCurve(*options_.curve);
   Expected<std::unique_ptr<net::Socket>> socket =
       net::Socket::Create(&context_, net::SocketType::kDealer, socket_options);
   if (!socket.ok()) return socket.status().WithContext("world " + options_.endpoint);
@@ -123,7 +124,10 @@ Expected<wire::Envelope> WorldLink::Ask(wire::Envelope request,
   if (!*writable) {
     // Nothing was sent: the socket keeps connecting in the background for the next try.
     return UnavailableError(where + ": not reachable within " + Ms(options_.connect_timeout) +
-                            " (is `sandtable-world serve` running there?)");
+                            " (is `sandtable-world serve` running there?" +
+                            std::string(options_.curve ? " Is it served with the same --curve-keys?"
+                                                       : " Does it require CURVE (--curve-keys)?") +
+                            ")");
   }
   const Status sent = channel_->Send(std::move(request));
   if (!sent.ok()) {

@@ -15,12 +15,19 @@
 // After a deadline the socket is replaced by a fresh one (new routing id and incarnation), so a
 // late reply can never be taken for the answer to a later request.
 //
+// CURVE (options.curve, the site key pair): the DEALER is a CURVE client with the site key as
+// its own pair and as the world's server key (net::ClientCurve), for a world served with
+// `serve --curve-keys`. Against a world with another key, or a CURVE world without keys, the
+// handshake never completes: the request is UNAVAILABLE ("not reachable") after
+// connect_timeout, the message naming CURVE as a possible cause.
+//
 // Threading: Ask() is serialised by a mutex; one request is in flight at a time.
 #pragma once
 
 #include <chrono>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 
 #include <zmq.hpp>
@@ -28,6 +35,7 @@
 #include "common/base/ids.h"
 #include "common/base/status.h"
 #include "net/channel.h"
+#include "net/curve.h"
 #include "proto/codec.h"
 #include "proto/envelope.pb.h"
 #include "proto/message_counters.h"
@@ -40,6 +48,7 @@ struct WorldLinkOptions {
   std::chrono::milliseconds connect_timeout{2000};
   std::chrono::milliseconds reply_timeout{60000};
   proto::CodecLimits limits;
+  std::optional<net::CurveKeyPair> curve;  // site keys: connect with CURVE
 
   Status Check() const;
 };

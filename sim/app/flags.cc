@@ -121,6 +121,9 @@ void AddWorldCommands(CLI::App& app, WorldCommandLine& line) {
   serve->add_option("--threads", v.threads, "transport threads (0: all cores)")
       ->check(cli::Integer(0, 1024));
   serve->add_flag("--prebuild", v.prebuild, "build every camera's transport map first");
+  serve->add_option("--curve-keys", v.curve_keys,
+                    "site CURVE key file (sandtable-coordinator --generate-curve-keys): "
+                    "serve only clients holding the site key");
   line.serve_command = serve;
 }
 

@@ -5,7 +5,7 @@
 //   render     --site S --scene G [--white | --frame ID=FILE.png ...] --view top|camera:ID
 //              [--width W] [--height H] [--white-nits L] [--threads N] -o out.png
 //   serve      --site S --scene G [--bind tcp://127.0.0.1:0] [--no-noise] [--noise-seed N]
-//              [--threads N] [--prebuild]
+//              [--threads N] [--prebuild] [--curve-keys site.key]
 //
 // AddWorldCommands registers the four subcommands with typed, range-checked values: an unknown
 // flag, a missing required flag, a value of the wrong type or out of range is a usage error
@@ -53,7 +53,8 @@ struct ServeArgs {
   bool no_noise = false;
   uint64_t noise_seed = 1;
   int threads = 0;
-  bool prebuild = false;  // build every camera's transport map before serving
+  bool prebuild = false;   // build every camera's transport map before serving
+  std::string curve_keys;  // site CURVE key file: require CURVE from every client
 };
 
 // The parsed values, and which subcommand was given (after parsing: exactly one `parsed()`).

@@ -206,6 +206,12 @@ int RenderCommand(const RenderArgs& args, std::ostream& out, std::ostream& err) 
 int ServeCommand(const ServeArgs& args, const std::atomic<bool>& stop, std::ostream& out,
                  std::ostream& err) {
   const std::string kName = "serve";
+  std::optional<net::CurveKeyPair> curve;
+  if (!args.curve_keys.empty()) {
+    Expected<net::CurveKeyPair> keys = net::ReadCurveKeyFile(args.curve_keys);
+    if (!keys.ok()) return Usage(err, kName, "--curve-keys: " + keys.status().message());
+    curve = *keys;
+  }
   Loaded loaded = LoadWorld(args.site, args.scene, args.threads);
   if (!loaded.world) return Usage(err, kName, loaded.error);
   if (args.prebuild) {
@@ -224,11 +230,14 @@ int ServeCommand(const ServeArgs& args, const std::atomic<bool>& stop, std::ostr
   options.bind_endpoint = bind;
   options.noise = !args.no_noise;
   options.noise_seed = args.noise_seed;
+  options.curve = curve;
   WorldServer server(std::move(loaded.world), options);
   if (Status started = server.Start(); !started.ok()) {
     return Failure(err, kName, started.ToString());
   }
-  WriteJsonLine(out, {{"ready", "sandtable-world"}, {"world", server.endpoint()}});
+  WriteJsonLine(out, {{"ready", "sandtable-world"},
+                      {"world", server.endpoint()},
+                      {"curve", options.curve.has_value()}});
   const Status ran = server.Run(stop);
   const WorldServerStats& stats = server.stats();
   ST_LOG(kInfo) << "stopping: frames " << stats.frames_set << ", captures " << stats.captures

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <set>
 
 #include <opencv2/imgproc.hpp>
 
@@ -40,15 +41,31 @@ WorldServer::WorldServer(std::unique_ptr<World> world, WorldServerOptions option
   ST_CHECK(world_ != nullptr) << "WorldServer needs a World";
 }
 
-WorldServer::~WorldServer() { channel_.reset(); }
+WorldServer::~WorldServer() {
+  if (monitor_) monitor_->Stop();
+  channel_.reset();
+  if (zap_) zap_->Stop();
+}
 
 Status WorldServer::Start() {
   ST_RETURN_IF_ERROR(options_.Check());
   net::SocketOptions socket_options;
   socket_options.max_message_bytes = static_cast<int64_t>(options_.limits.max_message_bytes);
+  if (options_.curve) {
+    zap_ = std::make_unique<net::ZapHandler>(&context_,
+                                             std::set<std::string>{options_.curve->public_key_z85});
+    ST_RETURN_IF_ERROR(zap_->Start());
+    socket_options.curve = net::ServerCurve(*options_.curve);
+  }
   Expected<std::unique_ptr<net::Socket>> router =
       net::Socket::Create(&context_, net::SocketType::kRouter, socket_options);
   if (!router.ok()) return router.status();
+  if (options_.curve) {
+    // A client without keys is dropped in the ZMTP greeting and never reaches ZAP: the monitor
+    // is what logs and counts its refusal.
+    monitor_ = std::make_unique<net::HandshakeMonitor>();
+    ST_RETURN_IF_ERROR(monitor_->Attach(&context_, router->get(), "world"));
+  }
   Expected<std::string> endpoint = (*router)->Bind(options_.bind_endpoint);
   if (!endpoint.ok()) return endpoint.status().WithContext("world: bind");
   endpoint_ = *endpoint;

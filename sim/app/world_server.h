@@ -14,6 +14,11 @@
 // .bad_requests, and MessageCounters kInvalidContent). A message that is not a valid Envelope
 // (garbage, wrong version, out of order) is counted by reason and answered with Rejected when
 // the sender's identity is known.
+// CURVE (options.curve, `serve --curve-keys site.key`): the ROUTER is a CURVE server with the
+// site key pair and a ZAP handler admits only clients holding the site key (net/curve.h), as
+// the coordinator does; a client without CURVE or with another key gets no connection, and
+// the refusal is logged (rate-limited by the handshake monitor) and counted. Without it any
+// local process may ask the world for frames and captures.
 // Noise: capture k (0, 1, 2, ...) of camera c uses the seed CaptureSeed(noise_seed, c, k), so a
 // server run is reproducible for a request sequence.
 #pragma once
@@ -23,12 +28,15 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include <zmq.hpp>
 
 #include "common/base/ids.h"
 #include "net/channel.h"
+#include "net/curve.h"
+#include "net/handshake_monitor.h"
 #include "net/server_loop.h"
 #include "proto/codec.h"
 #include "proto/envelope.pb.h"
@@ -43,6 +51,7 @@ struct WorldServerOptions {
   bool noise = true;
   uint64_t noise_seed = 1;
   proto::CodecLimits limits;
+  std::optional<net::CurveKeyPair> curve;  // site keys: require CURVE from every client
   Status Check() const;
 };
 
@@ -72,6 +81,11 @@ class WorldServer {
 
   const WorldServerStats& stats() const { return stats_; }
   const proto::MessageCounters& counters() const { return counters_; }
+  // CURVE clients admitted / refused by the ZAP handler (0 without CURVE).
+  uint64_t curve_accepted() const { return zap_ ? zap_->accepted() : 0; }
+  uint64_t curve_refused() const { return zap_ ? zap_->refused() : 0; }
+  // Failed handshakes seen on the ROUTER (with CURVE: clients without keys, wrong keys).
+  uint64_t failed_handshakes() const { return monitor_ ? monitor_->failed_handshakes() : 0; }
   World& world() { return *world_; }
 
  private:
@@ -85,6 +99,8 @@ class WorldServer {
   std::unique_ptr<World> world_;
   WorldServerOptions options_;
   zmq::context_t context_;
+  std::unique_ptr<net::ZapHandler> zap_;
+  std::unique_ptr<net::HandshakeMonitor> monitor_;
   proto::MessageCounters counters_;
   std::unique_ptr<net::Channel> channel_;
   net::ServerLoop loop_;

@@ -15,6 +15,7 @@
 #include "common/base/ready_line.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/gltf_loader.h"
+#include "net/curve.h"
 #include "sim/lab/lab_images.h"
 #include "sim/lab/lab_inputs.h"
 #include "sim/lab/lab_report.h"
@@ -110,6 +111,18 @@ class LabRun {
       return inputs.status().code() == StatusCode::kInvalidArgument ? kExitUsage : kExitFailure;
     }
     inputs_ = std::move(*inputs);
+    if (options_.curve) {
+      // One site key for the whole run: world, coordinator and nodes require CURVE with it.
+      const std::string key_path = fs::absolute(fs::path(options_.out_dir) / "site.key");
+      Expected<net::CurveKeyPair> keys = net::GenerateCurveKeyPair();
+      const Status written = keys.ok() ? net::WriteCurveKeyFile(key_path, *keys) : keys.status();
+      if (!written.ok()) {
+        progress_.End("failed");
+        err_ << "sandtable-lab run: --curve: " << written.ToString() << "\n";
+        return kExitFailure;
+      }
+      curve_keys_path_ = key_path;
+    }
     result_.site_name = inputs_.site.name;
     result_.num_units = static_cast<int>(inputs_.site.units.size());
     result_.site_path = RelativeToOut(inputs_.site_path);
@@ -363,6 +376,9 @@ class LabRun {
 
   ChildProcess* StartChild(const std::string& name, const std::string& role,
                            std::vector<std::string> argv) {
+    if (!curve_keys_path_.empty() && (role == "world" || role == "coordinator" || role == "node")) {
+      argv.insert(argv.end(), {"--curve-keys", curve_keys_path_});
+    }
     ChildSpec spec{name, role, std::move(argv),
                    (fs::path(options_.out_dir) / "logs" / (name + ".log")).string()};
     Expected<ChildProcess*> child = supervisor_.Start(spec);
@@ -481,6 +497,7 @@ class LabRun {
   Scene scene_;
   LabResult result_;
   std::string world_bin_, coordinator_bin_, node_bin_;
+  std::string curve_keys_path_;  // --curve: the run's site key file
   std::string progress_phase_;
   std::string world_endpoint_, coordinator_requests_, coordinator_events_;
   std::set<NodeId> nodes_ready_;

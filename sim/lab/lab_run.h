@@ -6,6 +6,8 @@
 //                   -> {"ready":"sandtable-world","world":ENDPOINT}
 //   start coordinator  sandtable-coordinator --requests tcp://127.0.0.1:* --events ...:*
 //                   -> {"ready":"sandtable-coordinator","requests":..,"events":..}
+//   (--curve: OUT/site.key is generated, mode 0600, and each of the three also gets
+//    --curve-keys OUT/site.key, so every connection of the run is authenticated)
 //   start nodes     per unit: sandtable-node --id N --coordinator REQ,EV --world W
 //                   --factory F --true-pose T --export-dir DIR/calibration
 //                   -> {"ready":"sandtable-node","id":N,...}            (k/N ready)
@@ -45,6 +47,7 @@ struct LabRunOptions {
   int metric_samples = 40000;
   int image_width_px = 640;
   bool progress_tty = false;
+  bool curve = false;  // generate OUT/site.key (0600); world, coordinator, nodes require CURVE
   std::string command_line;  // for the report
   Status Check() const;
 };

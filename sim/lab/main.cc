@@ -60,6 +60,9 @@ int main(int argc, char** argv) {
       ->check(cli::Real(0.1, 36000.0));
   run->add_option("--image-width", options.image_width_px, "Width of the report's pictures (px)")
       ->check(cli::Integer<int>(16, 8192));
+  run->add_flag("--curve", options.curve,
+                "Authenticate the whole run: a site key in OUT/site.key, CURVE on world, "
+                "coordinator and nodes");
   run->add_option("--progress", progress,
                   "Terminal progress: bars, plain lines, or auto (bars "
                   "on a TTY)")

@@ -206,6 +206,13 @@ TEST_F(TableFromTrackerFile, BadFilesNameTheField) {
   EXPECT_NE(s.message().find(path_ + ": table_from_tracker.rotation_xyzw has norm 5"),
             std::string::npos)
       << s.ToString();
+  // A translation of 1e19 m would reach the ray caster: refused naming the limit.
+  std::ofstream(path_) << R"({"format": "sandtable.table_from_tracker", "version": 1,
+                              "table_from_tracker": {"rotation_xyzw": [0, 0, 0, 1],
+                                                     "translation_m": [1e19, 0, 0]}})";
+  s = LoadTableFromTracker(path_).status();
+  EXPECT_EQ(s.code(), StatusCode::kParseError);
+  EXPECT_NE(s.message().find("kMaxTrackerCoordinate_m"), std::string::npos) << s.ToString();
   std::ofstream(path_) << R"({"format": "sandtable.table_from_tracker", "version": 1})";
   s = LoadTableFromTracker(path_).status();
   EXPECT_NE(s.message().find("table_from_tracker is missing"), std::string::npos) << s.ToString();
