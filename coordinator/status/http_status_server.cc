@@ -2,8 +2,10 @@
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <cstdlib>
 
@@ -81,6 +83,35 @@ bool SameToken(const std::string& a, const std::string& b) {
 
 constexpr uint64_t kMaxStatusTokenFileBytes = 4096;
 constexpr size_t kMinStatusTokenChars = 16, kMaxStatusTokenChars = 256;
+
+// Connects to the server, half-closes and waits until the server closes too: proof that its
+// accept loop and a worker thread run (httplib creates its pool of worker_threads only once
+// listening; on a loaded machine that took a second, and the first clients waited for it).
+// Best effort: false at the deadline. No request is sent, so nothing is counted.
+bool ProbeServing(const std::string& host, uint16_t port, std::chrono::milliseconds deadline) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  if (fd < 0) return false;
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(port);
+  if (::inet_pton(AF_INET, host == "0.0.0.0" ? "127.0.0.1" : host.c_str(), &address.sin_addr) !=
+          1 ||
+      ::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address)) != 0) {
+    ::close(fd);
+    return false;
+  }
+  ::shutdown(fd, SHUT_WR);
+  pollfd p{fd, POLLIN, 0};
+  bool closed = false;
+  const auto until = std::chrono::steady_clock::now() + deadline;
+  while (!closed && std::chrono::steady_clock::now() < until) {
+    if (::poll(&p, 1, 50) <= 0) continue;
+    char byte;
+    closed = ::recv(fd, &byte, 1, 0) <= 0;
+  }
+  ::close(fd);
+  return closed;
+}
 
 }  // namespace
 
@@ -230,6 +261,11 @@ HttpStatusServer::HttpStatusServer(std::unique_ptr<httplib::Server> server, std:
   const auto until = std::chrono::steady_clock::now() + kStartDeadline;
   while (!server_->is_running() && std::chrono::steady_clock::now() < until) {
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  // Serving, not only listening, before Start() returns.
+  if (!ProbeServing(host_, port_, kStartDeadline)) {
+    ST_LOG(kWarning) << "status: " << url() << " did not answer a probe within "
+                     << kStartDeadline.count() << " s";
   }
 }
 
