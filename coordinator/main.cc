@@ -15,9 +15,12 @@
 // with a message naming the flag. A file that does not load exits 1.
 //
 // --annotations: the SQLite database of annotation events (created when absent). Without it
-// annotations live in memory only (a warning says so). A damaged database: the coordinator
-// refuses to start and says why (exit code 1). --export-session / --import-session work on the
-// database and exit (docs/coordinator.md).
+// annotations live in memory only (a warning says so). A damaged database, a changed row, a
+// log shorter than its sequence record (a lost -wal) or a database another coordinator holds:
+// it refuses to start, says why and how to recover (exit code 2; docs/reliability/store.md);
+// --annotations-accept-loss accepts lost events explicitly. --export-session / --import-session
+// work on the database and exit (docs/coordinator.md); a bad session file exits 2 naming the
+// line and field and imports nothing.
 //
 // --timeline: personnel tracks (CSV, docs/coordinator.md) replayed with play/pause/seek/rate
 // requests and a timeline_clock on the PUB. --status: JSON at http://HOST:PORT/status (port 0:
@@ -108,6 +111,9 @@ int main(int argc, char** argv) {
                  "memory only)");
   app.add_option("--annotation-sync", sync_name, "SQLite synchronous mode of the database")
       ->check(CLI::IsMember({"full", "normal"}));
+  app.add_flag("--annotations-accept-loss", store_options.accept_lost_events,
+               "start even though acknowledged annotation events are missing (lost -wal, "
+               "older copy): logged, and the sequence record reset");
   CLI::Option* export_session = app.add_option(
       "--export-session", export_path, "write the database's events as JSON lines and exit");
   CLI::Option* import_session = app.add_option("--import-session", import_path,
@@ -180,7 +186,7 @@ int main(int argc, char** argv) {
   if (!store.ok()) {
     std::cerr << "sandtable-coordinator: cannot open annotations: " << store.status().ToString()
               << "\n";
-    return 1;
+    return store.status().code() == StatusCode::kInternal ? 1 : 2;
   }
   if (annotations_path == ":memory:") {
     ST_LOG(kWarning) << "annotations are kept in memory only (no --annotations FILE): a restart "
@@ -190,12 +196,23 @@ int main(int argc, char** argv) {
                   << " events restored, " << (*store)->state().strokes().size() << " strokes";
   }
   if (!import_path.empty() || !export_path.empty()) {
-    Expected<size_t> n = !import_path.empty()
-                             ? coordinator::ImportSession(import_path, store->get())
-                             : coordinator::ExportSession(**store, export_path);
+    Expected<size_t> n = 0;
+    if (!import_path.empty()) {
+      // A bad file is bad input (exit 2); a failure to store it is not (exit 1).
+      Expected<std::vector<wire::AnnotationEvent>> events =
+          coordinator::ReadSessionFile(import_path);
+      if (!events.ok()) {
+        std::cerr << "sandtable-coordinator: --import-session: " << events.status().ToString()
+                  << "\n";
+        return 2;
+      }
+      n = coordinator::ImportEvents(std::move(*events), import_path, store->get());
+    } else {
+      n = coordinator::ExportSession(**store, export_path);
+    }
     if (!n.ok()) {
       std::cerr << "sandtable-coordinator: " << n.status().ToString() << "\n";
-      return 1;
+      return n.status().code() == StatusCode::kInvalidArgument ? 2 : 1;
     }
     std::cout << (import_path.empty() ? "exported " : "imported ") << *n << " events\n";
     return 0;

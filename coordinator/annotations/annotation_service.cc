@@ -48,10 +48,10 @@ void AnnotationService::OnRequest(net::Incoming request, CoordinatorServer& serv
     wire::AnnotationAck* ack = reply.mutable_annotation_ack();
     ack->set_request_sequence(request.envelope.sequence());
     ack->set_accepted(false);
-    ack->set_reason("stroke_points: " +
-                    std::to_string(event.stroke_points().points_in_table_m_size() / 3) +
-                    " points in one request, more than kMaxPointsPerRequest = " +
-                    std::to_string(kMaxPointsPerRequest) + "; send them in several requests");
+    ack->set_reason(
+        "stroke_points: " + std::to_string(event.stroke_points().points_in_table_m_size() / 3) +
+        " points in one request, more than kMaxPointsPerRequest = " +
+        std::to_string(kMaxPointsPerRequest) + "; send them in several requests");
     Status sent = server.Reply(std::move(reply), request.routing_id);
     if (!sent.ok()) ST_LOG(kDebug) << "annotation ack dropped: " << sent.ToString();
     return;
@@ -63,9 +63,8 @@ void AnnotationService::OnRequest(net::Incoming request, CoordinatorServer& serv
 
 Status AnnotationService::OnStep(CoordinatorServer& server) {
   const auto now = std::chrono::steady_clock::now();
-  std::erase_if(held_, [&](const HeldSnapshot& h) {
-    return now - h.last_used > options_.snapshot_hold;
-  });
+  std::erase_if(held_,
+                [&](const HeldSnapshot& h) { return now - h.last_used > options_.snapshot_hold; });
   if (batch_.empty()) return OkStatus();
   std::vector<wire::AnnotationEvent> batch = std::move(batch_);
   std::vector<Pending> pending = std::move(pending_);
@@ -147,8 +146,7 @@ bool AnnotationService::AddEventPage(SequenceNumber last_seen, wire::CatchUpRepl
 
 void AnnotationService::AddChunk(const HeldSnapshot& held, uint64_t offset,
                                  wire::CatchUpReply* out) {
-  const size_t size =
-      std::min<size_t>(options_.catch_up_page_bytes, held.bytes.size() - offset);
+  const size_t size = std::min<size_t>(options_.catch_up_page_bytes, held.bytes.size() - offset);
   out->set_snapshot_sent(true);
   out->set_snapshot_sequence(held.sequence);
   out->set_snapshot_total_bytes(held.bytes.size());
@@ -178,9 +176,8 @@ void AnnotationService::AddSnapshot(wire::CatchUpReply* out) {
   HeldSnapshot held{newest, snapshot.SerializeAsString(), now};
   snapshot.Clear();
   held_.push_back(std::move(held));
-  ST_LOG(kInfo) << "catch-up: snapshot at event " << newest << " of "
-                << held_.back().bytes.size() << " bytes sent in chunks of "
-                << options_.catch_up_page_bytes;
+  ST_LOG(kInfo) << "catch-up: snapshot at event " << newest << " of " << held_.back().bytes.size()
+                << " bytes sent in chunks of " << options_.catch_up_page_bytes;
   AddChunk(held_.back(), 0, out);
 }
 

@@ -23,7 +23,7 @@ void EventStateService::OnCoordinatorMessage(const wire::Envelope& message, Node
       OnAnnotationEvent(message.annotation_event(), node);
       break;
     case wire::Envelope::kCatchUpReply:
-      OnCatchUpReply(message.catch_up_reply());
+      OnCatchUpReply(message.catch_up_reply(), node);
       break;
     case wire::Envelope::kTimelineClock:
       timeline_ = message.timeline_clock();
@@ -58,7 +58,12 @@ Status EventStateService::OnStep(NodeRuntime& node) {
 
 void EventStateService::RequestCatchUp(NodeRuntime& node) {
   wire::Envelope request;
-  request.mutable_catch_up_request()->set_last_seen_sequence(annotations_.last_sequence());
+  wire::CatchUpRequest* out = request.mutable_catch_up_request();
+  out->set_last_seen_sequence(annotations_.last_sequence());
+  if (chunked_sequence_ != 0) {
+    out->set_snapshot_sequence(chunked_sequence_);
+    out->set_snapshot_offset_bytes(chunked_bytes_.size());
+  }
   catch_up_sent_ = std::chrono::steady_clock::now();
   if (node.SendToCoordinator(std::move(request)).ok()) ++counters_.catch_ups_requested;
 }
@@ -88,7 +93,19 @@ void EventStateService::OnAnnotationEvent(const wire::AnnotationEvent& event, No
   ++counters_.annotation_events_applied;
 }
 
-void EventStateService::OnCatchUpReply(const wire::CatchUpReply& reply) {
+void EventStateService::OnCatchUpReply(const wire::CatchUpReply& reply, NodeRuntime& node) {
+  if (reply.snapshot_expired()) {
+    ST_LOG(kInfo) << "catch-up snapshot " << chunked_sequence_ << " expired; starting again";
+    chunked_sequence_ = chunked_total_bytes_ = 0;
+    chunked_bytes_.clear();
+    catch_up_wanted_ = true;
+    RequestCatchUp(node);
+    return;
+  }
+  if (reply.snapshot_total_bytes() > 0) {
+    OnSnapshotChunk(reply, node);
+    return;
+  }
   cluster::AnnotationState next;
   if (reply.snapshot_sent()) {
     Expected<cluster::AnnotationState> from =
@@ -101,6 +118,63 @@ void EventStateService::OnCatchUpReply(const wire::CatchUpReply& reply) {
   } else {
     next = annotations_;
   }
+  ApplyCatchUp(std::move(next), reply, node);
+}
+
+void EventStateService::OnSnapshotChunk(const wire::CatchUpReply& reply, NodeRuntime& node) {
+  ++counters_.snapshot_chunks;
+  const uint64_t total = reply.snapshot_total_bytes();
+  const uint64_t offset = reply.snapshot_offset_bytes();
+  auto refuse = [&](const std::string& why) {
+    ++counters_.snapshots_refused;
+    ST_LOG(kWarning) << "catch-up snapshot " << reply.snapshot_sequence() << " refused: " << why;
+    chunked_sequence_ = chunked_total_bytes_ = 0;
+    chunked_bytes_.clear();
+  };
+  if (total > kMaxCatchUpSnapshotBytes) {
+    refuse(std::to_string(total) + " bytes, more than kMaxCatchUpSnapshotBytes = " +
+           std::to_string(kMaxCatchUpSnapshotBytes));
+    return;  // retried after catch_up_retry
+  }
+  if (offset == 0) {
+    chunked_sequence_ = reply.snapshot_sequence();
+    chunked_total_bytes_ = total;
+    chunked_bytes_.clear();
+  }
+  if (chunked_sequence_ == 0 || reply.snapshot_sequence() != chunked_sequence_ ||
+      total != chunked_total_bytes_ || offset != chunked_bytes_.size() ||
+      reply.snapshot_chunk().empty() || offset + reply.snapshot_chunk().size() > total) {
+    // A stale or duplicate chunk (e.g. the answer to a retried request): ignored.
+    ST_LOG(kDebug) << "catch-up chunk at " << offset << " of snapshot " << reply.snapshot_sequence()
+                   << " does not continue ours; ignored";
+    return;
+  }
+  chunked_bytes_ += reply.snapshot_chunk();
+  if (chunked_bytes_.size() < total) {
+    RequestCatchUp(node);  // the next chunk, at once
+    return;
+  }
+  wire::Snapshot snapshot;
+  const bool parsed = snapshot.ParseFromString(chunked_bytes_);
+  chunked_sequence_ = chunked_total_bytes_ = 0;
+  chunked_bytes_.clear();
+  chunked_bytes_.shrink_to_fit();
+  if (!parsed) {
+    refuse("the assembled chunks do not parse");
+    return;
+  }
+  Expected<cluster::AnnotationState> from = cluster::AnnotationState::FromSnapshot(snapshot);
+  if (!from.ok()) {
+    refuse(from.status().ToString());
+    return;
+  }
+  wire::CatchUpReply whole;
+  whole.set_last_event_sequence(reply.last_event_sequence());
+  ApplyCatchUp(std::move(*from), whole, node);
+}
+
+void EventStateService::ApplyCatchUp(cluster::AnnotationState next, const wire::CatchUpReply& reply,
+                                     NodeRuntime& node) {
   for (const wire::AnnotationEvent& event : reply.events()) {
     if (event.event_sequence() <= next.last_sequence()) continue;
     if (event.event_sequence() != next.last_sequence() + 1 || !next.Check(event).ok()) {
@@ -109,9 +183,13 @@ void EventStateService::OnCatchUpReply(const wire::CatchUpReply& reply) {
     }
     next.Apply(event);
   }
+  const bool progressed = next.last_sequence() > annotations_.last_sequence();
   annotations_ = std::move(next);
   ++counters_.catch_ups_applied;
   catch_up_wanted_ = annotations_.last_sequence() < reply.last_event_sequence();
+  // Still behind after progress: the next page at once (the reply was cut at the page size,
+  // or the snapshot is older than the log's head). Without progress: after catch_up_retry.
+  if (catch_up_wanted_ && progressed) RequestCatchUp(node);
 }
 
 std::optional<double> EventStateService::MediaTimeAt(const NodeRuntime& node,

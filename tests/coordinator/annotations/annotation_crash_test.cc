@@ -8,12 +8,14 @@
 // must hold every acknowledged point (in order, same values), and its last event sequence
 // must be at least the largest acknowledged one. Also: a second client joining late with
 // last_seen_sequence gets exactly the events after it; a damaged database makes the
-// coordinator refuse to start with exit code 1 (no crash).
+// coordinator refuse to start with exit code 2 (no crash).
 // Waits on events with deadlines; never sleeps for synchronisation.
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <iterator>
 #include <map>
 
 #include "net/channel.h"
@@ -195,11 +197,149 @@ TEST_F(AnnotationCrashTest, SigkillMidStrokeLosesNoAcknowledgedEvent) {
   EXPECT_EQ(restarted->Wait(), 0);
 }
 
+// Runs a coordinator on the database, gets `points` acknowledged points of one stroke and
+// kills it with SIGKILL (its -wal file then holds the newest events). Returns the largest
+// acknowledged event sequence.
+uint64_t AckThenKill(AnnotationCrashTest* test, int points,
+                     const std::function<std::unique_ptr<ChildProcess>(std::string*)>& start) {
+  std::string requests;
+  std::unique_ptr<ChildProcess> coordinator = start(&requests);
+  EXPECT_FALSE(requests.empty());
+  if (requests.empty()) return 0;
+  Client client(requests, 7003);
+  uint64_t max_acked = 0;
+  for (int k = -1; k < points; ++k) {
+    wire::Envelope e;
+    *e.mutable_annotation_request() =
+        k < 0 ? Begin(kStrokeId, 0.f, 0.f, 1.f) : Points(kStrokeId, k, {LinePoint(k)});
+    client.Send(std::move(e));
+    std::optional<wire::Envelope> ack = client.Receive(kReplyDeadline);
+    EXPECT_TRUE(ack && ack->has_annotation_ack() && ack->annotation_ack().accepted());
+    if (!ack || !ack->has_annotation_ack()) return max_acked;
+    max_acked = std::max(max_acked, ack->annotation_ack().event_sequence());
+  }
+  coordinator->Signal(SIGKILL);
+  EXPECT_EQ(coordinator->Wait(), 128 + SIGKILL);
+  (void)test;
+  return max_acked;
+}
+
+// The whole output of a coordinator that must refuse to start, and its exit status.
+std::pair<int, std::string> RunToExit(const std::vector<std::string>& argv) {
+  ChildProcess child(argv, testing::ChildOutput::kStdoutAndStderr);
+  std::string out;
+  while (std::optional<std::string> line = child.ReadLine(kStartDeadline)) out += *line + "\n";
+  return {child.Wait(), out};
+}
+
+TEST_F(AnnotationCrashTest, DeletedOrCutWalAfterSigkillIsDetectedAndNamed) {
+  auto start = [&](std::string* requests) { return Start(requests); };
+  for (const std::string damage : {"delete", "truncate"}) {
+    fs::remove(db_);
+    fs::remove(db_ + ".seq");
+    const uint64_t acked = AckThenKill(this, 60, start);
+    ASSERT_EQ(acked, 61u);
+    const std::string wal = db_ + "-wal";
+    ASSERT_TRUE(fs::exists(wal)) << "no -wal after SIGKILL";
+    if (damage == "delete") {
+      fs::remove(wal);
+    } else {
+      fs::resize_file(wal, fs::file_size(wal) / 2);
+    }
+    const auto [code, out] = RunToExit({SANDTABLE_COORDINATOR_BIN, "--annotations", db_});
+    std::cout << damage << " -wal: exit " << code << ": " << out;
+    EXPECT_EQ(code, 2) << out;
+    EXPECT_NE(out.find("are missing"), std::string::npos) << out;
+    EXPECT_NE(out.find("61 events were acknowledged"), std::string::npos) << out;
+    EXPECT_NE(out.find("-wal"), std::string::npos) << out;
+    EXPECT_NE(out.find("--annotations-accept-loss"), std::string::npos) << out;
+    EXPECT_EQ(out.find("\"ready\""), std::string::npos) << "it started: " << out;
+  }
+  // Accepting the loss explicitly: it starts (and says so); a later start is normal again.
+  ChildProcess accepted(
+      {SANDTABLE_COORDINATOR_BIN, "--annotations", db_, "--annotations-accept-loss"});
+  std::string error;
+  ASSERT_TRUE(ReadReadyLine(accepted, "sandtable-coordinator", kStartDeadline, &error)) << error;
+  accepted.Signal(SIGTERM);
+  EXPECT_EQ(accepted.Wait(), 0);
+  std::string requests;
+  std::unique_ptr<ChildProcess> again = Start(&requests);
+  EXPECT_FALSE(requests.empty());
+}
+
+TEST_F(AnnotationCrashTest, ChangedRowIsDetectedAtStartAndNamed) {
+  auto start = [&](std::string* requests) { return Start(requests); };
+  ASSERT_EQ(AckThenKill(this, 20, start), 21u);
+  // A clean start and stop checkpoints the -wal into the main file, so an edit of the file
+  // itself reaches the rows.
+  {
+    std::string requests;
+    std::unique_ptr<ChildProcess> clean = Start(&requests);
+    clean->Signal(SIGTERM);
+    ASSERT_EQ(clean->Wait(), 0);
+  }
+  // One byte of the stored points flipped in place (a float of event 12's body), no tool.
+  std::string bytes;
+  {
+    std::ifstream in(db_, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  wire::AnnotationEvent twelve = Points(kStrokeId, 10, {LinePoint(10)});
+  const std::string floats = twelve.stroke_points().SerializeAsString().substr(
+      twelve.stroke_points().SerializeAsString().size() - 12);
+  const size_t at = bytes.find(floats);
+  ASSERT_NE(at, std::string::npos) << "event 12's points not found in the file";
+  bytes[at + 5] = static_cast<char>(bytes[at + 5] ^ 0x10);
+  std::ofstream(db_, std::ios::binary | std::ios::trunc) << bytes;
+  const auto [code, out] = RunToExit({SANDTABLE_COORDINATOR_BIN, "--annotations", db_});
+  std::cout << "changed row: exit " << code << ": " << out;
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_NE(out.find("event 12"), std::string::npos) << out;
+  EXPECT_NE(out.find("checksum mismatch"), std::string::npos) << out;
+}
+
+TEST_F(AnnotationCrashTest, SecondCoordinatorOnTheSameDatabaseIsRefused) {
+  std::string requests;
+  std::unique_ptr<ChildProcess> first = Start(&requests);
+  ASSERT_FALSE(requests.empty());
+  const auto [code, out] = RunToExit({SANDTABLE_COORDINATOR_BIN, "--annotations", db_});
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_NE(out.find("in use by another coordinator (pid " + std::to_string(first->pid())),
+            std::string::npos)
+      << out;
+  // The first one still serves.
+  Client client(requests, 7004);
+  EXPECT_EQ(client.CatchUp(0).last_event_sequence(), 0u);
+  first->Signal(SIGTERM);
+  EXPECT_EQ(first->Wait(), 0);
+}
+
+TEST_F(AnnotationCrashTest, ImportOfACutSessionFileExitsTwoAndImportsNothing) {
+  const std::string session = (dir_ / "cut.jsonl").string();
+  std::ofstream(session) << "{\"format\":\"sandtable-annotation-session\",\"version\":1,"
+                            "\"event_count\":8}\n"
+                         << "{\"kind\":\"stroke_begin\",\"stroke_id\":1,\"color_rgb\":[1,0,0],"
+                            "\"width_m\":0.004}\n"
+                         << "{\"kind\":\"stroke_points\",\"stroke_id\":1,\"first_point_index\":0,"
+                            "\"points_in_table_m\":[[0.1,0.2,0]]}\n"
+                         << "{\"kind\":\"stroke_end\",\"stroke_id\":1,\"point_count\":1}\n";
+  const auto [code, out] =
+      RunToExit({SANDTABLE_COORDINATOR_BIN, "--annotations", db_, "--import-session", session});
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_NE(out.find("line 1 (header): event_count 8 but the file holds 3"), std::string::npos)
+      << out;
+  const auto [export_code, export_out] =
+      RunToExit({SANDTABLE_COORDINATOR_BIN, "--annotations", db_, "--export-session",
+                 (dir_ / "out.jsonl").string()});
+  EXPECT_EQ(export_code, 0) << export_out;
+  EXPECT_NE(export_out.find("exported 0 events"), std::string::npos) << export_out;
+}
+
 TEST_F(AnnotationCrashTest, DamagedDatabaseRefusesToStartWithAMessage) {
   std::ofstream(db_, std::ios::binary) << std::string(4096, '\x5a');
   ChildProcess child({SANDTABLE_COORDINATOR_BIN, "--annotations", db_});
   EXPECT_FALSE(child.ReadLine(kStartDeadline).has_value());  // no endpoints line
-  EXPECT_EQ(child.Wait(), 1);  // a clean refusal, not a crash (128 + signal)
+  EXPECT_EQ(child.Wait(), 2);  // a clean refusal, not a crash (128 + signal)
 }
 
 }  // namespace
