@@ -12,12 +12,8 @@ namespace sandtable::sim {
 
 namespace {
 
-View TopView(const World& world, int width_px) {
-  const Eigen::AlignedBox3d bounds = world.scene().Bounds();
-  const Eigen::AlignedBox2d area(bounds.min().head<2>(), bounds.max().head<2>());
-  const Eigen::Vector2d size = area.sizes();
-  const int height_px = std::max(16, static_cast<int>(std::lround(width_px * size.y() / size.x())));
-  return View::OrthographicTop(area, width_px, height_px, bounds.max().z() + 10.0);
+Expected<View> TopView(const World& world, int width_px) {
+  return View::TopOver(world.scene().Bounds(), width_px, /*height_px=*/0);
 }
 
 }  // namespace
@@ -27,8 +23,9 @@ Expected<cv::Mat> TopViewWhite(World* world, int width_px) {
   for (const UnitSpec& unit : world->site().units) {
     ST_RETURN_IF_ERROR(world->SetProjectorUniform(unit.id, 255));
   }
-  const View view = TopView(*world, width_px);
-  Expected<std::vector<float>> luminance = world->RenderLuminance(view);
+  Expected<View> view = TopView(*world, width_px);
+  if (!view.ok()) return view.status();
+  Expected<std::vector<float>> luminance = world->RenderLuminance(*view);
   if (!luminance.ok()) return luminance.status();
   std::vector<float> positive;
   for (float l : *luminance) {
@@ -41,7 +38,7 @@ Expected<cv::Mat> TopViewWhite(World* world, int width_px) {
                      positive.end());
     white = std::max(1e-6, static_cast<double>(positive[k]));
   }
-  return LuminanceToImage(*luminance, view.width_px(), view.height_px(), white);
+  return LuminanceToImage(*luminance, view->width_px(), view->height_px(), white);
 }
 
 Expected<cv::Mat> RegistrationHeatmap(const World& world,
@@ -52,7 +49,8 @@ Expected<cv::Mat> RegistrationHeatmap(const World& world,
   if (!(scale_mm > 0) || !std::isfinite(scale_mm)) {
     return InvalidArgumentError("heatmap: scale_mm must be > 0");
   }
-  const View view = TopView(world, width_px);
+  Expected<View> view = TopView(world, width_px);
+  if (!view.ok()) return view.status();
   const Site& site = world.site();
   std::vector<int> unit_index;  // estimate -> index in site.units
   for (const EstimatedRegistration& e : estimates) {
@@ -65,12 +63,12 @@ Expected<cv::Mat> RegistrationHeatmap(const World& world,
   }
   const double min_cos_incidence = std::cos(DegToRad(options.max_incidence_deg));
   constexpr int kBarHeight_px = 28;
-  cv::Mat values(view.height_px(), view.width_px(), CV_8UC1, cv::Scalar(0));
-  cv::Mat lit(view.height_px(), view.width_px(), CV_8UC1, cv::Scalar(0));
-  for (int y = 0; y < view.height_px(); ++y) {
-    for (int x = 0; x < view.width_px(); ++x) {
+  cv::Mat values(view->height_px(), view->width_px(), CV_8UC1, cv::Scalar(0));
+  cv::Mat lit(view->height_px(), view->width_px(), CV_8UC1, cv::Scalar(0));
+  for (int y = 0; y < view->height_px(); ++y) {
+    for (int x = 0; x < view->width_px(); ++x) {
       Eigen::Vector3d origin, direction;
-      if (!view.Ray(x, y, &origin, &direction)) continue;
+      if (!view->Ray(x, y, &origin, &direction)) continue;
       Expected<SurfaceTruth> truth = world.TruthAlongRay(origin, direction);
       if (!truth.ok()) continue;
       double worst_mm = -1.0;
@@ -99,7 +97,7 @@ Expected<cv::Mat> RegistrationHeatmap(const World& world,
   cv::applyColorMap(values, colour, cv::COLORMAP_VIRIDIS);
   colour.setTo(cv::Scalar(64, 64, 64), lit == 0);
   // The colour bar: 0 .. scale_mm left to right, labelled.
-  cv::Mat bar(kBarHeight_px, view.width_px(), CV_8UC1);
+  cv::Mat bar(kBarHeight_px, view->width_px(), CV_8UC1);
   for (int x = 0; x < bar.cols; ++x) {
     bar.col(x).setTo(cv::Scalar(255.0 * x / std::max(1, bar.cols - 1)));
   }

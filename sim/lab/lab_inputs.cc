@@ -1,9 +1,9 @@
 #include "sim/lab/lab_inputs.h"
 
 #include <filesystem>
-#include <fstream>
 
 #include "common/io/json_codec.h"
+#include "common/io/json_reader.h"
 #include "common/scene/gltf_loader.h"
 #include "common/scene/gltf_writer.h"
 #include "common/scene/procedural_scene.h"
@@ -16,16 +16,16 @@ namespace sandtable::sim {
 namespace {
 
 Status WriteJsonFile(const nlohmann::json& json, const std::filesystem::path& path) {
-  std::ofstream out(path);
-  out << json.dump(2) << "\n";
-  if (!out.good()) return IoError("cannot write " + path.string());
-  return OkStatus();
+  return io::WriteJsonFile(json, path.string());  // atomic (common/io/json_reader.h)
 }
 
-// A preset name when it names one; a path otherwise (an existing file always wins).
+// A path (then read as a file: a directory, FIFO or device is refused by name) when something
+// exists there or the text looks like one ('/' or '.'; preset names have neither); a preset
+// name otherwise.
 bool IsFile(const std::string& text) {
   std::error_code error;
-  return std::filesystem::is_regular_file(text, error);
+  return std::filesystem::exists(std::filesystem::symlink_status(text, error)) ||
+         text.find_first_of("/.") != std::string::npos;
 }
 
 }  // namespace

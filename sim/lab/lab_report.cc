@@ -2,9 +2,10 @@
 
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <sstream>
 
+#include "common/base/file_io.h"
+#include "common/io/json_reader.h"
 #include "sim/lab/child_process.h"
 
 namespace sandtable::sim {
@@ -188,15 +189,8 @@ std::string LabReportMarkdown(const LabResult& r) {
 
 Status WriteLabReport(const LabResult& result, const std::string& out_dir) {
   const std::filesystem::path dir(out_dir);
-  {
-    std::ofstream out(dir / "report.json");
-    out << LabReportJson(result).dump(2) << "\n";
-    if (!out.good()) return IoError("cannot write " + (dir / "report.json").string());
-  }
-  std::ofstream out(dir / "report.md");
-  out << LabReportMarkdown(result);
-  if (!out.good()) return IoError("cannot write " + (dir / "report.md").string());
-  return OkStatus();
+  ST_RETURN_IF_ERROR(io::WriteJsonFile(LabReportJson(result), (dir / "report.json").string()));
+  return WriteFileAtomically(dir / "report.md", LabReportMarkdown(result));
 }
 
 }  // namespace sandtable::sim

@@ -10,9 +10,10 @@
 #include <set>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
 
+#include "common/base/log.h"
 #include "common/base/ready_line.h"
+#include "common/io/image_file.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/gltf_loader.h"
 #include "net/curve.h"
@@ -308,12 +309,23 @@ class LabRun {
     result_.registration = std::move(work.report);
     result_.heatmap_scale_mm = work.scale_mm;
     const fs::path dir(options_.out_dir);
-    if (!work.top.empty() && cv::imwrite((dir / "top_white.png").string(), work.top)) {
-      result_.top_white_png = "top_white.png";
+    // A picture that cannot be written is left out of the report, with the reason logged.
+    if (!work.top.empty()) {
+      const Status written = io::WritePngFile((dir / "top_white.png").string(), work.top);
+      if (written.ok()) {
+        result_.top_white_png = "top_white.png";
+      } else {
+        ST_LOG(kWarning) << written.ToString();
+      }
     }
-    if (!work.heatmap.empty() &&
-        cv::imwrite((dir / "registration_error_top.png").string(), work.heatmap)) {
-      result_.heatmap_png = "registration_error_top.png";
+    if (!work.heatmap.empty()) {
+      const Status written =
+          io::WritePngFile((dir / "registration_error_top.png").string(), work.heatmap);
+      if (written.ok()) {
+        result_.heatmap_png = "registration_error_top.png";
+      } else {
+        ST_LOG(kWarning) << written.ToString();
+      }
     }
     progress_.End();
     return true;

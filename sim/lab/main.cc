@@ -15,6 +15,7 @@
 #include <string>
 
 #include "common/base/log.h"
+#include "common/base/main_guard.h"
 #include "common/cli/command_line.h"
 #include "sim/lab/lab_run.h"
 
@@ -25,7 +26,7 @@ void OnSignal(int) { g_stop = true; }
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int Run(int argc, char** argv) {
   using namespace sandtable;
   SetLogTag("lab");
   CLI::App app("sandtable-lab: a simulated site on localhost, measured against the truth",
@@ -79,3 +80,5 @@ int main(int argc, char** argv) {
   signal(SIGPIPE, SIG_IGN);
   return sim::RunLab(options, g_stop, std::cout, std::cerr);
 }
+
+int main(int argc, char** argv) { return sandtable::GuardedMain(argc, argv, "sandtable-lab", Run); }

@@ -3,8 +3,7 @@
 #include <poll.h>
 #include <signal.h>
 
-#include <filesystem>
-#include <fstream>
+#include "common/base/file_io.h"
 
 namespace sandtable::sim {
 
@@ -22,21 +21,10 @@ Status Supervisor::WriteProcessesJson() const {
   for (const auto& child : children_) {
     list.push_back({{"name", child->name()}, {"pid", child->pid()}, {"role", child->spec().role}});
   }
-  // Written to a temporary file and renamed, so a reader never sees half a list.
-  const std::string temporary = processes_json_path_ + ".tmp";
-  {
-    std::ofstream out(temporary);
-    out << nlohmann::json{{"format", "sandtable.lab_processes"},
-                          {"version", 1},
-                          {"processes", list}}
-               .dump(2)
-        << "\n";
-    if (!out.good()) return IoError("cannot write " + temporary);
-  }
-  std::error_code error;
-  std::filesystem::rename(temporary, processes_json_path_, error);
-  if (error) return IoError("cannot write " + processes_json_path_ + ": " + error.message());
-  return OkStatus();
+  // All or nothing (temporary file, fsync, rename), so a reader never sees half a list.
+  const nlohmann::json file{
+      {"format", "sandtable.lab_processes"}, {"version", 1}, {"processes", list}};
+  return WriteFileAtomically(processes_json_path_, file.dump(2) + "\n");
 }
 
 WaitOutcome Supervisor::WaitUntil(const std::function<bool()>& done,

@@ -19,6 +19,7 @@
 #include "common/io/json_reader.h"
 #include "common/io/opencv_yaml.h"
 #include "common/io/unit_calibration_file.h"
+#include "common/structured_light/capture_io.h"
 
 namespace sandtable::io {
 namespace {
@@ -199,6 +200,24 @@ TEST_F(InputFilesTest, PngRoundTripAndFullDiskKeepsThePreviousImage) {
   ::sigaction(SIGXFSZ, &previous, nullptr);
   EXPECT_EQ(status.code(), StatusCode::kIoError) << status.ToString();
   EXPECT_EQ(Get(path), before);
+}
+
+TEST_F(InputFilesTest, CaptureSequenceRefusesHugeHeadersAndFifoFrames) {
+  const CaptureSequenceNames names;
+  Put("graycode_00.png", PngHeader(40000, 40000));
+  Expected<std::vector<cv::Mat>> frames = LoadCaptureSequence(dir_.string(), 2, names);
+  ASSERT_FALSE(frames.ok());
+  EXPECT_NE(frames.status().message().find("kMaxImageSide_px"), std::string::npos)
+      << frames.status().ToString();
+  fs::remove(Path("graycode_00.png"));
+  ASSERT_EQ(::mkfifo(Path("graycode_00.png").c_str(), 0600), 0);
+  ExpectRefusedQuickly([&] { return LoadCaptureSequence(dir_.string(), 2, names).status(); },
+                       Path("graycode_00.png"), "regular file");
+  EXPECT_NE(LoadCaptureSequence(dir_.string(), kMaxCaptureFrames + 1, names)
+                .status()
+                .message()
+                .find("kMaxCaptureFrames"),
+            std::string::npos);
 }
 
 }  // namespace
