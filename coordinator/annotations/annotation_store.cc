@@ -271,7 +271,8 @@ Status AnnotationStore::VerifyRecord(const AnnotationStoreOptions& options) {
   if (!record_) return OkStatus();
   const SequenceNumber last = state_.last_sequence();
   const std::string db =
-      "annotation database " + path_ + " (events 1.." + std::to_string(last) + ")";
+      "annotation database " + path_ +
+      (last == 0 ? std::string(" (no events)") : " (events 1.." + std::to_string(last) + ")");
   std::string problem;
   Expected<std::optional<SequenceMark>> mark = record_->Read();
   if (!mark.ok()) {
