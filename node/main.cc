@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "common/base/log.h"
+#include "common/base/main_guard.h"
 #include "common/base/ready_line.h"
 #include "common/cli/command_line.h"
 #include "common/io/unit_calibration_file.h"
@@ -36,7 +37,7 @@ void OnSignal(int) { g_stop = true; }
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int Run(int argc, char** argv) {
   using namespace sandtable;
   CLI::App app{"sandtable-node: one projector unit of a Sandtable site", "sandtable-node"};
   cli::Configure(app);
@@ -242,4 +243,8 @@ int main(int argc, char** argv) {
   ST_LOG(kInfo) << "stopping; messages " << runtime.counters().ToString() << "; annotations "
                 << events.annotations().strokes().size() << " strokes";
   return ran.ok() ? 0 : cli::kExitFailure;
+}
+
+int main(int argc, char** argv) {
+  return sandtable::GuardedMain(argc, argv, "sandtable-node", Run);
 }

@@ -1,11 +1,10 @@
 #include "node/app/calibration_service.h"
 
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 
 #include <nlohmann/json.hpp>
 
+#include "common/base/file_io.h"
 #include "common/io/json_codec.h"
 #include "common/io/json_reader.h"
 #include "common/io/opencv_yaml.h"
@@ -15,21 +14,6 @@ namespace {
 
 constexpr const char* kTruePoseFormat = "sandtable.true_pose";
 constexpr int kTruePoseVersion = 1;
-
-Status WriteFileAtomically(const std::string& path, const std::string& text) {
-  const std::string temporary = path + ".tmp";
-  {
-    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    if (!out) return IoError("cannot write " + temporary);
-    out << text;
-    out.flush();
-    if (!out) return IoError("write failed: " + temporary);
-  }
-  std::error_code error;
-  std::filesystem::rename(temporary, path, error);
-  if (error) return IoError("cannot rename " + temporary + " to " + path + ": " + error.message());
-  return OkStatus();
-}
 
 }  // namespace
 
@@ -62,13 +46,9 @@ Expected<TruePose> ParseTruePose(const std::string& json_text, const std::string
 }
 
 Expected<TruePose> LoadTruePose(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in || !std::filesystem::is_regular_file(path)) {
-    return IoError(path + ": cannot open (not a readable regular file)");
-  }
-  std::stringstream text;
-  text << in.rdbuf();
-  return ParseTruePose(text.str(), path);
+  Expected<std::string> text = ReadInputFile(path, io::kMaxJsonFileBytes, "kMaxJsonFileBytes");
+  if (!text.ok()) return IoError(text.status().message());  // the message names the path
+  return ParseTruePose(*text, path);
 }
 
 std::string TruePoseToJson(const TruePose& pose) {
@@ -107,10 +87,7 @@ Expected<ExportedCalibration> ExportCalibration(const UnitCalibration& calibrati
   ST_RETURN_IF_ERROR(WriteFileAtomically(out.json_path, UnitCalibrationToJson(calibration)));
   if (calibration.table_from_projector && calibration.table_from_model) {
     out.yaml_path = stem + ".yaml";
-    const std::string temporary = out.yaml_path + ".tmp.yaml";
-    ST_RETURN_IF_ERROR(WriteOpenCvYaml(calibration, temporary));
-    std::filesystem::rename(temporary, out.yaml_path, error);
-    if (error) return IoError("cannot rename " + temporary + ": " + error.message());
+    ST_RETURN_IF_ERROR(WriteOpenCvYaml(calibration, out.yaml_path));  // atomic
   }
   return out;
 }

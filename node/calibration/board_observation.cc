@@ -145,9 +145,11 @@ Expected<std::vector<PoseObservation>> ObservePoseFolders(const std::string& dir
     return IoError("--poses " + dir + ": not a directory");
   }
   std::vector<std::pair<int, std::string>> folders;
-  for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
-    if (!entry.is_directory()) continue;
-    const std::string folder_name = entry.path().filename().string();
+  // The error_code forms throughout: a folder that changes while listed is an error, not a throw.
+  for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    std::error_code type_error;
+    if (!it->is_directory(type_error)) continue;
+    const std::string folder_name = it->path().filename().string();
     const int index = CaptureIndex(folder_name);
     if (index >= 0) folders.emplace_back(index, folder_name);
   }

@@ -2,12 +2,12 @@
 
 #include <chrono>
 #include <cmath>
-#include <fstream>
 #include <iostream>
 #include <limits>
 
 #include <nlohmann/json.hpp>
 
+#include "common/base/file_io.h"
 #include "common/base/units.h"
 #include "common/cli/command_line.h"
 #include "node/calibration/board_observation.h"
@@ -101,7 +101,10 @@ int RunCalibrateUnit(const std::vector<std::string>& args) {
       ObservePoseFolders(poses_dir, options.board, observation);
   if (!poses.ok()) {
     std::cerr << "calibrate-unit: " << poses.status().ToString() << "\n";
-    return 1;
+    // A folder or frame that cannot be read (missing, not a regular file, too large) is bad
+    // input; a failed observation is a run-time failure.
+    const StatusCode code = poses.status().code();
+    return code == StatusCode::kIoError || code == StatusCode::kNotFound ? cli::kExitUsage : 1;
   }
   Expected<UnitCalibrationResult> result = CalibrateUnit(*poses, options);
   if (!result.ok()) {
@@ -180,11 +183,9 @@ int RunCalibrateUnit(const std::vector<std::string>& args) {
     report["heldout_camera_rms_px"] = nullptr;
   }
   report["compute_time_s"] = Seconds(std::chrono::steady_clock::now() - start).count();
-  std::ofstream out(report_path);
-  out << report.dump(2) << "\n";
-  out.close();
-  if (!out) {
-    std::cerr << "calibrate-unit: " << report_path << ": cannot write the report\n";
+  // All or nothing: a full disk leaves the previous report and exits 1.
+  if (Status written = WriteFileAtomically(report_path, report.dump(2) + "\n"); !written.ok()) {
+    std::cerr << "calibrate-unit: cannot write the report: " << written.message() << "\n";
     return 1;
   }
   return 0;

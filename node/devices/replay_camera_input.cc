@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common/base/log.h"
+#include "common/io/image_file.h"
 
 namespace sandtable::node {
 namespace {
@@ -62,7 +63,13 @@ Expected<std::unique_ptr<ReplayCameraInput>> ReplayCameraInput::Open(const std::
   std::unique_ptr<ReplayCameraInput> camera(new ReplayCameraInput());
   camera->directory_ = directory;
   for (fs::directory_iterator it(directory, error), end; !error && it != end; it.increment(error)) {
-    if (it->is_regular_file(error) && IsImageFile(it->path())) camera->files_.push_back(it->path());
+    if (it->is_regular_file(error) && IsImageFile(it->path())) {
+      if (camera->files_.size() >= kMaxReplayFrames) {
+        return InvalidArgumentError(who + ": more than kMaxReplayFrames = " +
+                                    std::to_string(kMaxReplayFrames) + " images in the folder");
+      }
+      camera->files_.push_back(it->path());
+    }
   }
   if (error) return IoError(who + ": cannot list the folder: " + error.message());
   if (camera->files_.empty()) {
@@ -81,13 +88,10 @@ Expected<std::unique_ptr<ReplayCameraInput>> ReplayCameraInput::Open(const std::
 }
 
 Expected<cv::Mat> ReplayCameraInput::Load(const fs::path& file) const {
-  cv::Mat raw;
-  try {
-    raw = cv::imread(file.string(), cv::IMREAD_UNCHANGED);
-  } catch (const cv::Exception& e) {
-    return IoError("replay " + file.string() + ": OpenCV: " + e.what());
-  }
-  if (raw.empty()) return IoError("replay " + file.string() + ": cannot be read as an image");
+  // Regular files only, at most kMaxImageFileBytes, the header's size checked before decoding.
+  Expected<cv::Mat> read = io::ReadImageFile(file.string(), cv::IMREAD_UNCHANGED);
+  if (!read.ok()) return read.status().WithContext("replay");
+  const cv::Mat raw = std::move(*read);
   if (raw.depth() != CV_8U && raw.depth() != CV_16U) {
     return InvalidArgumentError("replay " + file.string() + ": not an 8- or 16-bit image");
   }

@@ -3,7 +3,9 @@
 // 8-bit gray, captured while the projector showed pattern_00 ... pattern_41).
 //
 // The recording: every image file of the folder (.png .jpg .jpeg .tif .tiff .bmp .pgm .ppm),
-// in natural name order (frame_2 before frame_10), read with cv::imread(IMREAD_UNCHANGED) so
+// in natural name order (frame_2 before frame_10; at most kMaxReplayFrames), read through
+// io::ReadImageFile (regular files only, the size in the header bounded by kMaxImageSide_px and
+// kMaxImagePixels before decoding; common/io/image_file.h) with IMREAD_UNCHANGED so
 // that 16-bit captures keep their depth (OpenCV's VideoCapture image-sequence backend would
 // give 8-bit BGR). Colour images are converted to gray. The first image sets size() and
 // bit_depth() (8 for 8-bit files, 16 for 16-bit ones); every later one must match.
@@ -23,6 +25,9 @@
 #include "node/devices/camera_input.h"
 
 namespace sandtable::node {
+
+// The most image files one recording folder may hold.
+inline constexpr size_t kMaxReplayFrames = 100000;
 
 class ReplayCameraInput : public CameraInput {
  public:
