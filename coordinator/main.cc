@@ -12,12 +12,13 @@
 //
 // Flags are parsed by CLI11 (common/cli/command_line.h): --help lists them all; a bad value
 // (--heartbeat-ms abc, --misses 0, --status 99999) or flags that exclude each other exit 2
-// with a message naming the flag. A file that does not load exits 1.
+// with a message naming the flag. A file that does not load (bad input) exits 2; an internal
+// failure (cannot bind, cannot write) exits 1, and so does an escaped exception (GuardedMain).
 //
 // --annotations: the SQLite database of annotation events (created when absent). Without it
 // annotations live in memory only (a warning says so). A damaged database, a changed row, a
 // log shorter than its sequence record (a lost -wal) or a database another coordinator holds:
-// it refuses to start, says why and how to recover (exit code 2; docs/reliability/store.md);
+// it refuses to start, says why and how to recover (exit code 2; docs/reliability.md);
 // --annotations-accept-loss accepts lost events explicitly. --export-session / --import-session
 // work on the database and exit (docs/coordinator.md); a bad session file exits 2 naming the
 // line and field and imports nothing.
@@ -28,7 +29,7 @@
 // printable characters, file mode 0600) every status request must send as "Authorization:
 // Bearer TOKEN"; required with --curve-keys and for any address beyond loopback (exit 2
 // otherwise). --max-members: the site's size; Hellos past it are refused (default 256).
-// Limits against hostile peers: docs/reliability/dos.md.
+// Limits against hostile peers: docs/reliability.md.
 //
 // --tracker-replay: replays a recorded tracker trajectory (FASTRAK .traj at 100 Hz, or the CSV
 // of docs/tracker-formats.md) in real time from the start, publishing tracker_pose and cursor
@@ -57,6 +58,7 @@
 #include <string>
 
 #include "common/base/log.h"
+#include "common/base/main_guard.h"
 #include "common/base/ready_line.h"
 #include "common/cli/command_line.h"
 #include "common/scene/gltf_loader.h"
@@ -77,7 +79,7 @@ void OnSignal(int) { g_stop = true; }
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int Run(int argc, char** argv) {
   using namespace sandtable;
   SetLogTag("coordinator");
   coordinator::CoordinatorOptions options;
@@ -240,7 +242,7 @@ int main(int argc, char** argv) {
     Expected<Scene> scene = LoadGltfScene(scene_path);
     if (!scene.ok()) {
       std::cerr << "sandtable-coordinator: --scene: " << scene.status().ToString() << "\n";
-      return 1;
+      return 2;  // bad input file
     }
     for (const Eigen::Vector3f& p : scene->positions_in_table_m) {
       scene_positions_in_table_m.push_back(p.cast<double>());
@@ -258,7 +260,7 @@ int main(int argc, char** argv) {
         coordinator::LoadVirtualWandScript(virtual_wand_path);
     if (!script.ok()) {
       std::cerr << "sandtable-coordinator: --virtual-wand: " << script.status().ToString() << "\n";
-      return 2;  // bad input file (docs/reliability/security.md)
+      return 2;  // bad input file (docs/reliability.md)
     }
     auto source = std::make_unique<coordinator::VirtualWandSource>(virtual_wand_path, *script);
     ST_LOG(kInfo) << "tracker: " << source->Describe();
@@ -274,7 +276,7 @@ int main(int argc, char** argv) {
     if (!samples.ok()) {
       std::cerr << "sandtable-coordinator: --tracker-replay: " << samples.status().ToString()
                 << "\n";
-      return 2;  // bad input file (docs/reliability/security.md)
+      return 2;  // bad input file (docs/reliability.md)
     }
     coordinator::WandServiceOptions wand_options;
     if (!table_from_tracker_path.empty()) {
@@ -283,7 +285,7 @@ int main(int argc, char** argv) {
       if (!table_from_tracker.ok()) {
         std::cerr << "sandtable-coordinator: --table-from-tracker: "
                   << table_from_tracker.status().ToString() << "\n";
-        return 1;
+        return 2;  // bad input file
       }
       wand_options.table_from_tracker = *table_from_tracker;
     }
@@ -340,4 +342,8 @@ int main(int argc, char** argv) {
     return 1;
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return sandtable::GuardedMain(argc, argv, "sandtable-coordinator", Run);
 }

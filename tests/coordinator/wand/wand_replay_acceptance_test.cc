@@ -162,23 +162,23 @@ TEST(WandReplayAcceptanceTest, TrajectoryDrivesPosesAndCursorAtTrackerRate) {
   fs::remove(json);
 }
 
-TEST(WandReplayAcceptanceTest, BadTableFromTrackerFileStopsTheProgramWithExitCode1) {
+TEST(WandReplayAcceptanceTest, BadTableFromTrackerFileStopsTheProgramWithExitCode2) {
   const fs::path json =
       fs::temp_directory_path() / ("sandtable_wand_bad_" + std::to_string(::getpid()) + ".json");
   std::ofstream(json) << "{\"rotation_wxyz\": [1, 0, 0]}";
   ChildProcess coordinator({SANDTABLE_COORDINATOR_BIN, "--tracker-replay", kTraj,
                             "--table-from-tracker", json.string()});
-  EXPECT_EQ(coordinator.Wait(), 1);
+  EXPECT_EQ(coordinator.Wait(), 2);  // bad input file
   fs::remove(json);
 }
 
-TEST(WandReplayAcceptanceTest, MalformedSceneStopsTheProgramWithExitCode1) {
+TEST(WandReplayAcceptanceTest, MalformedSceneStopsTheProgramWithExitCode2) {
   // --scene loads the glTF the wand ray is cast against; a file that fails the loader's checks
   // (data README: a bufferView length of 1e300) must stop the program with a message, not crash.
   ChildProcess coordinator(
       {SANDTABLE_COORDINATOR_BIN, "--tracker-replay", kTraj, "--scene",
        "../shared/data/gltf/tinygltf/BoundsChecking/integer-out-of-bounds.gltf"});
-  EXPECT_EQ(coordinator.Wait(), 1);
+  EXPECT_EQ(coordinator.Wait(), 2);  // bad input file
 }
 
 }  // namespace
