@@ -3,7 +3,7 @@
 # (common/scene/gltf_loader.h, from memory) for a bounded time.
 #   deploy/fuzz.sh [seconds=60] [build_dir=build-fuzz]
 #   FUZZ_GLTF_SECONDS (default 20): the glTF loader's share, run after the message handlers.
-#   FUZZ_FILE_SECONDS (default 15): the share of each file-format target in FILE_TARGETS
+#   FUZZ_FILE_SECONDS (default 20): the share of each file-format target in FILE_TARGETS
 #   (tests/fuzz/fuzz_<name>.cc, seeds tests/fuzz/<name>_corpus/), run after the glTF loader.
 # With clang + libFuzzer (Debian: clang-14, libclang-rt-14-dev) it builds
 # fuzz_message_handlers with ASan/UBSan and runs it over a copy of tests/fuzz/corpus/ for the
@@ -17,8 +17,8 @@ ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$ROOT"
 JOBS="${FUZZ_JOBS:-2}"
 GLTF_SECONDS="${FUZZ_GLTF_SECONDS:-20}"
-FILE_SECONDS="${FUZZ_FILE_SECONDS:-15}"
-FILE_TARGETS=()
+FILE_SECONDS="${FUZZ_FILE_SECONDS:-20}"
+FILE_TARGETS=(site_file json_formats session_import tracker_files)
 
 CLANGXX="$(command -v clang++-14 || command -v clang++ || true)"
 CLANGCC="$(command -v clang-14 || command -v clang || true)"

@@ -11,7 +11,7 @@
 //   public = <40 Z85 characters>
 //   secret = <40 Z85 characters>
 //
-// Key file rules (docs/reliability/security.md): the file holds a secret, so it is written with
+// Key file rules (docs/reliability.md): the file holds a secret, so it is written with
 // mode 0600 (owner read/write) through WriteFileAtomically, and a key file that group or others
 // may read or write (any of the bits 0077) is refused on load, as ssh refuses an unprotected
 // private key. The two halves must belong together: the public key derived from the secret

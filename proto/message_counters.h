@@ -23,7 +23,7 @@ enum class RejectReason {
   kWrongType,       // a known body this socket/handler does not serve
   kInvalidContent,  // a body whose fields fail validation (NaN, sizes that do not match)
   kUnknownSender,   // a request from a sender that must register first
-  kOverLimit,       // a field, list or count over a documented limit (docs/reliability/dos.md)
+  kOverLimit,       // a field, list or count over a documented limit (docs/reliability.md)
   kForged,          // claims another member's id from a connection that is not the member's
   kCount,
 };

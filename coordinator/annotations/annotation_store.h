@@ -14,7 +14,7 @@
 //          checksum INTEGER)                 -- EventChecksum of the other four columns
 // body is the serialized wire::AnnotationEvent (sequence and time_ns included). A version 1
 // database (no checksum column) is upgraded in place at open, in one transaction.
-// Integrity, checked at Open() (docs/reliability/store.md):
+// Integrity, checked at Open() (docs/reliability.md):
 //   - every row: its checksum (event_checksum.h) over sequence, time_ns, kind and body; body
 //     parses; body's sequence, time and kind equal the columns; sequences are 1, 2, 3 ... with
 //     no gap; every event applies to the state of those before it;

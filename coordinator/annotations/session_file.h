@@ -11,7 +11,7 @@
 // Units are in the field names (metres, ns of the coordinator's steady clock).
 // Import re-sequences the events into an EMPTY store (times in the file are informative)
 // and checks every event as a live request would be checked.
-// Validation (docs/reliability/store.md): the file is read through ReadInputFile (regular file,
+// Validation (docs/reliability.md): the file is read through ReadInputFile (regular file,
 // at most kMaxSessionFileBytes); line 1 must be the header with an event_count in
 // [0, kMaxSessionEvents] and the file must hold exactly that many event lines (a file cut at a
 // line break is refused, not imported in part); each number is checked against its field's

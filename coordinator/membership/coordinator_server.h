@@ -8,7 +8,7 @@
 // tracker calibration, timeline); invalid messages are counted and answered with Rejected
 // (net/server_loop.h).
 //
-// Hostile peers (docs/reliability/dos.md): a Hello whose fields exceed the limits of
+// Hostile peers (docs/reliability.md): a Hello whose fields exceed the limits of
 // membership_table.h is answered with Rejected and counted over_limit; a full site or an id
 // bound to another live connection gets HelloAck{accepted: false} (counted over_limit /
 // forged); a Goodbye or Heartbeat for an id from another connection or incarnation changes

@@ -6,7 +6,7 @@
 // change bumps version(). Pure logic, no sockets, no clock of its own (times are passed in),
 // so tests drive it directly. Not thread-safe.
 //
-// Bounds (docs/reliability/dos.md): at most max_members members (a site's size is known;
+// Bounds (docs/reliability.md): at most max_members members (a site's size is known;
 // --max-members); every field that is stored and re-published in the member list is checked by
 // CheckHello() (endpoint, capability names and sizes), so the member list stays far below the
 // codec's message limit (max_members x ~600 bytes).

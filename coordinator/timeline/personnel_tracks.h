@@ -7,7 +7,7 @@
 // z_m the position in the table frame in metres (finite). Blank lines and lines starting
 // with '#' are skipped. Any other line is a PARSE_ERROR naming the file, line number and field.
 //
-// Limits (docs/reliability/dos.md): the file at most kMaxTimelineFileBytes, at most
+// Limits (docs/reliability.md): the file at most kMaxTimelineFileBytes, at most
 // kMaxTimelineTracks tracks (every clock event on the PUB carries one position per track, so
 // this bounds that message: ~40 bytes per track, far below the codec's 64 MiB) and at most
 // kMaxTimelineSamples samples (memory: 32 bytes each). Past a limit: PARSE_ERROR naming the file,

@@ -10,7 +10,7 @@
 //   time_s,sensor,x_m,y_m,z_m,qw,qx,qy,qz,button
 // one sample per line, tracker_from_sensor with quaternion (w, x, y, z) (normalised; |q| must
 // be within kCsvQuaternionTolerance of 1), button 0/1, time_s non-decreasing.
-// Limits (docs/reliability/security.md): files are read through ReadInputFile (a directory,
+// Limits (docs/reliability.md): files are read through ReadInputFile (a directory,
 // FIFO or /dev/zero is IO_ERROR before a byte is read; missing is NOT_FOUND) and at most
 // kMaxTrackerReplayBytes; at most kMaxTrackerReplaySamples samples spanning at most
 // kMaxTrackerReplaySpan_s; positions within kMaxTrackerCoordinate_m per axis. Each limit is a

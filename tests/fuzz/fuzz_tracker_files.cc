@@ -8,7 +8,7 @@
 // Invariants: the parser never holds back a whole record; every sample is finite, within the
 // documented position range, with a unit quaternion; a Polhemus sample re-encodes to a record
 // that parses to the same station; a parsed wand script gives at most kMaxVirtualWandSamples.
-// Seeds in tests/fuzz/tracker_files_corpus/ (crafted; see docs/reliability/security.md).
+// Seeds in tests/fuzz/tracker_files_corpus/ (crafted; see docs/reliability.md).
 #include <cmath>
 #include <cstdint>
 #include <string>

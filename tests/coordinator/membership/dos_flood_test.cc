@@ -1,4 +1,4 @@
-// Denial of service against a real CoordinatorServer (docs/reliability/dos.md), serving on its
+// Denial of service against a real CoordinatorServer (docs/reliability.md), serving on its
 // own thread in this process, so its memory is this process's VmRSS: every hostile input is
 // crafted here and sent over real sockets (ZeroMQ, and raw ZMTP over TCP for the subscription
 // floods, so the flooding client keeps no copy), and a real member is served throughout.
@@ -394,7 +394,9 @@ TEST(DosFloodTest, ForgedGoodbyeHelloAndHeartbeatDoNotTouchAnotherMember) {
   EXPECT_TRUE(Lists(*after, kVictim));
   EXPECT_EQ(after->version(), listed->version()) << "the forger changed the member list";
   for (const wire::Member& m : after->members()) {
-    if (m.node_id() == kVictim) EXPECT_EQ(m.endpoints().peer_router(), "tcp://127.0.0.1:1");
+    if (m.node_id() == kVictim) {
+      EXPECT_EQ(m.endpoints().peer_router(), "tcp://127.0.0.1:1");
+    }
   }
   // The victim's own Goodbye does take it off.
   victim.Goodbye();

@@ -1,5 +1,5 @@
 // Denial-of-service limits that the sandtable-coordinator program enforces at start
-// (docs/reliability/dos.md): a --timeline file past kMaxTimelineTracks exits 2 naming the limit;
+// (docs/reliability.md): a --timeline file past kMaxTimelineTracks exits 2 naming the limit;
 // --status on a CURVE site needs a token (exit 2).
 #include <gtest/gtest.h>
 #include <unistd.h>
