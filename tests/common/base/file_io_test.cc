@@ -11,6 +11,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/testing/full_disk.h"
+
 namespace sandtable {
 namespace {
 
@@ -84,18 +86,12 @@ TEST_F(FileIoTest, WritesAtomicallyWithTheAskedMode) {
 TEST_F(FileIoTest, AFailedWriteKeepsThePreviousFile) {
   const fs::path target = dir_ / "export.json";
   ASSERT_TRUE(WriteFileAtomically(target, "old contents").ok());
-  // A full disk, as the kernel reports it: writes past RLIMIT_FSIZE fail with EFBIG.
-  struct sigaction ignore = {}, previous = {};
-  ignore.sa_handler = SIG_IGN;
-  ASSERT_EQ(::sigaction(SIGXFSZ, &ignore, &previous), 0);
-  struct rlimit old_limit;
-  ASSERT_EQ(::getrlimit(RLIMIT_FSIZE, &old_limit), 0);
-  struct rlimit small = old_limit;
-  small.rlim_cur = 8;
-  ASSERT_EQ(::setrlimit(RLIMIT_FSIZE, &small), 0);
-  const Status status = WriteFileAtomically(target, std::string(4096, 'n'));
-  ::setrlimit(RLIMIT_FSIZE, &old_limit);
-  ::sigaction(SIGXFSZ, &previous, nullptr);
+  Status status;
+  {
+    test_support::FullDisk full_disk(8);  // writes past 8 bytes fail with EFBIG
+    ASSERT_TRUE(full_disk.ok());
+    status = WriteFileAtomically(target, std::string(4096, 'n'));
+  }
   EXPECT_EQ(status.code(), StatusCode::kIoError);
   EXPECT_NE(status.message().find("unchanged"), std::string::npos) << status.ToString();
   EXPECT_EQ(Get(target), "old contents");

@@ -20,6 +20,7 @@
 #include "common/io/opencv_yaml.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/structured_light/capture_io.h"
+#include "tests/testing/full_disk.h"
 
 namespace sandtable::io {
 namespace {
@@ -116,17 +117,12 @@ TEST_F(InputFilesTest, FullDiskKeepsThePreviousJsonFile) {
   const std::string path = Path("site.json");
   ASSERT_TRUE(WriteJsonFile(nlohmann::json{{"old", true}}, path).ok());
   const std::string before = Get(path);
-  struct sigaction ignore = {}, previous = {};
-  ignore.sa_handler = SIG_IGN;
-  ASSERT_EQ(::sigaction(SIGXFSZ, &ignore, &previous), 0);
-  struct rlimit old_limit;
-  ASSERT_EQ(::getrlimit(RLIMIT_FSIZE, &old_limit), 0);
-  struct rlimit small = old_limit;
-  small.rlim_cur = 8;
-  ASSERT_EQ(::setrlimit(RLIMIT_FSIZE, &small), 0);
-  const Status status = WriteJsonFile(nlohmann::json{{"new", std::string(4096, 'x')}}, path);
-  ::setrlimit(RLIMIT_FSIZE, &old_limit);
-  ::sigaction(SIGXFSZ, &previous, nullptr);
+  Status status;
+  {
+    test_support::FullDisk full_disk(8);
+    ASSERT_TRUE(full_disk.ok());
+    status = WriteJsonFile(nlohmann::json{{"new", std::string(4096, 'x')}}, path);
+  }
   EXPECT_EQ(status.code(), StatusCode::kIoError) << status.ToString();
   EXPECT_EQ(Get(path), before);
 }
@@ -185,19 +181,14 @@ TEST_F(InputFilesTest, PngRoundTripAndFullDiskKeepsThePreviousImage) {
   ASSERT_TRUE(back.ok()) << back.status().ToString();
   EXPECT_EQ(cv::countNonZero(*back != image), 0);
   const std::string before = Get(path);
-  struct sigaction ignore = {}, previous = {};
-  ignore.sa_handler = SIG_IGN;
-  ASSERT_EQ(::sigaction(SIGXFSZ, &ignore, &previous), 0);
-  struct rlimit old_limit;
-  ASSERT_EQ(::getrlimit(RLIMIT_FSIZE, &old_limit), 0);
-  struct rlimit small = old_limit;
-  small.rlim_cur = 16;
-  ASSERT_EQ(::setrlimit(RLIMIT_FSIZE, &small), 0);
-  cv::Mat noise(256, 256, CV_8UC1);
-  cv::randu(noise, 0, 255);
-  const Status status = WritePngFile(path, noise);
-  ::setrlimit(RLIMIT_FSIZE, &old_limit);
-  ::sigaction(SIGXFSZ, &previous, nullptr);
+  Status status;
+  {
+    test_support::FullDisk full_disk(16);
+    ASSERT_TRUE(full_disk.ok());
+    cv::Mat noise(256, 256, CV_8UC1);
+    cv::randu(noise, 0, 255);
+    status = WritePngFile(path, noise);
+  }
   EXPECT_EQ(status.code(), StatusCode::kIoError) << status.ToString();
   EXPECT_EQ(Get(path), before);
 }

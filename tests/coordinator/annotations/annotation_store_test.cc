@@ -8,6 +8,7 @@
 
 #include "coordinator/annotations/session_file.h"
 #include "tests/cluster/annotation_test_util.h"
+#include "tests/testing/temp_dir_test.h"
 
 namespace sandtable::coordinator {
 namespace {
@@ -19,17 +20,9 @@ using cluster::testing::LinePoint;
 using cluster::testing::Points;
 using cluster::testing::SpotErase;
 
-class AnnotationStoreTest : public ::testing::Test {
+class AnnotationStoreTest : public test_support::TempDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("sandtable_store_test_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+  AnnotationStoreTest() : TempDirTest("store_test") {}
 
   // Writes `strokes` strokes of `points` points each (one event per point) to a new store.
   std::unique_ptr<AnnotationStore> Fill(const std::string& path, int strokes, int points) {
@@ -45,8 +38,6 @@ class AnnotationStoreTest : public ::testing::Test {
     }
     return std::move(*store);
   }
-
-  fs::path dir_;
 };
 
 TEST_F(AnnotationStoreTest, CommittedEventsSurviveReopen) {

@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "tests/cluster/annotation_test_util.h"
+#include "tests/testing/temp_dir_test.h"
 
 namespace sandtable::coordinator {
 namespace {
@@ -20,17 +21,9 @@ using cluster::testing::End;
 using cluster::testing::LinePoint;
 using cluster::testing::Points;
 
-class SessionFileTest : public ::testing::Test {
+class SessionFileTest : public test_support::TempDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("sandtable_session_test_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+  SessionFileTest() : TempDirTest("session_test") {}
 
   // A valid session of 8 events: 2 strokes of begin, 2 points events, end.
   std::vector<wire::AnnotationEvent> Events() const {
@@ -58,8 +51,6 @@ class SessionFileTest : public ::testing::Test {
     EXPECT_EQ((*store)->last_sequence(), 0u) << "a refused file imported events";
     return imported.ok() ? "" : imported.status().ToString();
   }
-
-  fs::path dir_;
 };
 
 TEST_F(SessionFileTest, ValidFileImportsEveryEvent) {

@@ -26,6 +26,7 @@
 #include "sim/site/site_presets.h"
 #include "sim/transport/view.h"
 #include "tests/coordinator/membership/child_process.h"
+#include "tests/testing/full_disk.h"
 
 namespace sandtable::sim {
 namespace {
@@ -36,28 +37,7 @@ using nlohmann::json;
 // A refusal comes before any work: far under this even on a loaded 2-core machine.
 constexpr std::chrono::milliseconds kRefusalDeadline{30000};
 
-// Ignores SIGXFSZ and caps the file size of this process for its lifetime (a full disk as the
-// kernel reports it: writes past the cap fail with EFBIG).
-class FullDisk {
- public:
-  explicit FullDisk(rlim_t bytes) {
-    struct sigaction ignore = {};
-    ignore.sa_handler = SIG_IGN;
-    ::sigaction(SIGXFSZ, &ignore, &previous_action_);
-    ::getrlimit(RLIMIT_FSIZE, &previous_limit_);
-    struct rlimit small = previous_limit_;
-    small.rlim_cur = bytes;
-    ::setrlimit(RLIMIT_FSIZE, &small);
-  }
-  ~FullDisk() {
-    ::setrlimit(RLIMIT_FSIZE, &previous_limit_);
-    ::sigaction(SIGXFSZ, &previous_action_, nullptr);
-  }
-
- private:
-  struct sigaction previous_action_ = {};
-  struct rlimit previous_limit_ = {};
-};
+using test_support::FullDisk;
 
 class WorldInputsTest : public ::testing::Test {
  protected:
