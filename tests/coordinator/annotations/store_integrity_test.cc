@@ -14,6 +14,7 @@
 #include "coordinator/annotations/event_checksum.h"
 #include "coordinator/annotations/sequence_record.h"
 #include "tests/cluster/annotation_test_util.h"
+#include "tests/testing/temp_dir_test.h"
 
 namespace sandtable::coordinator {
 namespace {
@@ -28,15 +29,12 @@ constexpr int kStrokes = 5;
 constexpr int kPointsPerStroke = 20;
 constexpr uint64_t kEvents = kStrokes * (kPointsPerStroke + 2);
 
-class StoreIntegrityTest : public ::testing::Test {
+class StoreIntegrityTest : public test_support::TempDirTest {
  protected:
+  StoreIntegrityTest() : TempDirTest("integrity_test") {}
   void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("sandtable_integrity_test_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    db_ = (dir_ / "a.db").string();
+    TempDirTest::SetUp();
+    db_ = Path("a.db");
     std::unique_ptr<AnnotationStore> store = Open();
     ASSERT_TRUE(store);
     for (int s = 1; s <= kStrokes; ++s) {
@@ -49,7 +47,6 @@ class StoreIntegrityTest : public ::testing::Test {
     }
     ASSERT_EQ(store->last_sequence(), kEvents);
   }
-  void TearDown() override { fs::remove_all(dir_); }
 
   std::unique_ptr<AnnotationStore> Open(const AnnotationStoreOptions& options = {}) {
     Expected<std::unique_ptr<AnnotationStore>> store = AnnotationStore::Open(db_, options);
@@ -75,7 +72,6 @@ class StoreIntegrityTest : public ::testing::Test {
     sqlite3_close(db);
   }
 
-  fs::path dir_;
   std::string db_;
 };
 
