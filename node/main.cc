@@ -24,7 +24,10 @@
 #include "common/base/ready_line.h"
 #include "common/cli/command_line.h"
 #include "common/io/unit_calibration_file.h"
+#include "common/base/file_io.h"
+#include "common/scene/gltf_loader.h"
 #include "node/app/calibration_service.h"
+#include "node/app/self_calibration_service.h"
 #include "node/calibration/calibrate_unit_command.h"
 #include "node/devices/device_factory.h"
 #include "node/events/event_state_service.h"
@@ -52,7 +55,8 @@ static int Run(int argc, char** argv) {
   node::NodeOptions options;
   uint32_t id = 0;
   std::string coordinator, curve_keys, world, factory_path, true_pose_path, export_dir;
-  std::string projector_spec, camera_spec;
+  std::string projector_spec, camera_spec, model_path;
+  int grid_step_px = 16;
   int heartbeat_ms = 100;
   app.add_option("--id", id, "this unit's node id (below 4294967280)")
       ->check(cli::Integer<uint32_t>(0, kFirstReservedSenderId - 1));
@@ -86,6 +90,12 @@ static int Run(int argc, char** argv) {
                  "LAB TEST MODE: the unit's true pose (source factory+true_pose); needs --factory")
       ->check(CLI::ExistingFile);
   app.add_option("--export-dir", export_dir, "where unit-<id>.json and .yaml are written");
+  app.add_option("--model", model_path,
+                 "the glTF model on the table: self-calibration finds where it stands")
+      ->check(CLI::ExistingFile);
+  app.add_option("--grid-step-px", grid_step_px,
+                 "self-calibration: projector grid spacing of the correspondences, px")
+      ->check(cli::Integer(4, 256));
 
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
   if (calibrate->parsed()) return node::RunCalibrateUnit(calibrate->remaining());
@@ -135,6 +145,12 @@ static int Run(int argc, char** argv) {
     caps.projector_height_px = calibration->projector.height_px;
     caps.camera_width_px = calibration->camera.width_px;
     caps.camera_height_px = calibration->camera.height_px;
+  }
+  std::shared_ptr<const Scene> model;
+  if (!model_path.empty()) {
+    Expected<Scene> loaded = LoadGltfScene(model_path);
+    if (!loaded.ok()) return usage("--model: " + loaded.status().ToString());
+    model = std::make_shared<const Scene>(std::move(*loaded));
   }
   if (!world.empty()) {
     if (projector_spec.empty()) projector_spec = "world:" + world;
@@ -194,9 +210,54 @@ static int Run(int argc, char** argv) {
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
 
+  // Declared before the runtime: destroyed after it, so no worker job outlives the service's
+  // camera.
+  std::unique_ptr<node::SelfCalibrationService> self_calibration;
   node::NodeRuntime runtime(options);
   node::EventStateService events;
   runtime.AddService(&events);
+  // Self-calibration (structured light with the neighbours) when the unit has its factory
+  // calibration, a projector and a camera, and is not in the lab's true-pose test mode.
+  if (calibration && true_pose_path.empty() && projector && !camera_spec.empty()) {
+    node::SelfCalibrationOptions sc;
+    sc.grid_step_px = grid_step_px;
+    const NodeId id = options.id;
+    self_calibration = std::make_unique<node::SelfCalibrationService>(
+        *calibration, projector.get(), model, sc,
+        [&, id](const node::SelfCalibrationOutcome& outcome) {
+          calibration = outcome.calibration;
+          if (export_dir.empty()) return;
+          Expected<node::ExportedCalibration> exported =
+              node::ExportCalibration(outcome.calibration, export_dir);
+          if (!exported.ok()) {
+            ST_LOG(kError) << "cannot export the calibration: " << exported.status().ToString();
+            return;
+          }
+          std::string report_path;
+          if (outcome.report.value("runner", kInvalidNodeId) == id) {
+            report_path = export_dir + "/self_calibration_report.json";
+            if (Status written = WriteFileAtomically(report_path, outcome.report.dump(2) + "\n");
+                !written.ok()) {
+              ST_LOG(kError) << "cannot write the report: " << written.ToString();
+              report_path.clear();
+            }
+          }
+          WriteJsonLine(std::cout, {{"calibrated", id},
+                                    {"source", outcome.calibration.source},
+                                    {"json", exported->json_path},
+                                    {"yaml", exported->yaml_path},
+                                    {"report", report_path},
+                                    {"compute_s", outcome.compute_s},
+                                    {"messages_sent", outcome.messages_sent},
+                                    {"messages_received", outcome.messages_received},
+                                    {"bytes_sent", outcome.bytes_sent},
+                                    {"bytes_received", outcome.bytes_received}});
+        },
+        [id](const std::string& reason) {
+          WriteJsonLine(std::cout, {{"calibration_failed", id}, {"reason", reason}});
+        });
+    runtime.AddService(self_calibration.get());
+  }
   Status started = runtime.Start();
   if (!started.ok()) {
     ST_LOG(kError) << "cannot start: " << started.ToString();
@@ -208,20 +269,32 @@ static int Run(int argc, char** argv) {
         [camera_spec, device_options] {
           return node::MakeCameraInput(camera_spec, device_options);
         },
-        [&camera, camera_spec](Expected<std::unique_ptr<node::CameraInput>> opened) {
+        [&camera, &self_calibration, camera_spec,
+         id = options.id](Expected<std::unique_ptr<node::CameraInput>> opened) {
           if (!opened.ok()) {
             ST_LOG(kError) << "camera " << camera_spec << ": " << opened.status().message();
+            if (self_calibration) {
+              WriteJsonLine(std::cout,
+                            {{"calibration_failed", id},
+                             {"reason", "unit " + std::to_string(id) + ": camera " + camera_spec +
+                                            ": " + opened.status().message()}});
+            }
             return;
           }
-          camera = std::move(*opened);
-          ST_LOG(kInfo) << "camera " << camera->description() << " " << camera->size().width << "x"
-                        << camera->size().height << ", " << camera->bit_depth() << " bit";
+          ST_LOG(kInfo) << "camera " << (*opened)->description() << " " << (*opened)->size().width
+                        << "x" << (*opened)->size().height << ", " << (*opened)->bit_depth()
+                        << " bit";
+          if (self_calibration) {
+            self_calibration->SetCamera(std::move(*opened));
+          } else {
+            camera = std::move(*opened);
+          }
         });
   }
   WriteJsonLine(
       std::cout,
       {{"ready", "sandtable-node"}, {"id", options.id}, {"peer", runtime.peer_endpoint()}});
-  if (calibration && !export_dir.empty()) {
+  if (calibration && !export_dir.empty() && !self_calibration) {
     Expected<node::ExportedCalibration> exported =
         node::ExportCalibration(*calibration, export_dir);
     if (!exported.ok()) {

@@ -312,6 +312,7 @@ void NodeRuntime::HandleEvent(const wire::Envelope& in) {
 void NodeRuntime::ApplyMemberList(const wire::MemberList& list) {
   if (!last_member_list_ || &list != &*last_member_list_) last_member_list_ = list;
   const wire::MemberList& members = *last_member_list_;
+  if (members.version() != member_list_version_) member_list_changed_ = Clock::now();
   member_list_version_ = members.version();
   std::vector<const wire::Member*> candidates;
   for (const wire::Member& m : members.members()) {

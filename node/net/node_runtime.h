@@ -111,6 +111,13 @@ class NodeRuntime {
   // The coordinator's steady clock now, as this node estimates it (offset 0 until known).
   int64_t CoordinatorNowNs() const;
   const std::map<NodeId, PeerInfo>& peers() const { return peers_; }
+  // The coordinator's last member list (nullopt before the first), and how long ago its
+  // version last changed.
+  const std::optional<wire::MemberList>& member_list() const { return last_member_list_; }
+  std::chrono::milliseconds member_list_age() const {
+    return std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() -
+                                                                  member_list_changed_);
+  }
   const proto::MessageCounters& counters() const { return counters_; }
   uint64_t registrations() const { return registrations_; }
 
@@ -147,6 +154,7 @@ class NodeRuntime {
   bool peer_links_capped_ = false;
   uint64_t registrations_ = 0;
   uint64_t member_list_version_ = 0;
+  Clock::time_point member_list_changed_{};
   Clock::time_point last_coordinator_message_{};
   Clock::time_point next_heartbeat_{}, next_time_sync_{}, next_hello_{};
 };

@@ -1,6 +1,10 @@
 #include "sim/lab/lab_inputs.h"
 
+#include <cmath>
 #include <filesystem>
+#include <random>
+
+#include <Eigen/Geometry>
 
 #include "common/io/json_codec.h"
 #include "common/io/json_reader.h"
@@ -31,7 +35,8 @@ bool IsFile(const std::string& text) {
 }  // namespace
 
 Expected<LabInputs> PrepareLabInputs(const std::string& site_arg, const std::string& scene_arg,
-                                     uint64_t seed, const std::string& out_dir) {
+                                     uint64_t seed, const std::string& out_dir,
+                                     const std::string& model_arg) {
   const std::filesystem::path dir(out_dir);
   std::error_code error;
   for (const char* sub : {"", "factory", "truth", "calibration", "logs"}) {
@@ -68,6 +73,34 @@ Expected<LabInputs> PrepareLabInputs(const std::string& site_arg, const std::str
     if (!scene.ok()) return scene.status();
     inputs.scene_path = (dir / "scene.gltf").string();
     ST_RETURN_IF_ERROR(WriteGltfScene(scene->scene, inputs.scene_path));
+  }
+
+  // The model the nodes must find.
+  if (!model_arg.empty()) {
+    Expected<Scene> model = LoadGltfScene(model_arg);
+    if (!model.ok()) {
+      return InvalidArgumentError("--model " + model_arg + ": " + model.status().message());
+    }
+    inputs.model_path = std::filesystem::absolute(model_arg).string();
+    inputs.model_from_table = Rigid3d::Identity();
+  } else {
+    Expected<Scene> scene = LoadGltfScene(inputs.scene_path);
+    if (!scene.ok()) return scene.status();
+    // A placement the nodes do not know: uniform in [-max, max] per axis, from the seed.
+    std::mt19937_64 rng(seed ^ 0x6d6f64656cULL);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    const double yaw_rad = u(rng) * kMaxModelYaw_deg * 3.14159265358979323846 / 180.0;
+    const double x = u(rng) * kMaxModelOffset_m / std::sqrt(2.0);
+    const double y = u(rng) * kMaxModelOffset_m / std::sqrt(2.0);
+    inputs.model_from_table =
+        Rigid3d(Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
+                Eigen::Vector3d(x, y, 0.0));
+    Scene moved = *scene;
+    for (Eigen::Vector3f& v : moved.positions_in_table_m) {
+      v = (inputs.model_from_table * v.cast<double>()).cast<float>();
+    }
+    inputs.model_path = (dir / "model.gltf").string();
+    ST_RETURN_IF_ERROR(WriteGltfScene(moved, inputs.model_path));
   }
 
   for (const UnitSpec& unit : inputs.site.units) {

@@ -22,6 +22,7 @@
 
 #include "common/base/ids.h"
 #include "common/base/status.h"
+#include "common/geometry/rigid3.h"
 #include "common/scene/scene.h"
 #include "sim/site/site.h"
 
@@ -35,11 +36,21 @@ struct LabInputs {
   std::string scene_path;
   std::map<NodeId, std::string> factory_paths;
   std::map<NodeId, std::string> true_pose_paths;
+  // The model the nodes get (model.gltf, or the --model file) and where it truly stands:
+  // x_in_model_file = model_from_table * x_in_table (the metric's true table_from_model is
+  // its inverse).
+  std::string model_path;
+  Rigid3d model_from_table = Rigid3d::Identity();
 };
 
 // `site` / `scene`: a preset name (sandtable-3, grid-N, flat-4 / sandtable, city, flat) or a
 // file (site JSON / glTF). The scene presets use `seed`; so do the factory calibrations.
+// `model`: "" writes model.gltf, the scene moved by a placement drawn from `seed` (up to
+// kMaxModelOffset_m in x and y and kMaxModelYaw_deg about z); a file is handed over as given.
+inline constexpr double kMaxModelOffset_m = 0.05;
+inline constexpr double kMaxModelYaw_deg = 10.0;
 Expected<LabInputs> PrepareLabInputs(const std::string& site, const std::string& scene,
-                                     uint64_t seed, const std::string& out_dir);
+                                     uint64_t seed, const std::string& out_dir,
+                                     const std::string& model = "");
 
 }  // namespace sandtable::sim

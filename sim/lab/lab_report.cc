@@ -97,7 +97,55 @@ json LabReportJson(const LabResult& r) {
                              {"max_incidence_deg", r.metric_options.max_incidence_deg},
                              {"definition", kDefinition}};
   }
+  // Self-calibration figures (docs/calibration.md).
+  const json& sc = r.self_calibration;
+  if (sc.contains("runner_report")) {
+    const json& rr = sc["runner_report"];
+    calibration["device_time_s"] = rr.value("device_time_s", 0.0);
+    calibration["frame_period_s"] = rr.value("frame_period_s", 0.0);
+    calibration["capture_latency_s"] = rr.value("capture_latency_s", 0.0);
+    calibration["site_frames"] = rr.value("site_frames", 0);
+    calibration["colours"] = rr.value("colours", 0);
+    json frames = json::object(), time = json::object();
+    if (rr.contains("projectors") && rr["projectors"].is_object()) {
+      for (const auto& [id, p] : rr["projectors"].items()) {
+        frames[id] = p.value("frames", 0);
+        time[id] = p.value("device_time_s", 0.0);
+      }
+    }
+    calibration["frames_per_projector"] = frames;
+    calibration["device_time_per_projector_s"] = time;
+    if (rr.contains("bundle")) calibration["refinement"] = rr["bundle"];
+    if (rr.contains("table")) calibration["table_plane"] = rr["table"];
+    calibration["self_calibration_report"] = rr;
+  }
+  if (sc.contains("compute_time_s")) {
+    calibration["compute_time_s"] = sc["compute_time_s"];
+    calibration["messages_per_node"] = sc.value("messages_per_node", 0.0);
+    calibration["bytes_per_node"] = sc.value("bytes_per_node", 0.0);
+    if (calibration.contains("per_unit") && sc.contains("per_unit")) {
+      for (const auto& [id, u] : sc["per_unit"].items()) {
+        if (calibration["per_unit"].contains(id)) calibration["per_unit"][id].update(u);
+      }
+    }
+  }
+  if (!r.unit_failures.empty()) {
+    json failures = json::object();
+    for (const auto& [id, why] : r.unit_failures) failures[std::to_string(id)] = why;
+    calibration["failures"] = failures;
+  }
   out["calibration"] = calibration;
+  if (r.model_offset_measured || sc.contains("runner_report")) {
+    json registration = json::object();
+    if (r.model_offset_measured) {
+      registration["model_offset_mm"] = r.model_offset_mm;
+      registration["model_offset_deg"] = r.model_offset_deg;
+    }
+    if (sc.contains("runner_report") && sc["runner_report"].contains("model")) {
+      registration["model"] = sc["runner_report"]["model"];
+    }
+    out["registration"] = registration;
+  }
   out["images"] = {{"top_white", r.top_white_png},
                    {"registration_error", r.heatmap_png},
                    {"registration_error_scale_mm", r.heatmap_scale_mm}};
@@ -157,6 +205,85 @@ std::string LabReportMarkdown(const LabResult& r) {
       const std::string unit = "unit " + std::to_string(id);
       md << StatsRow(unit, errors.all) << StatsRow(unit + ": table", errors.table)
          << StatsRow(unit + ": buildings", errors.buildings);
+    }
+    md << "\n";
+  }
+  if (!r.unit_failures.empty()) {
+    md << "## Units that could not calibrate\n\n| unit | cause |\n| --- | --- |\n";
+    for (const auto& [id, why] : r.unit_failures) md << "| " << id << " | " << why << " |\n";
+    md << "\n";
+  }
+  if (r.self_calibration.contains("runner_report")) {
+    const json& rr = r.self_calibration["runner_report"];
+    md << "## Self-calibration\n\n"
+       << "Modeled projection time of the site: **" << Fixed(rr.value("device_time_s", 0.0), 3)
+       << " s** (" << rr.value("site_frames", 0) << " frames x ("
+       << Fixed(rr.value("frame_period_s", 0.0) * 1e3, 2) << " ms frame + "
+       << Fixed(rr.value("capture_latency_s", 0.0) * 1e3, 1) << " ms capture latency)), "
+       << rr.value("colours", 0) << " colours; slowest node's compute "
+       << Fixed(r.self_calibration.value("compute_time_s", 0.0), 2) << " s (one core); "
+       << Fixed(r.self_calibration.value("messages_per_node", 0.0), 0) << " messages and "
+       << Fixed(r.self_calibration.value("bytes_per_node", 0.0) / 1024.0, 0)
+       << " KiB per node.\n\n";
+    md << "| projector | colour | cameras | frames | projection (s) | Gray bits skipped | phase "
+          "steps x period (px) | compute (s) |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n";
+    if (rr.contains("projectors") && rr["projectors"].is_object()) {
+      for (const auto& [id, p] : rr["projectors"].items()) {
+        std::string cameras;
+        if (p.contains("cameras")) {
+          for (const auto& c : p["cameras"]) cameras += (cameras.empty() ? "" : " ") + c.dump();
+        }
+        md << "| " << id << " | " << p.value("colour", 0) << " | " << cameras << " | "
+           << p.value("frames", 0) << " | " << Fixed(p.value("device_time_s", 0.0), 3) << " | "
+           << p.value("gray_lsb_skip", 0) << " | " << p.value("phase_steps", 0) << " x "
+           << Fixed(p.value("phase_period_px", 0.0), 0) << " | "
+           << Fixed(p.value("compute_s", 0.0), 2) << " |\n";
+      }
+    }
+    if (rr.contains("bundle")) {
+      const json& b = rr["bundle"];
+      md << "\nJoint refinement (Ceres): " << b.value("termination", std::string()) << ", "
+         << b.value("iterations", 0) << " iterations, " << b.value("tracks", 0)
+         << " tracks, rms " << Fixed(b.value("initial_rms_px", 0.0), 3) << " -> "
+         << Fixed(b.value("final_rms_px", 0.0), 3) << " px.\n\n"
+         << "| unit | projector rms (px) | camera rms (px) | free parameters |\n"
+         << "| --- | --- | --- | --- |\n";
+      if (b.contains("units")) {
+        for (const auto& [id, u] : b["units"].items()) {
+          std::string free;
+          for (const auto& f : u["free_parameters"]) {
+            free += (free.empty() ? "" : ", ") + f.get<std::string>();
+          }
+          md << "| " << id << " | " << Fixed(u.value("projector_rms_px", 0.0), 3) << " | "
+             << Fixed(u.value("camera_rms_px", 0.0), 3) << " | " << free << " |\n";
+        }
+      }
+    }
+    if (rr.contains("table")) {
+      const json& t = rr["table"];
+      md << "\nTable plane: " << t.value("points", 0) << " points, rms "
+         << Fixed(t.value("plane_rms_mm", 0.0), 3) << " mm; highest point "
+         << Fixed(t.value("max_height_mm", 0.0), 1) << " mm"
+         << (t.value("planar", false) ? " (planar site)" : "") << ".\n";
+    }
+    if (rr.contains("model")) {
+      const json& m = rr["model"];
+      if (m.value("found", false)) {
+        md << "\nModel found on the scanned surface: rms " << Fixed(m.value("rms_mm", 0.0), 3)
+           << " mm over " << m.value("inliers", 0) << " of " << m.value("points", 0)
+           << " points; scale of the scan " << Fixed(m.value("scale", 1.0), 5) << ".";
+        if (r.model_offset_measured) {
+          md << " Placement against the truth: **" << Fixed(r.model_offset_mm, 3) << " mm, "
+             << Fixed(r.model_offset_deg, 4) << " deg**.";
+        }
+        md << "\n";
+      } else {
+        md << "\nThe model was not found on the scanned surface.\n";
+      }
+    }
+    if (rr.contains("notes") && !rr["notes"].empty()) {
+      md << "\nNotes:\n\n";
+      for (const auto& n : rr["notes"]) md << "- " << n.get<std::string>() << "\n";
     }
     md << "\n";
   }

@@ -70,6 +70,12 @@ struct LabResult {
   std::string top_white_png, heatmap_png;  // relative; empty when not made
   double heatmap_scale_mm = 0.0;
   std::optional<LabFailure> failure;
+  // Self-calibration (docs/calibration.md): the runner's report, per-unit compute, messages
+  // and bytes; units that could not calibrate and why; the model's placement against the truth.
+  nlohmann::json self_calibration = nlohmann::json::object();
+  std::map<NodeId, std::string> unit_failures;
+  bool model_offset_measured = false;
+  double model_offset_mm = 0.0, model_offset_deg = 0.0;
 };
 
 nlohmann::json LabReportJson(const LabResult& result);

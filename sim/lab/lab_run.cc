@@ -2,6 +2,8 @@
 
 #include <unistd.h>
 
+#include <Eigen/Geometry>
+
 #include <chrono>
 #include <filesystem>
 #include <future>
@@ -11,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "common/base/file_io.h"
 #include "common/base/log.h"
 #include "common/base/ready_line.h"
 #include "common/io/image_file.h"
@@ -105,7 +108,8 @@ class LabRun {
   int Prepare() {
     Phase("prepare", 0);
     Expected<LabInputs> inputs =
-        PrepareLabInputs(options_.site, options_.scene, options_.seed, options_.out_dir);
+        PrepareLabInputs(options_.site, options_.scene, options_.seed, options_.out_dir,
+                         options_.model);
     if (!inputs.ok()) {
       progress_.End("failed");
       err_ << "sandtable-lab run: " << inputs.status().message() << "\n";
@@ -186,12 +190,23 @@ class LabRun {
     const std::string export_dir = fs::absolute(fs::path(options_.out_dir) / "calibration");
     for (const UnitSpec& unit : inputs_.site.units) {
       const std::string id = std::to_string(unit.id);
-      ChildProcess* node =
-          StartChild("node-" + id, "node",
-                     {node_bin_, "--id", id, "--coordinator",
-                      coordinator_requests_ + "," + coordinator_events_, "--world", world_endpoint_,
-                      "--factory", inputs_.factory_paths.at(unit.id), "--true-pose",
-                      inputs_.true_pose_paths.at(unit.id), "--export-dir", export_dir});
+      std::vector<std::string> argv = {node_bin_,
+                                       "--id",
+                                       id,
+                                       "--coordinator",
+                                       coordinator_requests_ + "," + coordinator_events_,
+                                       "--world",
+                                       world_endpoint_,
+                                       "--factory",
+                                       inputs_.factory_paths.at(unit.id),
+                                       "--export-dir",
+                                       export_dir};
+      if (TruePoseMode()) {
+        argv.insert(argv.end(), {"--true-pose", inputs_.true_pose_paths.at(unit.id)});
+      } else {
+        argv.insert(argv.end(), {"--model", inputs_.model_path});
+      }
+      ChildProcess* node = StartChild("node-" + id, "node", argv);
       if (!node) return false;
     }
     return Wait(
@@ -203,11 +218,15 @@ class LabRun {
         [&] { return Missing(nodes_ready_); });
   }
 
+  bool TruePoseMode() const { return options_.calibration == "true-pose"; }
+
   bool Calibrate() {
     const int n = result_.num_units;
     Phase("calibration held", n);
+    // A node that reports it could not calibrate is done too: the report names it and why.
     return Wait(
-        "calibration held", [&] { return static_cast<int>(calibrated_.size()) == n; },
+        "calibration held",
+        [&] { return static_cast<int>(calibrated_.size() + calibration_failed_.size()) >= n; },
         ToMs(options_.calibration_timeout_s),
         "not every sandtable-node reported a calibration "
         "{\"calibrated\":N,\"source\":..,\"json\":..,\"yaml\":..}",
@@ -236,7 +255,9 @@ class LabRun {
     Phase("metrics", result_.num_units);
     std::vector<EstimatedRegistration> estimates;
     std::set<std::string> sources;
+    for (const auto& [id, why] : calibration_failed_) result_.unit_failures[id] = why;
     for (const UnitSpec& unit : inputs_.site.units) {
+      if (!calibrated_.count(unit.id)) continue;  // failed: named in the report
       const json& line = calibrated_.at(unit.id);
       const std::string path = line.value("json", std::string());
       Expected<UnitCalibration> calibration = LoadUnitCalibration(path);
@@ -257,10 +278,18 @@ class LabRun {
                                          line.value("yaml", std::string()) + " is missing");
       }
       sources.insert(calibration->source);
+      if (calibration->table_from_model) units_have_model_ = true;
       estimates.push_back({unit.id, calibration->projector, *calibration->table_from_projector,
                            calibration->table_from_model.value_or(Rigid3d::Identity())});
     }
     result_.calibration_source = sources.size() == 1 ? *sources.begin() : "mixed";
+    if (estimates.empty()) {
+      return FailedWith("metrics", "no unit holds a calibration (every node reported a failure)");
+    }
+    // Where the model truly stands, in the frame the nodes' table_from_model refers to.
+    result_.metric_options.true_table_from_model =
+        TruePoseMode() ? Rigid3d::Identity() : inputs_.model_from_table.Inverse();
+    CollectSelfCalibration();
     // The metric and the pictures run on a worker while the children stay watched.
     struct Work {
       std::optional<RegistrationReport> report;
@@ -268,6 +297,7 @@ class LabRun {
       double scale_mm = 0;
       std::string error;
     };
+    ModelOffset(estimates);
     const RegistrationMetricOptions metric_options = result_.metric_options;
     const int width = options_.image_width_px;
     std::future<Work> future =
@@ -329,6 +359,72 @@ class LabRun {
     }
     progress_.End();
     return true;
+  }
+
+  // The runner's report and each node's figures (docs/lab.md, "Self-calibration").
+  void CollectSelfCalibration() {
+    json& sc = result_.self_calibration;
+    sc = json::object();
+    for (const auto& [id, line] : calibrated_) {
+      const std::string report = line.value("report", std::string());
+      if (report.empty()) continue;
+      Expected<std::string> text = ReadInputFile(report, size_t{16} << 20, "16 MiB");
+      if (!text.ok()) continue;
+      json parsed = json::parse(*text, nullptr, false);
+      if (!parsed.is_discarded() && parsed.is_object()) sc["runner_report"] = parsed;
+    }
+    json per_unit = json::object();
+    double slowest = 0.0;
+    double messages = 0, bytes = 0;
+    for (const auto& [id, line] : calibrated_) {
+      json u = {{"compute_s", line.value("compute_s", 0.0)},
+                {"messages_sent", line.value("messages_sent", 0)},
+                {"messages_received", line.value("messages_received", 0)},
+                {"bytes_sent", line.value("bytes_sent", 0)},
+                {"bytes_received", line.value("bytes_received", 0)}};
+      slowest = std::max(slowest, u["compute_s"].get<double>());
+      messages += u["messages_sent"].get<double>() + u["messages_received"].get<double>();
+      bytes += u["bytes_sent"].get<double>() + u["bytes_received"].get<double>();
+      per_unit[std::to_string(id)] = u;
+    }
+    sc["per_unit"] = per_unit;
+    sc["compute_time_s"] = slowest;
+    if (!calibrated_.empty()) {
+      sc["messages_per_node"] = messages / calibrated_.size();
+      sc["bytes_per_node"] = bytes / calibrated_.size();
+    }
+  }
+
+  // The model's estimated placement against the truth: the estimated table frame is related
+  // to the true one through the projectors (the mean of true_table_from_projector *
+  // projector_from_estimated_table over the units), then compared at the model's centre.
+  void ModelOffset(const std::vector<EstimatedRegistration>& estimates) {
+    if (TruePoseMode() || estimates.empty()) return;
+    bool any_model = false;
+    Eigen::Vector4d mean_q = Eigen::Vector4d::Zero();
+    Eigen::Vector3d mean_t = Eigen::Vector3d::Zero();
+    for (const EstimatedRegistration& e : estimates) {
+      const UnitSpec* unit = inputs_.site.FindUnit(e.unit_id);
+      if (!unit) continue;
+      const Rigid3d true_from_est =
+          unit->projector.table_from_projector * e.table_from_projector.Inverse();
+      Eigen::Vector4d q = true_from_est.rotation.coeffs();
+      if (q.dot(mean_q) < 0) q = -q;
+      mean_q += q;
+      mean_t += true_from_est.translation;
+      any_model = true;
+    }
+    if (!any_model || !units_have_model_) return;
+    Eigen::Quaterniond q(mean_q[3], mean_q[0], mean_q[1], mean_q[2]);
+    q.normalize();
+    const Rigid3d true_from_est(q, mean_t / static_cast<double>(estimates.size()));
+    const Rigid3d estimated = true_from_est * estimates.front().table_from_model;
+    const Rigid3d truth = inputs_.model_from_table.Inverse();
+    const Eigen::Vector3d centre_in_model = inputs_.model_from_table * scene_.Bounds().center();
+    result_.model_offset_mm = (estimated * centre_in_model - truth * centre_in_model).norm() * 1e3;
+    result_.model_offset_deg = Eigen::AngleAxisd((truth.Inverse() * estimated).rotation).angle() *
+                               180.0 / 3.14159265358979323846;
+    result_.model_offset_measured = true;
   }
 
   int Finish() {
@@ -417,6 +513,13 @@ class LabRun {
                  line["id"].is_number_unsigned()) {
         nodes_ready_.insert(line["id"].get<NodeId>());
         progress_.Update(static_cast<int>(nodes_ready_.size()));
+      } else if (child.spec().role == "node" && line.contains("calibration_failed") &&
+                 line["calibration_failed"].is_number_unsigned()) {
+        calibration_failed_[line["calibration_failed"].get<NodeId>()] =
+            line.value("reason", std::string("(no reason given)"));
+        if (progress_phase_ == "calibration held") {
+          progress_.Update(static_cast<int>(calibrated_.size() + calibration_failed_.size()));
+        }
       } else if (child.spec().role == "node" && line.contains("calibrated") &&
                  line["calibrated"].is_number_unsigned() && line.contains("json") &&
                  line["json"].is_string()) {
@@ -514,6 +617,8 @@ class LabRun {
   std::string world_endpoint_, coordinator_requests_, coordinator_events_;
   std::set<NodeId> nodes_ready_;
   std::map<NodeId, json> calibrated_;
+  std::map<NodeId, std::string> calibration_failed_;
+  bool units_have_model_ = false;
 };
 
 }  // namespace

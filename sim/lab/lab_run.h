@@ -48,6 +48,12 @@ struct LabRunOptions {
   int image_width_px = 640;
   bool progress_tty = false;
   bool curve = false;  // generate OUT/site.key (0600); world, coordinator, nodes require CURVE
+  // "structured-light" (the nodes calibrate themselves and find the model) or "true-pose"
+  // (LAB TEST MODE: factory intrinsics + the true pose, the baseline).
+  std::string calibration = "structured-light";
+  // The model handed to the nodes: "" = the scene at a seeded unknown placement (up to 5 cm
+  // and 10 degrees about z); a glTF FILE = exactly that file (true placement: as written).
+  std::string model;
   std::string command_line;  // for the report
   Status Check() const;
 };

@@ -4,6 +4,7 @@
 //   sandtable-lab run [--site PRESET|FILE] [--scene PRESET|FILE] --out DIR [--seed N]
 //                     [--hold-s S] [--bin-dir DIR] [--samples N] [--start-timeout-s S]
 //                     [--calibration-timeout-s S] [--image-width W] [--progress auto|bar|plain]
+//                     [--calibration structured-light|true-pose] [--model FILE.gltf]
 //
 // Exit codes: 0 ok, 1 the run failed (report written), 2 usage, 130 interrupted (SIGINT or
 // SIGTERM: the site is torn down and the report says so).
@@ -59,6 +60,15 @@ static int Run(int argc, char** argv) {
   run->add_option("--calibration-timeout-s", options.calibration_timeout_s,
                   "Deadline for every node to report its calibration")
       ->check(cli::Real(0.1, 36000.0));
+  run->add_option("--calibration", options.calibration,
+                  "structured-light (default: the nodes calibrate themselves and find the "
+                  "model) or true-pose (test mode: factory intrinsics + the true pose, the "
+                  "baseline)")
+      ->check(CLI::IsMember({"structured-light", "true-pose"}));
+  run->add_option("--model", options.model,
+                  "the glTF model handed to the nodes as is (default: the scene at a seeded "
+                  "unknown placement, up to 5 cm and 10 degrees about z)")
+      ->check(CLI::ExistingFile);
   run->add_option("--image-width", options.image_width_px, "Width of the report's pictures (px)")
       ->check(cli::Integer<int>(16, 8192));
   run->add_flag("--curve", options.curve,

@@ -1,0 +1,508 @@
+// The runner side of SelfCalibrationService (self_calibration_service.h).
+#include <algorithm>
+#include <cmath>
+#include <ctime>
+
+#include "common/base/log.h"
+#include "common/io/json_codec.h"
+#include "node/app/self_calibration_runner.h"
+#include "node/calibration/schedule.h"
+#include "proto/convert.h"
+#include "proto/envelope_stamper.h"
+
+namespace sandtable::node {
+namespace {
+
+double ThreadCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+constexpr uint32_t kBlackSlot = 1;
+constexpr uint32_t kWhiteSlot = 2;
+
+wire::CalibrationStep MakeStep(uint64_t round, wire::CalibrationAction action) {
+  wire::CalibrationStep s;
+  s.set_round(round);
+  s.set_action(action);
+  return s;
+}
+
+}  // namespace
+
+void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
+  if (runner_ || calibrated_ || !camera_ || !node.registered()) return;
+  const std::optional<wire::MemberList>& list = node.member_list();
+  if (!list) return;
+  std::vector<NodeId> members;
+  std::map<NodeId, std::pair<int, int>> sizes;
+  for (const wire::Member& m : list->members()) {
+    const wire::Capabilities& c = m.capabilities();
+    if (!c.has_projector() || !c.has_camera()) continue;
+    members.push_back(m.node_id());
+    sizes[m.node_id()] = {static_cast<int>(c.projector_width_px()),
+                          static_cast<int>(c.projector_height_px())};
+  }
+  if (members.empty() || members.front() != node.id()) return;  // not the runner
+  if (node.member_list_age() < options_.settle) return;
+  for (NodeId m : members) {
+    if (m == node.id()) continue;
+    auto peer = node.peers().find(m);
+    if (peer == node.peers().end() || peer->second.heartbeats_received == 0) return;
+  }
+  runner_ = std::make_unique<Runner>();
+  Runner& r = *runner_;
+  r.round = static_cast<uint64_t>(proto::SteadyNowNs());
+  r.self = node.id();
+  r.members = members;
+  r.projector_size = sizes;
+  r.round_started = std::chrono::steady_clock::now();
+  ST_LOG(kInfo) << "self-calibration: running round " << r.round << " for " << members.size()
+                << " units";
+  // Pre-pass: black everywhere, a black reference, then each projector white alone.
+  Runner::Stage black, reference;
+  black.label = "pre-pass black";
+  reference.label = "pre-pass reference";
+  for (NodeId m : members) {
+    wire::CalibrationStep show = MakeStep(r.round, wire::CALIBRATION_ACTION_SHOW);
+    show.set_show(wire::SHOW_WHAT_BLACK);
+    black.commands.push_back({m, show});
+    wire::CalibrationStep capture = MakeStep(r.round, wire::CALIBRATION_ACTION_CAPTURE);
+    capture.set_slot(kBlackSlot);
+    reference.commands.push_back({m, capture});
+  }
+  r.stages.push_back(black);
+  r.stages.push_back(reference);
+  r.prepass_frames = 1;
+  for (NodeId p : members) {
+    Runner::Stage white, capture, off;
+    white.label = "pre-pass white " + std::to_string(p);
+    wire::CalibrationStep show = MakeStep(r.round, wire::CALIBRATION_ACTION_SHOW);
+    show.set_show(wire::SHOW_WHAT_WHITE);
+    white.commands.push_back({p, show});
+    capture.label = "pre-pass capture " + std::to_string(p);
+    for (NodeId c : members) {
+      wire::CalibrationStep s = MakeStep(r.round, wire::CALIBRATION_ACTION_CAPTURE);
+      s.set_slot(kWhiteSlot);
+      s.set_reference_slot(kBlackSlot);
+      capture.commands.push_back({c, s, p});
+    }
+    off.label = "pre-pass off " + std::to_string(p);
+    wire::CalibrationStep dark = MakeStep(r.round, wire::CALIBRATION_ACTION_SHOW);
+    dark.set_show(wire::SHOW_WHAT_BLACK);
+    off.commands.push_back({p, dark});
+    r.stages.push_back(white);
+    r.stages.push_back(capture);
+    r.stages.push_back(off);
+    ++r.prepass_frames;
+  }
+  r.stages.back().after = [this](NodeRuntime& n) {
+    Runner& rr = *runner_;
+    // Who sees whom, the schedule, the plans.
+    for (NodeId p : rr.members) {
+      if (!rr.Active(p)) continue;
+      std::set<NodeId> seeing;
+      for (const auto& [c, count] : rr.lit[p]) {
+        if (rr.Active(c) && static_cast<int>(count) >= options_.min_lit_pixels) seeing.insert(c);
+      }
+      if (seeing.empty()) {
+        rr.left_out[p] = "projector " + std::to_string(p) + ": no camera sees it";
+        ST_LOG(kWarning) << "self-calibration: " << rr.left_out[p];
+        continue;
+      }
+      if (!seeing.count(p)) {
+        rr.left_out[p] = "unit " + std::to_string(p) + ": its camera does not see its projector";
+        ST_LOG(kWarning) << "self-calibration: " << rr.left_out[p];
+        continue;
+      }
+      rr.cameras_seeing[p] = seeing;
+    }
+    const std::map<NodeId, std::set<NodeId>> graph = ConflictGraph(rr.cameras_seeing);
+    rr.colours = ColourGraph(graph);
+    const int colour_count = ColourCount(rr.colours);
+    for (const auto& [p, seeing] : rr.cameras_seeing) {
+      const auto [w, h] = rr.projector_size[p];
+      const uint32_t own = rr.lit[p][p];
+      const double ratio = own > 0 ? std::sqrt(static_cast<double>(w) * h / own) : 2.0;
+      rr.resolution[p] = ratio;
+      // The coarsest camera: the own one, or a neighbour at the stated factor.
+      const double coarsest = seeing.size() > 1 ? ratio * options_.neighbour_resolution_factor
+                                                : ratio;
+      rr.plans[p] = PlanPatterns(w, h, coarsest, options_.plan);
+    }
+    ST_LOG(kInfo) << "self-calibration: " << rr.cameras_seeing.size() << " projectors in "
+                  << colour_count << " colours";
+    // One sequence per colour class.
+    for (int colour = 0; colour < colour_count; ++colour) {
+      std::vector<NodeId> projectors;
+      std::set<NodeId> cameras;
+      int frames = 0;
+      for (const auto& [p, c] : rr.colours) {
+        if (c != colour) continue;
+        projectors.push_back(p);
+        for (NodeId cam : rr.cameras_seeing[p]) cameras.insert(cam);
+        const int f = MakePatternLayout(rr.plans[p]).frame_count;
+        rr.frames_per_projector[p] = f;
+        frames = std::max(frames, f);
+      }
+      const uint32_t base = 1000u * static_cast<uint32_t>(colour + 1);
+      for (int f = 0; f < frames; ++f) {
+        Runner::Stage show, capture;
+        show.label = "colour " + std::to_string(colour) + " frame " + std::to_string(f);
+        capture.label = show.label + " capture";
+        for (NodeId p : projectors) {
+          wire::CalibrationStep s = MakeStep(rr.round, wire::CALIBRATION_ACTION_SHOW);
+          if (f < rr.frames_per_projector[p]) {
+            s.set_show(wire::SHOW_WHAT_PATTERN);
+            s.set_frame(static_cast<uint32_t>(f));
+            *s.mutable_plan() = PatternPlanToWire(rr.plans[p]);
+          } else {
+            s.set_show(wire::SHOW_WHAT_BLACK);
+          }
+          show.commands.push_back({p, s});
+        }
+        for (NodeId cam : cameras) {
+          wire::CalibrationStep s = MakeStep(rr.round, wire::CALIBRATION_ACTION_CAPTURE);
+          s.set_slot(base + static_cast<uint32_t>(f));
+          capture.commands.push_back({cam, s});
+        }
+        rr.stages.push_back(show);
+        rr.stages.push_back(capture);
+      }
+      rr.site_frames += frames;
+      Runner::Stage off, decode;
+      off.label = "colour " + std::to_string(colour) + " off";
+      decode.label = "colour " + std::to_string(colour) + " decode";
+      for (NodeId p : projectors) {
+        wire::CalibrationStep s = MakeStep(rr.round, wire::CALIBRATION_ACTION_SHOW);
+        s.set_show(wire::SHOW_WHAT_BLACK);
+        off.commands.push_back({p, s});
+        for (NodeId cam : rr.cameras_seeing[p]) {
+          wire::CalibrationStep d = MakeStep(rr.round, wire::CALIBRATION_ACTION_DECODE);
+          d.set_slot(base);
+          d.set_frames(static_cast<uint32_t>(rr.frames_per_projector[p]));
+          *d.mutable_plan() = PatternPlanToWire(rr.plans[p]);
+          d.set_projector_id(p);
+          d.set_grid_step_px(static_cast<uint32_t>(options_.grid_step_px));
+          decode.commands.push_back({cam, d});
+        }
+      }
+      rr.stages.push_back(off);
+      rr.stages.push_back(decode);
+    }
+    Runner::Stage local;
+    local.label = "local geometry";
+    for (const auto& [p, seeing] : rr.cameras_seeing) {
+      wire::CalibrationStep s = MakeStep(rr.round, wire::CALIBRATION_ACTION_LOCAL);
+      uint32_t expected = 0;
+      for (NodeId cam : seeing) expected += rr.Active(cam) ? 1 : 0;
+      s.set_frames(expected);
+      local.commands.push_back({p, s});
+    }
+    local.after = [this](NodeRuntime& n2) { StartSolve(n2); };
+    rr.stages.push_back(local);
+    (void)n;
+  };
+}
+
+void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
+  if (!runner_ || runner_->finished || runner_->solving) return;
+  Runner& r = *runner_;
+  const auto now = std::chrono::steady_clock::now();
+  if (r.stage_active) {
+    // Members that left, or did not answer in time, are left out of the rest of the round.
+    for (auto it = r.awaiting.begin(); it != r.awaiting.end();) {
+      const NodeId to = it->second.to;
+      const bool gone = to != r.self && !node.peers().count(to);
+      const bool late = now - r.stage_started > options_.step_timeout;
+      if (gone || late) {
+        const std::string why =
+            "unit " + std::to_string(to) +
+            (gone ? ": left the site during calibration"
+                  : ": no answer to a calibration step in " +
+                        std::to_string(options_.step_timeout.count() / 1000) + " s");
+        if (!r.left_out.count(to)) {
+          r.left_out[to] = why;
+          ST_LOG(kWarning) << "self-calibration: " << why;
+        }
+        it = r.awaiting.erase(it);
+      } else {
+        ++it;
+      }
+    }
+    if (!r.awaiting.empty()) return;
+    r.stage_active = false;
+    if (r.current_after) {
+      auto after = std::move(r.current_after);
+      r.current_after = nullptr;
+      after(node);
+      if (!runner_ || r.solving || r.finished) return;
+    }
+  }
+  while (!r.stage_active && !r.stages.empty()) {
+    Runner::Stage stage = std::move(r.stages.front());
+    r.stages.pop_front();
+    r.current_after = stage.after;
+    r.stage_active = true;
+    r.stage_started = now;
+    std::vector<Runner::Command> to_send;
+    for (Runner::Command& c : stage.commands) {
+      if (!r.Active(c.to)) continue;
+      c.step.set_step(r.next_step++);
+      r.awaiting[c.step.step()] = c;
+      to_send.push_back(c);
+    }
+    for (const Runner::Command& c : to_send) {
+      wire::Envelope e;
+      *e.mutable_calibration_step() = c.step;
+      Send(c.to, std::move(e), node);
+    }
+    if (r.awaiting.empty()) {  // nothing to wait for
+      r.stage_active = false;
+      if (r.current_after) {
+        auto after = std::move(r.current_after);
+        r.current_after = nullptr;
+        after(node);
+        if (!runner_ || r.solving || r.finished) return;
+      }
+    }
+  }
+}
+
+void SelfCalibrationService::RunnerDone(NodeId from, const wire::CalibrationStepDone& done,
+                                        NodeRuntime& node) {
+  (void)node;
+  if (!runner_ || done.round() != runner_->round) return;
+  Runner& r = *runner_;
+  auto it = r.awaiting.find(done.step());
+  if (it == r.awaiting.end() || it->second.to != from) return;
+  const Runner::Command command = it->second;
+  r.awaiting.erase(it);
+  r.compute_s[from] += done.compute_s();
+  if (!done.ok()) {
+    ST_LOG(kWarning) << "self-calibration: " << done.message();
+    r.notes.push_back(done.message());
+    if (command.step.action() == wire::CALIBRATION_ACTION_CAPTURE ||
+        command.step.action() == wire::CALIBRATION_ACTION_SHOW) {
+      if (!r.left_out.count(from)) r.left_out[from] = done.message();
+    }
+    return;
+  }
+  if (command.step.action() == wire::CALIBRATION_ACTION_CAPTURE &&
+      command.about != kInvalidNodeId) {
+    r.lit[command.about][from] = done.lit_pixels();
+  }
+  if (command.step.action() == wire::CALIBRATION_ACTION_DECODE && done.points() < 50) {
+    r.notes.push_back("camera " + std::to_string(from) + " decoded " +
+                      std::to_string(done.points()) + " points of projector " +
+                      std::to_string(command.step.projector_id()) + " (too few to use)");
+  }
+}
+
+void SelfCalibrationService::RunnerInput(NodeId from, const wire::CalibrationInput& input,
+                                         NodeRuntime& node) {
+  (void)node;
+  if (!runner_ || input.round() != runner_->round || input.unit_id() != from) return;
+  if (!input.ok()) {
+    runner_->left_out[from] = input.message();
+    return;
+  }
+  runner_->inputs[from] = input;
+}
+
+}  // namespace sandtable::node
+
+namespace sandtable::node {
+
+void SelfCalibrationService::StartSolve(NodeRuntime& node) {
+  Runner& r = *runner_;
+  r.solving = true;
+  ClusterObservations observations;
+  std::map<NodeId, LocalGeometry> local;
+  for (const auto& [id, input] : r.inputs) {
+    if (!r.Active(id)) continue;
+    Expected<CameraModel> camera = proto::FromWire(input.camera_model());
+    Expected<CameraModel> projector = proto::FromWire(input.projector_model());
+    Expected<Rigid3d> mount = proto::FromWire(input.projector_from_camera());
+    if (!camera.ok() || !projector.ok() || !mount.ok()) {
+      r.left_out[id] = "unit " + std::to_string(id) + ": invalid factory models in its input";
+      continue;
+    }
+    observations.units[id] = UnitModel{id, *camera, *projector, *mount};
+    LocalGeometry geometry;
+    geometry.unit = id;
+    geometry.triangulated = static_cast<int>(input.triangulated());
+    for (const wire::RelativePose& rp : input.relative_poses()) {
+      Expected<Rigid3d> pose = proto::FromWire(rp.camera_from_projector());
+      if (!pose.ok()) continue;
+      geometry.neighbours[rp.camera_id()] = {*pose, static_cast<int>(rp.points()), rp.rms_px()};
+    }
+    local[id] = geometry;
+    std::map<NodeId, std::vector<ProjectorGridPoint>> by_camera;
+    for (const wire::CorrespondenceSet& set : input.correspondences()) {
+      if (set.camera_px_xy_size() != set.projector_px_xy_size()) continue;
+      std::vector<ProjectorGridPoint>& points = by_camera[set.camera_id()];
+      for (int i = 0; i + 1 < set.camera_px_xy_size(); i += 2) {
+        ProjectorGridPoint p;
+        p.camera_px = Eigen::Vector2f(set.camera_px_xy(i), set.camera_px_xy(i + 1));
+        p.projector_px = Eigen::Vector2f(set.projector_px_xy(i), set.projector_px_xy(i + 1));
+        if (p.camera_px.allFinite() && p.projector_px.allFinite()) points.push_back(p);
+      }
+    }
+    const std::vector<Track> tracks = BuildTracks(id, by_camera);
+    observations.tracks.insert(observations.tracks.end(), tracks.begin(), tracks.end());
+  }
+  for (NodeId m : r.members) {
+    if (r.Active(m) && !observations.units.count(m)) {
+      r.left_out[m] = "unit " + std::to_string(m) + ": sent no calibration input";
+    }
+  }
+  const NodeId root = observations.units.count(r.self) || observations.units.empty()
+                          ? r.self
+                          : observations.units.begin()->first;
+  struct Solved {
+    Expected<ClusterSolution> solution = ClusterSolution{};
+    double cpu_s = 0.0;
+  };
+  std::shared_ptr<const Scene> model = model_;
+  const ClusterSolveOptions solve_options = options_.solve;
+  node.workers().Run<Solved>(
+      [observations = std::move(observations), local = std::move(local), root, model,
+       solve_options] {
+        Solved s;
+        const double t0 = ThreadCpuSeconds();
+        s.solution = SolveCluster(root, observations, local, model.get(), solve_options);
+        s.cpu_s = ThreadCpuSeconds() - t0;
+        return s;
+      },
+      [this, &node](Solved s) { FinishRound(std::move(s.solution), s.cpu_s, node); });
+}
+
+void SelfCalibrationService::FinishRound(Expected<ClusterSolution> solution, double solve_cpu_s,
+                                         NodeRuntime& node) {
+  Runner& r = *runner_;
+  compute_s_ += solve_cpu_s;
+  r.compute_s[r.self] += solve_cpu_s;
+  const double period = options_.frame_period_s + options_.capture_latency_s;
+  nlohmann::json report{{"format", "sandtable.self_calibration_report"},
+                        {"version", 1},
+                        {"runner", r.self},
+                        {"round", r.round},
+                        {"members", r.members},
+                        {"frame_period_s", options_.frame_period_s},
+                        {"capture_latency_s", options_.capture_latency_s},
+                        {"prepass_frames", r.prepass_frames},
+                        {"site_frames", r.prepass_frames + r.site_frames},
+                        {"device_time_s", (r.prepass_frames + r.site_frames) * period},
+                        {"colours", ColourCount(r.colours)},
+                        {"solve_compute_s", solve_cpu_s},
+                        {"wall_s", std::chrono::duration<double>(std::chrono::steady_clock::now() -
+                                                                 r.round_started)
+                                       .count()}};
+  nlohmann::json per_projector = nlohmann::json::object();
+  for (const auto& [p, plan] : r.plans) {
+    const int frames = r.frames_per_projector[p];
+    std::vector<NodeId> seeing(r.cameras_seeing[p].begin(), r.cameras_seeing[p].end());
+    per_projector[std::to_string(p)] = {
+        {"colour", r.colours[p]},
+        {"cameras", seeing},
+        {"frames", frames},
+        {"device_time_s", (frames + 1) * period},  // its sequence + its pre-pass white
+        {"gray_lsb_skip", plan.gray_lsb_skip},
+        {"phase_steps", plan.phase_steps},
+        {"phase_period_px", plan.phase_period_px},
+        {"projector_px_per_camera_px", r.resolution[p]},
+        {"compute_s", r.compute_s[p]}};
+  }
+  report["projectors"] = per_projector;
+  nlohmann::json left = nlohmann::json::object();
+  for (const auto& [id, why] : r.left_out) left[std::to_string(id)] = why;
+  report["left_out"] = left;
+  std::vector<std::string> notes = r.notes;
+  if (solution.ok()) {
+    const ClusterSolution& s = *solution;
+    for (const std::string& n : s.notes) notes.push_back(n);
+    nlohmann::json units = nlohmann::json::object();
+    for (const auto& [id, u] : s.bundle.units) {
+      units[std::to_string(id)] = {{"projector_rms_px", u.projector_rms_px},
+                                   {"camera_rms_px", u.camera_rms_px},
+                                   {"projector_observations", u.projector_observations},
+                                   {"camera_observations", u.camera_observations},
+                                   {"free_parameters", u.free_parameters},
+                                   {"termination", s.bundle.termination},
+                                   {"iterations", s.bundle.iterations}};
+    }
+    report["bundle"] = {{"termination", s.bundle.termination},
+                        {"iterations", s.bundle.iterations},
+                        {"tracks", s.bundle.tracks_used},
+                        {"tracks_untriangulated", s.bundle.tracks_untriangulated},
+                        {"observations_dropped", s.bundle.observations_dropped},
+                        {"initial_rms_px", s.bundle.initial_rms_px},
+                        {"final_rms_px", s.bundle.final_rms_px},
+                        {"solve_time_s", s.bundle.solve_time_s},
+                        {"units", units}};
+    report["table"] = {{"points", s.table_points},
+                       {"plane_rms_mm", s.table_plane_rms_mm},
+                       {"max_height_mm", s.max_height_mm},
+                       {"planar", s.planar},
+                       {"extent_x_m", s.frame.extent_x_m},
+                       {"extent_y_m", s.frame.extent_y_m}};
+    if (s.model) {
+      report["model"] = {{"found", true},
+                         {"table_from_model", io::RigidToJson(s.model->table_from_model)},
+                         {"scale", s.model->scale},
+                         {"scale_correction", s.scale_correction},
+                         {"rms_mm", s.model->rms_m * 1e3},
+                         {"inliers", s.model->inliers},
+                         {"points", s.model->points},
+                         {"coarse_score", s.model->coarse_score}};
+    } else {
+      report["model"] = {{"found", false}};
+    }
+    report["ok"] = true;
+  } else {
+    notes.push_back("cluster solve: " + solution.status().message());
+    report["ok"] = false;
+    report["error"] = solution.status().message();
+  }
+  report["notes"] = notes;
+  const std::string report_text = report.dump();
+  ST_LOG(kInfo) << "self-calibration: round done in " << report["wall_s"].get<double>()
+                << " s; " << (solution.ok() ? "solved" : solution.status().message());
+  for (NodeId m : r.members) {
+    wire::Envelope e;
+    wire::CalibrationResult* result = e.mutable_calibration_result();
+    result->set_round(r.round);
+    result->set_projector_id(m);
+    result->set_report_json(report_text);
+    auto c = solution.ok() ? solution->calibrations.find(m)
+                           : std::map<NodeId, UnitCalibration>::iterator{};
+    if (solution.ok() && c != solution->calibrations.end() && r.Active(m)) {
+      const UnitCalibration& u = c->second;
+      const Rigid3d projector_from_table = u.table_from_projector->Inverse();
+      result->set_ok(true);
+      *result->mutable_projector_model() = proto::ToWire(u.projector);
+      *result->mutable_camera_model() = proto::ToWire(u.camera);
+      *result->mutable_projector_from_table() = proto::ToWire(projector_from_table);
+      *result->mutable_camera_from_table() =
+          proto::ToWire(u.projector_from_camera.Inverse() * projector_from_table);
+      if (u.table_from_model) *result->mutable_table_from_model() = proto::ToWire(*u.table_from_model);
+      result->set_reprojection_rms_px(u.projector_rms_px);
+      result->set_camera_rms_px(u.camera_rms_px);
+      result->set_compute_time_s(r.compute_s[m]);
+    } else {
+      result->set_ok(false);
+      std::string why = r.left_out.count(m) ? r.left_out[m]
+                        : solution.ok()     ? "unit " + std::to_string(m) +
+                                              ": not reached by the cluster solve"
+                                            : solution.status().message();
+      result->set_message(why);
+    }
+    Send(m, std::move(e), node);
+  }
+  r.solving = false;
+  r.finished = true;
+}
+
+}  // namespace sandtable::node

@@ -1,0 +1,67 @@
+// The runner of a self-calibration round (self_calibration_service.h): its state, and the
+// wire conversions of the pattern plan. Internal to node/app.
+#pragma once
+
+#include <chrono>
+#include <deque>
+#include <functional>
+#include <map>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "common/structured_light/pattern_sequence.h"
+#include "node/app/self_calibration_service.h"
+#include "proto/calibration.pb.h"
+
+namespace sandtable::node {
+
+PatternOptions PatternOptionsFromWire(const wire::PatternPlan& plan);
+wire::PatternPlan PatternPlanToWire(const PatternOptions& patterns);
+
+struct SelfCalibrationService::Runner {
+  struct Command {
+    NodeId to = kInvalidNodeId;
+    wire::CalibrationStep step;
+    NodeId about = kInvalidNodeId;  // CAPTURE in the pre-pass: the projector that is white
+  };
+  struct Stage {
+    std::vector<Command> commands;
+    std::function<void(NodeRuntime&)> after;  // runs when every command is answered
+    std::string label;
+  };
+
+  uint64_t round = 0;
+  NodeId self = kInvalidNodeId;
+  std::vector<NodeId> members;
+  std::map<NodeId, std::pair<int, int>> projector_size;  // from the Hello capabilities
+  std::map<NodeId, std::string> left_out;                // unit -> why
+  std::deque<Stage> stages;
+  std::map<uint32_t, Command> awaiting;  // by step number
+  std::function<void(NodeRuntime&)> current_after;
+  std::chrono::steady_clock::time_point stage_started{};
+  std::chrono::steady_clock::time_point round_started{};
+  uint32_t next_step = 1;
+  bool stage_active = false;
+
+  // Pre-pass and plan.
+  std::map<NodeId, std::map<NodeId, uint32_t>> lit;  // lit[projector][camera]
+  std::map<NodeId, std::set<NodeId>> cameras_seeing;
+  std::map<NodeId, int> colours;
+  std::map<NodeId, PatternOptions> plans;
+  std::map<NodeId, double> resolution;  // projector px per own-camera px
+  int prepass_frames = 0;
+  int site_frames = 0;
+  std::map<NodeId, int> frames_per_projector;
+
+  // Inputs and the solve.
+  std::map<NodeId, wire::CalibrationInput> inputs;
+  std::map<NodeId, double> compute_s;  // per node, from the step answers
+  bool solving = false;
+  bool finished = false;
+  std::vector<std::string> notes;
+
+  bool Active(NodeId unit) const { return !left_out.count(unit); }
+};
+
+}  // namespace sandtable::node

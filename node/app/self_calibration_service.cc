@@ -1,0 +1,442 @@
+#include "node/app/self_calibration_service.h"
+
+#include <ctime>
+
+#include "common/base/log.h"
+#include "node/app/self_calibration_runner.h"
+#include "node/calibration/cluster_initializer.h"
+#include "proto/convert.h"
+
+namespace sandtable::node {
+namespace {
+
+double ThreadCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+// The bounds a received correspondence set must keep (docs/calibration.md).
+constexpr int kMaxCorrespondencesPerSet = 1 << 20;
+constexpr auto kLocalWaitForSets = std::chrono::seconds(20);
+
+}  // namespace
+
+PatternOptions PatternOptionsFromWire(const wire::PatternPlan& plan) {
+  PatternOptions p;
+  p.projector_width_px = static_cast<int>(plan.projector_width_px());
+  p.projector_height_px = static_cast<int>(plan.projector_height_px());
+  p.gray_lsb_skip = static_cast<int>(plan.gray_lsb_skip());
+  p.phase_steps = static_cast<int>(plan.phase_steps());
+  p.phase_period_px = plan.phase_period_px();
+  return p;
+}
+
+wire::PatternPlan PatternPlanToWire(const PatternOptions& p) {
+  wire::PatternPlan plan;
+  plan.set_projector_width_px(static_cast<uint32_t>(p.projector_width_px));
+  plan.set_projector_height_px(static_cast<uint32_t>(p.projector_height_px));
+  plan.set_gray_lsb_skip(static_cast<uint32_t>(p.gray_lsb_skip));
+  plan.set_phase_steps(static_cast<uint32_t>(p.phase_steps));
+  plan.set_phase_period_px(p.phase_period_px);
+  plan.set_frames(static_cast<uint32_t>(MakePatternLayout(p).frame_count));
+  return plan;
+}
+
+SelfCalibrationService::SelfCalibrationService(UnitCalibration factory, ProjectorOutput* projector,
+                                               std::shared_ptr<const Scene> model,
+                                               SelfCalibrationOptions options,
+                                               OnCalibrated on_calibrated, OnFailed on_failed)
+    : factory_(std::move(factory)),
+      projector_(projector),
+      model_(std::move(model)),
+      options_(std::move(options)),
+      on_calibrated_(std::move(on_calibrated)),
+      on_failed_(std::move(on_failed)) {}
+
+SelfCalibrationService::~SelfCalibrationService() = default;
+
+void SelfCalibrationService::SetCamera(std::unique_ptr<CameraInput> camera) {
+  camera_ = std::move(camera);
+}
+
+bool SelfCalibrationService::ServesPeer(wire::Envelope::BodyCase body) const {
+  switch (body) {
+    case wire::Envelope::kCalibrationStep:
+    case wire::Envelope::kCalibrationStepDone:
+    case wire::Envelope::kCorrespondenceSet:
+    case wire::Envelope::kCalibrationInput:
+    case wire::Envelope::kCalibrationResult:
+      return true;
+    default:
+      return false;
+  }
+}
+
+void SelfCalibrationService::Send(NodeId to, wire::Envelope envelope, NodeRuntime& node) {
+  if (to == node.id()) {  // the runner talking to itself: no socket
+    Deliver(to, envelope, node);
+    return;
+  }
+  ++messages_sent_;
+  bytes_sent_ += envelope.ByteSizeLong();
+  if (Status sent = node.SendToPeer(to, std::move(envelope)); !sent.ok()) {
+    ST_LOG(kWarning) << "self-calibration: to node " << to << ": " << sent.ToString();
+  }
+}
+
+void SelfCalibrationService::OnPeerMessage(net::Incoming request, NodeRuntime& node) {
+  ++messages_received_;
+  bytes_received_ += request.envelope.ByteSizeLong();
+  Deliver(request.envelope.sender_id(), request.envelope, node);
+}
+
+void SelfCalibrationService::Deliver(NodeId from, const wire::Envelope& e, NodeRuntime& node) {
+  switch (e.body_case()) {
+    case wire::Envelope::kCalibrationStep:
+      HandleStep(e.calibration_step(), from, node);
+      break;
+    case wire::Envelope::kCalibrationStepDone:
+      RunnerDone(from, e.calibration_step_done(), node);
+      break;
+    case wire::Envelope::kCorrespondenceSet:
+      HandleCorrespondences(e.correspondence_set());
+      break;
+    case wire::Envelope::kCalibrationInput:
+      RunnerInput(from, e.calibration_input(), node);
+      break;
+    case wire::Envelope::kCalibrationResult:
+      HandleResult(e.calibration_result(), node);
+      break;
+    default:
+      break;
+  }
+}
+
+void SelfCalibrationService::Answer(NodeId to, wire::CalibrationStepDone done, NodeRuntime& node) {
+  wire::Envelope e;
+  *e.mutable_calibration_step_done() = std::move(done);
+  Send(to, std::move(e), node);
+}
+
+const std::vector<cv::Mat>* SelfCalibrationService::PatternFrames(const wire::PatternPlan& plan) {
+  const std::string key = plan.SerializeAsString();
+  auto it = pattern_cache_.find(key);
+  if (it != pattern_cache_.end()) return &it->second;
+  Expected<std::vector<cv::Mat>> frames = GeneratePatterns(PatternOptionsFromWire(plan));
+  if (!frames.ok()) return nullptr;
+  return &(pattern_cache_[key] = std::move(*frames));
+}
+
+void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeId from,
+                                        NodeRuntime& node) {
+  if (step.round() != round_) {
+    // A new round: forget the last one's captures and correspondences.
+    round_ = step.round();
+    slots_.clear();
+    received_.clear();
+    pending_local_.reset();
+  }
+  wire::CalibrationStepDone done;
+  done.set_round(step.round());
+  done.set_step(step.step());
+  auto fail = [&](const std::string& why) {
+    done.set_ok(false);
+    done.set_message("unit " + std::to_string(node.id()) + ": " + why);
+    ST_LOG(kWarning) << "self-calibration step " << step.step() << ": " << why;
+    Answer(from, done, node);
+  };
+  switch (step.action()) {
+    case wire::CALIBRATION_ACTION_SHOW: {
+      if (!projector_) return fail("no projector");
+      cv::Mat frame;
+      const cv::Size size = projector_->size();
+      if (step.show() == wire::SHOW_WHAT_WHITE) {
+        frame = cv::Mat(size, CV_8UC1, cv::Scalar(255));
+      } else if (step.show() == wire::SHOW_WHAT_PATTERN) {
+        const std::vector<cv::Mat>* frames = PatternFrames(step.plan());
+        if (!frames || step.frame() >= frames->size()) return fail("no such pattern frame");
+        frame = (*frames)[step.frame()];
+        if (frame.size() != size) return fail("pattern plan is not this projector's size");
+      } else {
+        frame = cv::Mat::zeros(size, CV_8UC1);
+      }
+      ProjectorOutput* projector = projector_;
+      node.workers().Run<Status>(
+          [projector, frame] {
+            Expected<ShownFrame> shown = projector->Show(frame);
+            return shown.ok() ? OkStatus() : shown.status();
+          },
+          [this, from, done, &node](Status shown) mutable {
+            done.set_ok(shown.ok());
+            if (!shown.ok()) done.set_message(shown.message());
+            Answer(from, done, node);
+          });
+      return;
+    }
+    case wire::CALIBRATION_ACTION_CAPTURE: {
+      if (!camera_) {
+        deferred_.emplace_back(step, from);  // the camera is still opening
+        return;
+      }
+      CameraInput* camera = camera_.get();
+      const int bits = camera->bit_depth();
+      node.workers().Run<Expected<cv::Mat>>(
+          [camera, bits]() -> Expected<cv::Mat> {
+            Expected<CapturedFrame> frame = camera->Capture(Seconds(0));
+            if (!frame.ok()) return frame.status();
+            return To8Bit(frame->image, bits).clone();
+          },
+          [this, from, done, step, &node](Expected<cv::Mat> image) mutable {
+            if (!image.ok()) {
+              done.set_ok(false);
+              done.set_message("unit " + std::to_string(node.id()) + " camera: " +
+                               image.status().message());
+              Answer(from, done, node);
+              return;
+            }
+            if (step.reference_slot() != 0) {
+              auto ref = slots_.find(step.reference_slot());
+              if (ref != slots_.end() && ref->second.size() == image->size()) {
+                done.set_lit_pixels(static_cast<uint32_t>(
+                    CountLitPixels(*image, ref->second, options_.lit_threshold)));
+              }
+            }
+            slots_[step.slot()] = std::move(*image);
+            done.set_ok(true);
+            Answer(from, done, node);
+          });
+      return;
+    }
+    case wire::CALIBRATION_ACTION_DECODE: {
+      std::vector<cv::Mat> captures;
+      for (uint32_t i = 0; i < step.frames(); ++i) {
+        auto it = slots_.find(step.slot() + i);
+        if (it == slots_.end()) return fail("capture slot " + std::to_string(step.slot() + i) +
+                                            " missing");
+        captures.push_back(it->second);
+      }
+      for (uint32_t i = 0; i < step.frames(); ++i) slots_.erase(step.slot() + i);
+      const PatternOptions patterns = PatternOptionsFromWire(step.plan());
+      ProjectorGridOptions grid;
+      grid.projector_width_px = patterns.projector_width_px;
+      grid.projector_height_px = patterns.projector_height_px;
+      grid.step_px = step.grid_step_px() > 0 ? step.grid_step_px() : options_.grid_step_px;
+      grid.offset_px = grid.step_px / 2;
+      grid.support_radius_px = std::min(3.0, grid.step_px / 2 - 0.5);
+      struct Decoded {
+        Expected<std::vector<ProjectorGridPoint>> points = std::vector<ProjectorGridPoint>{};
+        CameraDecodeReport report;
+        double cpu_s = 0.0;
+      };
+      node.workers().Run<Decoded>(
+          [captures = std::move(captures), patterns, grid] {
+            Decoded d;
+            const double t0 = ThreadCpuSeconds();
+            d.points = DecodeToProjectorGrid(captures, patterns, grid, &d.report);
+            d.cpu_s = ThreadCpuSeconds() - t0;
+            return d;
+          },
+          [this, from, done, step, &node](Decoded d) mutable {
+            compute_s_ += d.cpu_s;
+            done.set_compute_s(d.cpu_s);
+            if (!d.points.ok()) {
+              done.set_ok(false);
+              done.set_message("unit " + std::to_string(node.id()) + " decoding projector " +
+                               std::to_string(step.projector_id()) + ": " +
+                               d.points.status().message());
+              Answer(from, done, node);
+              return;
+            }
+            wire::Envelope e;
+            wire::CorrespondenceSet* set = e.mutable_correspondence_set();
+            set->set_round(step.round());
+            set->set_camera_id(node.id());
+            set->set_projector_id(step.projector_id());
+            *set->mutable_camera_model() = proto::ToWire(factory_.camera);
+            for (const ProjectorGridPoint& p : *d.points) {
+              set->add_camera_px_xy(p.camera_px.x());
+              set->add_camera_px_xy(p.camera_px.y());
+              set->add_projector_px_xy(p.projector_px.x());
+              set->add_projector_px_xy(p.projector_px.y());
+            }
+            ST_LOG(kInfo) << "self-calibration: projector " << step.projector_id() << " decoded "
+                          << d.report.decode.decoded_pixels << " camera px -> "
+                          << d.points->size() << " grid points (" << d.cpu_s << " s)";
+            Send(step.projector_id(), std::move(e), node);  // to the projecting node only
+            done.set_ok(true);
+            done.set_points(static_cast<uint32_t>(d.points->size()));
+            Answer(from, done, node);
+          });
+      return;
+    }
+    case wire::CALIBRATION_ACTION_LOCAL:
+      pending_local_ = std::make_pair(step, from);
+      pending_local_since_ = std::chrono::steady_clock::now();
+      RunDeferred(node);
+      return;
+    default:
+      return fail("unknown calibration action");
+  }
+}
+
+void SelfCalibrationService::HandleCorrespondences(const wire::CorrespondenceSet& set) {
+  if (set.projector_id() != factory_.unit_id) return;  // not ours
+  if (set.camera_px_xy_size() != set.projector_px_xy_size() || set.camera_px_xy_size() % 2 ||
+      set.camera_px_xy_size() > 2 * kMaxCorrespondencesPerSet) {
+    ST_LOG(kWarning) << "self-calibration: refused a correspondence set from camera "
+                     << set.camera_id() << " (array sizes)";
+    return;
+  }
+  if (set.round() != round_ && round_ != 0) return;
+  received_[set.camera_id()] = set;
+}
+
+void SelfCalibrationService::RunDeferred(NodeRuntime& node) {
+  if (camera_) {
+    while (!deferred_.empty()) {
+      auto [step, from] = deferred_.front();
+      deferred_.pop_front();
+      HandleStep(step, from, node);
+    }
+  }
+  if (pending_local_) {
+    const uint32_t expected = pending_local_->first.frames();  // sets expected (runner knows)
+    const bool waited = std::chrono::steady_clock::now() - pending_local_since_ > kLocalWaitForSets;
+    if (received_.size() >= expected || waited) {
+      auto [step, from] = *pending_local_;
+      pending_local_.reset();
+      RunLocal(step, from, node);
+    }
+  }
+}
+
+void SelfCalibrationService::RunLocal(const wire::CalibrationStep& step, NodeId from,
+                                      NodeRuntime& node) {
+  // Tracks of our projector from every camera's set; factory cameras of the senders.
+  std::map<NodeId, std::vector<ProjectorGridPoint>> by_camera;
+  std::map<NodeId, CameraModel> cameras;
+  cameras[node.id()] = factory_.camera;
+  wire::Envelope e;
+  wire::CalibrationInput* input = e.mutable_calibration_input();
+  input->set_round(step.round());
+  input->set_unit_id(node.id());
+  *input->mutable_camera_model() = proto::ToWire(factory_.camera);
+  *input->mutable_projector_model() = proto::ToWire(factory_.projector);
+  *input->mutable_projector_from_camera() = proto::ToWire(factory_.projector_from_camera);
+  for (const auto& [camera, set] : received_) {
+    Expected<CameraModel> model = proto::FromWire(set.camera_model());
+    if (!model.ok()) {
+      ST_LOG(kWarning) << "self-calibration: camera " << camera
+                       << " sent an invalid model: " << model.status().message();
+      continue;
+    }
+    cameras[camera] = *model;
+    std::vector<ProjectorGridPoint>& points = by_camera[camera];
+    for (int i = 0; i + 1 < set.camera_px_xy_size(); i += 2) {
+      ProjectorGridPoint p;
+      p.camera_px = Eigen::Vector2f(set.camera_px_xy(i), set.camera_px_xy(i + 1));
+      p.projector_px = Eigen::Vector2f(set.projector_px_xy(i), set.projector_px_xy(i + 1));
+      if (!p.camera_px.allFinite() || !p.projector_px.allFinite()) continue;
+      points.push_back(p);
+    }
+    *input->add_correspondences() = set;
+  }
+  received_.clear();
+  UnitModel self{node.id(), factory_.camera, factory_.projector, factory_.projector_from_camera};
+  struct Local {
+    Expected<LocalGeometry> geometry = LocalGeometry{};
+    double cpu_s = 0.0;
+  };
+  node.workers().Run<Local>(
+      [self, cameras, by_camera] {
+        Local l;
+        const double t0 = ThreadCpuSeconds();
+        l.geometry = EstimateLocalGeometry(self, cameras, BuildTracks(self.unit, by_camera));
+        l.cpu_s = ThreadCpuSeconds() - t0;
+        return l;
+      },
+      [this, e = std::move(e), step, from, &node](Local l) mutable {
+        compute_s_ += l.cpu_s;
+        wire::CalibrationInput* input = e.mutable_calibration_input();
+        if (!l.geometry.ok()) {
+          input->set_ok(false);
+          input->set_message(l.geometry.status().message());
+          ST_LOG(kWarning) << "self-calibration: " << l.geometry.status().message();
+        } else {
+          input->set_ok(true);
+          input->set_triangulated(static_cast<uint32_t>(l.geometry->triangulated));
+          for (const auto& [camera, relative] : l.geometry->neighbours) {
+            wire::RelativePose* r = input->add_relative_poses();
+            r->set_camera_id(camera);
+            *r->mutable_camera_from_projector() = proto::ToWire(relative.camera_from_projector);
+            r->set_points(static_cast<uint32_t>(relative.points));
+            r->set_rms_px(relative.rms_px);
+          }
+          for (const std::string& note : l.geometry->notes) {
+            ST_LOG(kInfo) << "self-calibration: " << note;
+          }
+        }
+        Send(from, std::move(e), node);
+        wire::CalibrationStepDone done;
+        done.set_round(step.round());
+        done.set_step(step.step());
+        done.set_ok(true);
+        done.set_compute_s(l.cpu_s);
+        Answer(from, done, node);
+      });
+}
+
+void SelfCalibrationService::HandleResult(const wire::CalibrationResult& result,
+                                          NodeRuntime& node) {
+  if (result.projector_id() != node.id()) return;
+  if (!result.ok()) {
+    ST_LOG(kError) << "self-calibration failed: " << result.message();
+    if (on_failed_) on_failed_(result.message());
+    return;
+  }
+  UnitCalibration c = factory_;
+  c.unit_id = node.id();
+  c.source = kSourceStructuredLight;
+  Expected<CameraModel> projector = proto::FromWire(result.projector_model());
+  Expected<CameraModel> camera = proto::FromWire(result.camera_model());
+  Expected<Rigid3d> projector_from_table = proto::FromWire(result.projector_from_table());
+  Expected<Rigid3d> camera_from_table = proto::FromWire(result.camera_from_table());
+  if (!projector.ok() || !camera.ok() || !projector_from_table.ok() || !camera_from_table.ok()) {
+    ST_LOG(kError) << "self-calibration: the runner's result does not convert";
+    if (on_failed_) on_failed_("invalid result from the runner");
+    return;
+  }
+  c.projector = *projector;
+  c.camera = *camera;
+  c.table_from_projector = projector_from_table->Inverse();
+  c.projector_from_camera = *projector_from_table * camera_from_table->Inverse();
+  c.projector_rms_px = result.reprojection_rms_px();
+  c.camera_rms_px = result.camera_rms_px();
+  if (result.has_table_from_model()) {
+    Expected<Rigid3d> table_from_model = proto::FromWire(result.table_from_model());
+    if (table_from_model.ok()) c.table_from_model = *table_from_model;
+  }
+  SelfCalibrationOutcome outcome;
+  outcome.calibration = c;
+  outcome.report = nlohmann::json::parse(result.report_json(), nullptr, false);
+  if (outcome.report.is_discarded()) outcome.report = nlohmann::json::object();
+  outcome.compute_s = compute_s_;
+  outcome.messages_sent = messages_sent_;
+  outcome.messages_received = messages_received_;
+  outcome.bytes_sent = bytes_sent_;
+  outcome.bytes_received = bytes_received_;
+  calibrated_ = true;
+  ST_LOG(kInfo) << "self-calibration: calibrated (projector rms " << c.projector_rms_px
+                << " px, compute " << compute_s_ << " s)";
+  if (on_calibrated_) on_calibrated_(outcome);
+}
+
+Status SelfCalibrationService::OnStep(NodeRuntime& node) {
+  RunDeferred(node);
+  MaybeStartRound(node);
+  RunnerStep(node);
+  return OkStatus();
+}
+
+}  // namespace sandtable::node

@@ -1,0 +1,141 @@
+// SelfCalibrationService: the node's part in the cluster's structured-light self-calibration
+// (docs/calibration.md), over the peer sockets, with no process outside the nodes deciding.
+//
+// Every node serves the steps of a round: SHOW (black, white or a pattern frame on its
+// projector), CAPTURE (a picture with its camera, kept under a slot; with a reference slot it
+// answers how many pixels are lit against it), DECODE (its captures of one projector's
+// sequence -> projector-grid correspondences, sent to the projecting node, neighbours only),
+// LOCAL (the correspondences of its own projector -> its triangulated footprint and its pose
+// relative to the cameras that share its points, sent to the runner). Device calls and long
+// work run on the node's workers; the network thread never blocks.
+//
+// The runner of a round is the lowest id among the members that have a projector and a
+// camera, once the member list has not changed for `settle` and every member is a linked
+// peer: a rule every node applies to the same member list. It runs the pre-pass (one black
+// reference, then each projector white alone: which cameras see which projectors), colours
+// the conflict graph (schedule.h), plans each projector's patterns from what its cameras
+// resolve (structured_light_plan.h), runs the colour classes' sequences, collects the
+// projecting nodes' inputs, solves the cluster on a worker (cluster_solver.h) and sends each
+// node its CalibrationResult. A node that does not answer a step within step_timeout is left
+// out of the rest of the round (its log line and the report name it); the others finish.
+#pragma once
+
+#include <chrono>
+#include <deque>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+
+#include "common/io/unit_calibration_file.h"
+#include "common/scene/scene.h"
+#include "node/calibration/cluster_solver.h"
+#include "node/calibration/structured_light_plan.h"
+#include "node/devices/camera_input.h"
+#include "node/devices/projector_output.h"
+#include "node/net/node_runtime.h"
+#include "proto/envelope.pb.h"
+
+namespace sandtable::node {
+
+struct SelfCalibrationOptions {
+  std::chrono::milliseconds settle{1500};
+  std::chrono::milliseconds step_timeout{60000};
+  // Modeled device time: frames x (frame period + capture latency). The latency is that of a
+  // hardware-triggered camera whose exposure fits inside the frame period: trigger and readout
+  // overlap beyond the frame, stated as 2 ms.
+  double frame_period_s = 1.0 / 60.0;
+  double capture_latency_s = 0.002;
+  PatternPlanOptions plan;
+  // Cameras other than the projector's own see its footprint obliquely: the plan assumes
+  // they resolve this factor worse than the own camera's measured resolution.
+  double neighbour_resolution_factor = 1.4;
+  int grid_step_px = 16;
+  int lit_threshold = 20;    // 8-bit levels, white - black
+  int min_lit_pixels = 500;  // a camera "sees" a projector above this
+  ClusterSolveOptions solve;
+};
+
+// What a node holds once a round ends, and the figures the lab reports.
+struct SelfCalibrationOutcome {
+  UnitCalibration calibration;
+  nlohmann::json report;  // the runner's cluster report (docs/calibration.md)
+  double compute_s = 0.0;  // this node's thread CPU time in the round
+  uint64_t messages_sent = 0, messages_received = 0;
+  uint64_t bytes_sent = 0, bytes_received = 0;
+};
+
+class SelfCalibrationService : public NodeService {
+ public:
+  using OnCalibrated = std::function<void(const SelfCalibrationOutcome&)>;
+  using OnFailed = std::function<void(const std::string&)>;
+
+  // `factory` is the unit's own factory calibration; `projector` is not owned and must outlive
+  // the service; `model` (may be null) is the glTF model to find on the table.
+  SelfCalibrationService(UnitCalibration factory, ProjectorOutput* projector,
+                         std::shared_ptr<const Scene> model, SelfCalibrationOptions options,
+                         OnCalibrated on_calibrated, OnFailed on_failed);
+  ~SelfCalibrationService() override;
+
+  // The camera, once opened (on a worker at start).
+  void SetCamera(std::unique_ptr<CameraInput> camera);
+
+  const char* name() const override { return "self-calibration"; }
+  bool ServesPeer(wire::Envelope::BodyCase body) const override;
+  void OnPeerMessage(net::Incoming request, NodeRuntime& node) override;
+  Status OnStep(NodeRuntime& node) override;
+
+  bool calibrated() const { return calibrated_; }
+
+ private:
+  struct Runner;  // the runner's state (self_calibration_runner.cc)
+
+  // Node side.
+  void HandleStep(const wire::CalibrationStep& step, NodeId from, NodeRuntime& node);
+  void RunDeferred(NodeRuntime& node);
+  void Answer(NodeId to, wire::CalibrationStepDone done, NodeRuntime& node);
+  void Send(NodeId to, wire::Envelope envelope, NodeRuntime& node);
+  void Deliver(NodeId from, const wire::Envelope& envelope, NodeRuntime& node);
+  void HandleCorrespondences(const wire::CorrespondenceSet& set);
+  void RunLocal(const wire::CalibrationStep& step, NodeId from, NodeRuntime& node);
+  void HandleResult(const wire::CalibrationResult& result, NodeRuntime& node);
+  const std::vector<cv::Mat>* PatternFrames(const wire::PatternPlan& plan);
+
+  // Runner side (self_calibration_runner.cc).
+  void MaybeStartRound(NodeRuntime& node);
+  void RunnerStep(NodeRuntime& node);
+  void RunnerDone(NodeId from, const wire::CalibrationStepDone& done, NodeRuntime& node);
+  void RunnerInput(NodeId from, const wire::CalibrationInput& input, NodeRuntime& node);
+  void StartSolve(NodeRuntime& node);
+  void FinishRound(Expected<ClusterSolution> solution, double solve_cpu_s, NodeRuntime& node);
+
+  UnitCalibration factory_;
+  ProjectorOutput* projector_;
+  std::unique_ptr<CameraInput> camera_;
+  std::shared_ptr<const Scene> model_;
+  SelfCalibrationOptions options_;
+  OnCalibrated on_calibrated_;
+  OnFailed on_failed_;
+
+  // Node side state of the current round.
+  uint64_t round_ = 0;
+  std::map<uint32_t, cv::Mat> slots_;  // captures (8 bit)
+  std::map<std::string, std::vector<cv::Mat>> pattern_cache_;
+  std::map<NodeId, wire::CorrespondenceSet> received_;  // by camera, for own projector
+  std::deque<std::pair<wire::CalibrationStep, NodeId>> deferred_;
+  std::optional<std::pair<wire::CalibrationStep, NodeId>> pending_local_;
+  std::chrono::steady_clock::time_point pending_local_since_{};
+  bool calibrated_ = false;
+  double compute_s_ = 0.0;
+  uint64_t messages_sent_ = 0, messages_received_ = 0, bytes_sent_ = 0, bytes_received_ = 0;
+
+  std::unique_ptr<Runner> runner_;
+};
+
+}  // namespace sandtable::node

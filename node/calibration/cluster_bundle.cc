@@ -1,0 +1,388 @@
+#include "node/calibration/cluster_bundle.h"
+
+#include <cmath>
+#include <ctime>
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+#include "common/estimation/triangulation.h"
+#include "node/calibration/procam_model.h"
+
+namespace sandtable::node {
+namespace {
+
+double ThreadCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+// x_b = R(pose[0..2]) x_a + pose[3..5]
+template <typename T>
+void Transform(const T* pose, const T* x, T* out) {
+  ceres::AngleAxisRotatePoint(pose, x, out);
+  out[0] += pose[3];
+  out[1] += pose[4];
+  out[2] += pose[5];
+}
+
+struct ProjectorCost {
+  Eigen::Vector2d observed_px;
+  double inverse_sigma;
+  template <typename T>
+  bool operator()(const T* pose, const T* k, const T* d, const T* x, T* r) const {
+    T xp[3], px[2];
+    Transform(pose, x, xp);
+    if (!ProjectToPixel(k, d, xp, px)) return false;
+    r[0] = (px[0] - observed_px.x()) * inverse_sigma;
+    r[1] = (px[1] - observed_px.y()) * inverse_sigma;
+    return true;
+  }
+};
+
+struct CameraCost {
+  Eigen::Vector2d observed_px;
+  double inverse_sigma;
+  template <typename T>
+  bool operator()(const T* pose, const T* mount, const T* k, const T* d, const T* x, T* r) const {
+    T xp[3], xc[3], px[2];
+    Transform(pose, x, xp);
+    Transform(mount, xp, xc);
+    if (!ProjectToPixel(k, d, xc, px)) return false;
+    r[0] = (px[0] - observed_px.x()) * inverse_sigma;
+    r[1] = (px[1] - observed_px.y()) * inverse_sigma;
+    return true;
+  }
+};
+
+template <int N>
+struct PriorCost {
+  double mean[N];
+  double inverse_sigma[N];
+  template <typename T>
+  bool operator()(const T* x, T* r) const {
+    for (int i = 0; i < N; ++i) r[i] = (x[i] - mean[i]) * inverse_sigma[i];
+    return true;
+  }
+};
+
+void PoseToArray(const Rigid3d& pose, double* out) {
+  const Eigen::Matrix3d r = pose.RotationMatrix();
+  ceres::RotationMatrixToAngleAxis(ceres::ColumnMajorAdapter3x3(r.data()), out);
+  out[3] = pose.translation.x();
+  out[4] = pose.translation.y();
+  out[5] = pose.translation.z();
+}
+
+Rigid3d PoseFromArray(const double* pose) {
+  Eigen::Matrix3d r;
+  ceres::AngleAxisToRotationMatrix(pose, ceres::ColumnMajorAdapter3x3(r.data()));
+  return Rigid3d(r, Eigen::Vector3d(pose[3], pose[4], pose[5]));
+}
+
+struct UnitBlocks {
+  double pose[6];
+  double mount[6];  // camera_from_projector
+  double pk[4], pd[5], ck[4], cd[5];
+};
+
+void ModelToArrays(const CameraModel& m, double* k, double* d) {
+  k[0] = m.fx_px;
+  k[1] = m.fy_px;
+  k[2] = m.cx_px;
+  k[3] = m.cy_px;
+  const auto a = m.distortion.ToArray();
+  for (int i = 0; i < 5; ++i) d[i] = a[i];
+}
+
+CameraModel ModelFromArrays(const CameraModel& like, const double* k, const double* d) {
+  CameraModel m = like;
+  m.fx_px = k[0];
+  m.fy_px = k[1];
+  m.cx_px = k[2];
+  m.cy_px = k[3];
+  m.distortion = BrownDistortion::FromArray(d);
+  return m;
+}
+
+struct Residual {
+  ceres::ResidualBlockId id = nullptr;
+  NodeId unit = kInvalidNodeId;
+  bool camera = false;
+};
+
+}  // namespace
+
+Status BundleOptions::Check() const {
+  if (!(observation_sigma_px > 0) || !(huber_whitened > 0) || !(outlier_px > 0)) {
+    return InvalidArgumentError("bundle: sigma, huber and outlier thresholds must be > 0");
+  }
+  if (!(prior_focal_relative > 0) || !(prior_principal_point_px > 0) || !(prior_k1 > 0) ||
+      !(prior_k2 > 0) || !(prior_p > 0) || !(prior_k3 > 0) || !(prior_mount_rotation_deg > 0) ||
+      !(prior_mount_translation_m > 0)) {
+    return InvalidArgumentError("bundle: every prior sigma must be > 0");
+  }
+  if (max_iterations < 1 || min_tracks < 1 || rounds < 1) {
+    return InvalidArgumentError("bundle: max_iterations, min_tracks and rounds must be >= 1");
+  }
+  return OkStatus();
+}
+
+Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
+                                     const std::map<NodeId, Rigid3d>& initial_projector_from_world,
+                                     NodeId root, const BundleOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
+  const double cpu_start = ThreadCpuSeconds();
+  std::map<NodeId, UnitBlocks> blocks;
+  for (const auto& [id, unit] : observations.units) {
+    auto pose = initial_projector_from_world.find(id);
+    if (pose == initial_projector_from_world.end()) continue;  // not reached: left out
+    UnitBlocks& b = blocks[id];
+    PoseToArray(pose->second, b.pose);
+    PoseToArray(unit.projector_from_camera.Inverse(), b.mount);
+    ModelToArrays(unit.projector, b.pk, b.pd);
+    ModelToArrays(unit.camera, b.ck, b.cd);
+  }
+  if (!blocks.count(root)) {
+    return InvalidArgumentError("bundle: the root unit " + std::to_string(root) +
+                                " has no initial pose");
+  }
+  const std::map<NodeId, UnitBlocks> factory = blocks;
+
+  BundleResult result;
+  // Triangulate every track from the initial poses.
+  TriangulationOptions triangulation;
+  triangulation.min_angle_deg = 1.0;
+  for (size_t t = 0; t < observations.tracks.size(); ++t) {
+    const Track& track = observations.tracks[t];
+    if (!blocks.count(track.projector_unit)) {
+      ++result.report.tracks_untriangulated;
+      continue;
+    }
+    std::vector<TriangulationView> views;
+    const UnitModel& pu = observations.units.at(track.projector_unit);
+    const Rigid3d projector_from_world = PoseFromArray(blocks[track.projector_unit].pose);
+    views.push_back({pu.projector, projector_from_world, track.projector_px});
+    for (const CameraObservation& o : track.cameras) {
+      if (!blocks.count(o.camera_unit)) continue;
+      const UnitModel& cu = observations.units.at(o.camera_unit);
+      const Rigid3d camera_from_world =
+          cu.projector_from_camera.Inverse() * PoseFromArray(blocks[o.camera_unit].pose);
+      views.push_back({cu.camera, camera_from_world, o.camera_px});
+    }
+    if (views.size() < 2) {
+      ++result.report.tracks_untriangulated;
+      continue;
+    }
+    Expected<TriangulationReport> point = TriangulatePoint(views, triangulation);
+    if (!point.ok() || point->rms_px > 5.0) {
+      ++result.report.tracks_untriangulated;
+      continue;
+    }
+    result.points_in_world.push_back(point->point_in_world);
+    result.point_track.push_back(static_cast<int>(t));
+  }
+  const int n_points = static_cast<int>(result.points_in_world.size());
+  if (n_points < options.min_tracks) {
+    return DegenerateError("bundle: " + std::to_string(n_points) + " tracks triangulate (at least " +
+                           std::to_string(options.min_tracks) + " needed)");
+  }
+  result.report.tracks_used = n_points;
+  std::vector<std::array<double, 3>> points(n_points);
+  for (int i = 0; i < n_points; ++i) {
+    for (int a = 0; a < 3; ++a) points[i][a] = result.points_in_world[i][a];
+  }
+
+  ceres::Problem::Options problem_options;
+  problem_options.enable_fast_removal = true;
+  ceres::Problem problem(problem_options);
+  const double inverse_sigma = 1.0 / options.observation_sigma_px;
+  std::vector<Residual> residuals;
+  auto* loss = new ceres::HuberLoss(options.huber_whitened);
+  for (int i = 0; i < n_points; ++i) {
+    const Track& track = observations.tracks[result.point_track[i]];
+    UnitBlocks& pb = blocks[track.projector_unit];
+    auto* projector_cost = new ceres::AutoDiffCostFunction<ProjectorCost, 2, 6, 4, 5, 3>(
+        new ProjectorCost{track.projector_px, inverse_sigma});
+    residuals.push_back({problem.AddResidualBlock(projector_cost, loss, pb.pose, pb.pk, pb.pd,
+                                                  points[i].data()),
+                         track.projector_unit, false});
+    for (const CameraObservation& o : track.cameras) {
+      auto cb = blocks.find(o.camera_unit);
+      if (cb == blocks.end()) continue;
+      auto* camera_cost = new ceres::AutoDiffCostFunction<CameraCost, 2, 6, 6, 4, 5, 3>(
+          new CameraCost{o.camera_px, inverse_sigma});
+      residuals.push_back({problem.AddResidualBlock(camera_cost, loss, cb->second.pose,
+                                                    cb->second.mount, cb->second.ck, cb->second.cd,
+                                                    points[i].data()),
+                           o.camera_unit, true});
+    }
+  }
+  // Priors and held groups.
+  const double rotation_sigma_rad = options.prior_mount_rotation_deg * M_PI / 180.0;
+  for (auto& [id, b] : blocks) {
+    const UnitBlocks& f = factory.at(id);
+    auto intrinsics_prior = [&](const double* mean) {
+      auto* p = new PriorCost<4>;
+      for (int i = 0; i < 4; ++i) p->mean[i] = mean[i];
+      p->inverse_sigma[0] = 1.0 / (options.prior_focal_relative * mean[0]);
+      p->inverse_sigma[1] = 1.0 / (options.prior_focal_relative * mean[1]);
+      p->inverse_sigma[2] = p->inverse_sigma[3] = 1.0 / options.prior_principal_point_px;
+      return new ceres::AutoDiffCostFunction<PriorCost<4>, 4, 4>(p);
+    };
+    auto distortion_prior = [&](const double* mean) {
+      auto* p = new PriorCost<5>;
+      for (int i = 0; i < 5; ++i) p->mean[i] = mean[i];
+      p->inverse_sigma[0] = 1.0 / options.prior_k1;
+      p->inverse_sigma[1] = 1.0 / options.prior_k2;
+      p->inverse_sigma[2] = p->inverse_sigma[3] = 1.0 / options.prior_p;
+      p->inverse_sigma[4] = 1.0 / options.prior_k3;
+      return new ceres::AutoDiffCostFunction<PriorCost<5>, 5, 5>(p);
+    };
+    auto* mount_prior = new PriorCost<6>;
+    for (int i = 0; i < 6; ++i) mount_prior->mean[i] = f.mount[i];
+    for (int i = 0; i < 3; ++i) mount_prior->inverse_sigma[i] = 1.0 / rotation_sigma_rad;
+    for (int i = 3; i < 6; ++i) {
+      mount_prior->inverse_sigma[i] = 1.0 / options.prior_mount_translation_m;
+    }
+    UnitBundleReport& unit_report = result.report.units[id];
+    const bool has = problem.HasParameterBlock(b.pk);
+    const bool has_camera = problem.HasParameterBlock(b.ck);
+    if (has) {
+      if (options.free_projector_intrinsics) {
+        problem.AddResidualBlock(intrinsics_prior(f.pk), nullptr, b.pk);
+        unit_report.free_parameters.push_back("projector fx fy cx cy");
+      } else {
+        problem.SetParameterBlockConstant(b.pk);
+      }
+      if (options.free_projector_distortion) {
+        problem.AddResidualBlock(distortion_prior(f.pd), nullptr, b.pd);
+        if (!options.free_k3) {
+          problem.SetManifold(b.pd, new ceres::SubsetManifold(5, {4}));
+        }
+        unit_report.free_parameters.push_back(options.free_k3 ? "projector k1 k2 p1 p2 k3"
+                                                              : "projector k1 k2 p1 p2");
+      } else {
+        problem.SetParameterBlockConstant(b.pd);
+      }
+      if (id == root) {
+        problem.SetParameterBlockConstant(b.pose);
+      } else {
+        unit_report.free_parameters.push_back("pose");
+      }
+    }
+    if (has_camera) {
+      if (options.free_camera_intrinsics) {
+        problem.AddResidualBlock(intrinsics_prior(f.ck), nullptr, b.ck);
+        unit_report.free_parameters.push_back("camera fx fy cx cy");
+      } else {
+        problem.SetParameterBlockConstant(b.ck);
+      }
+      if (options.free_camera_distortion) {
+        problem.AddResidualBlock(distortion_prior(f.cd), nullptr, b.cd);
+        if (!options.free_k3) problem.SetManifold(b.cd, new ceres::SubsetManifold(5, {4}));
+        unit_report.free_parameters.push_back(options.free_k3 ? "camera k1 k2 p1 p2 k3"
+                                                              : "camera k1 k2 p1 p2");
+      } else {
+        problem.SetParameterBlockConstant(b.cd);
+      }
+      if (options.free_mounts) {
+        problem.AddResidualBlock(new ceres::AutoDiffCostFunction<PriorCost<6>, 6, 6>(mount_prior),
+                                 nullptr, b.mount);
+        unit_report.free_parameters.push_back("mount");
+      } else {
+        delete mount_prior;
+        problem.SetParameterBlockConstant(b.mount);
+      }
+      if (!has && id == root) problem.SetParameterBlockConstant(b.pose);
+    } else {
+      delete mount_prior;
+    }
+  }
+
+  auto rms_px = [&](bool initial) {
+    double sum = 0.0;
+    int n = 0;
+    for (const Residual& r : residuals) {
+      if (!r.id) continue;
+      double cost = 0.0;
+      double v[2];
+      problem.EvaluateResidualBlock(r.id, /*apply_loss_function=*/false, &cost, v, nullptr);
+      sum += (v[0] * v[0] + v[1] * v[1]);
+      ++n;
+    }
+    (void)initial;
+    return n ? std::sqrt(sum / n) * options.observation_sigma_px : 0.0;
+  };
+  result.report.initial_rms_px = rms_px(true);
+
+  ceres::Solver::Options solver;
+  solver.linear_solver_type = ceres::DENSE_SCHUR;
+  solver.max_num_iterations = options.max_iterations;
+  solver.num_threads = 1;
+  solver.logging_type = ceres::SILENT;
+  solver.function_tolerance = 1e-10;
+  solver.parameter_tolerance = 1e-10;
+  for (int round = 0; round < options.rounds; ++round) {
+    if (round > 0) {
+      // Drop observations the model does not explain.
+      for (Residual& r : residuals) {
+        if (!r.id) continue;
+        double cost = 0.0, v[2];
+        problem.EvaluateResidualBlock(r.id, false, &cost, v, nullptr);
+        if (std::hypot(v[0], v[1]) * options.observation_sigma_px > options.outlier_px) {
+          problem.RemoveResidualBlock(r.id);
+          r.id = nullptr;
+          ++result.report.observations_dropped;
+        }
+      }
+    }
+    ceres::Solver::Summary summary;
+    ceres::Solve(solver, &problem, &summary);
+    result.report.iterations += static_cast<int>(summary.iterations.size());
+    result.report.termination = ceres::TerminationTypeToString(summary.termination_type);
+    if (summary.termination_type == ceres::FAILURE || !summary.IsSolutionUsable()) {
+      return NotConvergedError("bundle: Ceres " + result.report.termination + ": " +
+                               summary.message);
+    }
+  }
+  result.report.final_rms_px = rms_px(false);
+  // Per unit residuals.
+  std::map<NodeId, std::pair<double, int>> projector_sum, camera_sum;
+  for (const Residual& r : residuals) {
+    if (!r.id) continue;
+    double cost = 0.0, v[2];
+    problem.EvaluateResidualBlock(r.id, false, &cost, v, nullptr);
+    auto& s = r.camera ? camera_sum[r.unit] : projector_sum[r.unit];
+    s.first += (v[0] * v[0] + v[1] * v[1]) * options.observation_sigma_px *
+               options.observation_sigma_px;
+    ++s.second;
+  }
+  for (auto& [id, unit_report] : result.report.units) {
+    if (auto it = projector_sum.find(id); it != projector_sum.end() && it->second.second > 0) {
+      unit_report.projector_observations = it->second.second;
+      unit_report.projector_rms_px = std::sqrt(it->second.first / it->second.second);
+    }
+    if (auto it = camera_sum.find(id); it != camera_sum.end() && it->second.second > 0) {
+      unit_report.camera_observations = it->second.second;
+      unit_report.camera_rms_px = std::sqrt(it->second.first / it->second.second);
+    }
+  }
+  for (const auto& [id, b] : blocks) {
+    const UnitModel& in = observations.units.at(id);
+    UnitModel out = in;
+    out.projector = ModelFromArrays(in.projector, b.pk, b.pd);
+    out.camera = ModelFromArrays(in.camera, b.ck, b.cd);
+    out.projector_from_camera = PoseFromArray(b.mount).Inverse();
+    result.units[id] = out;
+    result.projector_from_world[id] = PoseFromArray(b.pose);
+  }
+  for (int i = 0; i < n_points; ++i) {
+    result.points_in_world[i] = Eigen::Vector3d(points[i][0], points[i][1], points[i][2]);
+  }
+  result.report.solve_time_s = ThreadCpuSeconds() - cpu_start;
+  return result;
+}
+
+}  // namespace sandtable::node

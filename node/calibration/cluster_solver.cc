@@ -1,0 +1,143 @@
+#include "node/calibration/cluster_solver.h"
+
+#include <algorithm>
+#include <cmath>
+#include <ctime>
+
+namespace sandtable::node {
+namespace {
+
+double ThreadCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+struct TableFit {
+  Rigid3d table_from_world;
+  TableFrameReport frame;
+  int table_points = 0;
+  double rms_mm = 0.0;
+};
+
+Expected<TableFit> FitTable(const std::vector<Eigen::Vector3d>& points_in_world,
+                            const PlaneFitOptions& options, const Eigen::Vector3d& up_hint) {
+  Expected<PlaneFitReport> plane = FitPlaneRansac(points_in_world, options);
+  if (!plane.ok()) return plane.status();
+  std::vector<Eigen::Vector3d> on_table;
+  for (size_t i = 0; i < points_in_world.size(); ++i) {
+    if (plane->inlier_mask[i]) on_table.push_back(points_in_world[i]);
+  }
+  Expected<TableFrameReport> frame = BuildTableFrame(plane->plane, on_table, up_hint);
+  if (!frame.ok()) return frame.status();
+  TableFit fit;
+  fit.table_from_world = frame->table_from_source;
+  fit.frame = *frame;
+  fit.table_points = plane->num_inliers;
+  fit.rms_mm = plane->rms_m * 1e3;
+  return fit;
+}
+
+}  // namespace
+
+Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& observations,
+                                       const std::map<NodeId, LocalGeometry>& local,
+                                       const Scene* model, const ClusterSolveOptions& options) {
+  const double cpu_start = ThreadCpuSeconds();
+  ClusterSolution out;
+  const std::map<NodeId, Rigid3d> initial = ChainProjectorPoses(root, observations.units, local);
+  for (const auto& [id, unit] : observations.units) {
+    if (!initial.count(id)) {
+      out.notes.push_back("unit " + std::to_string(id) +
+                          ": no pose relative to the cluster (no camera shares enough points "
+                          "with it); left out");
+    }
+  }
+  Expected<BundleResult> bundle = AdjustCluster(observations, initial, root, options.bundle);
+  if (!bundle.ok()) return bundle.status();
+  out.bundle = bundle->report;
+  std::map<NodeId, Rigid3d> projector_from_world = bundle->projector_from_world;
+  std::map<NodeId, UnitModel> units = bundle->units;
+  std::vector<Eigen::Vector3d> points = bundle->points_in_world;
+
+  // The root projector's centre (the world origin) is above the table.
+  Expected<TableFit> table = FitTable(points, options.plane, Eigen::Vector3d::Zero());
+  if (!table.ok()) return DegenerateError("table plane: " + table.status().message());
+  auto to_table = [&](const TableFit& fit) {
+    out.points_in_table_m.clear();
+    for (const Eigen::Vector3d& p : points) out.points_in_table_m.push_back(fit.table_from_world * p);
+  };
+  to_table(*table);
+
+  if (model) {
+    ModelMatcher matcher(*model, options.model);
+    Expected<ModelRegistration> found = matcher.Register(out.points_in_table_m);
+    if (!found.ok()) {
+      out.notes.push_back(found.status().message());
+    } else {
+      double scale = found->scale;
+      if (options.scale_from_model && std::abs(scale - 1.0) <= options.max_scale_correction) {
+        // Lengths / scale: points, projector translations, mount translations.
+        const double k = 1.0 / scale;
+        for (Eigen::Vector3d& p : points) p *= k;
+        for (auto& [id, pose] : projector_from_world) pose.translation *= k;
+        for (auto& [id, unit] : units) unit.projector_from_camera.translation *= k;
+        out.scale_correction = k;
+        table = FitTable(points, options.plane, Eigen::Vector3d::Zero());
+        if (!table.ok()) return DegenerateError("table plane: " + table.status().message());
+        to_table(*table);
+        Expected<ModelRegistration> refined =
+            matcher.Refine(out.points_in_table_m, found->table_from_model, /*scale_free=*/false);
+        if (refined.ok()) {
+          refined->coarse_score = found->coarse_score;
+          refined->candidates_tried = found->candidates_tried;
+          refined->structure_fraction = found->structure_fraction;
+          refined->scale = scale;
+          out.model = *refined;
+        } else {
+          out.notes.push_back(refined.status().message());
+        }
+      } else {
+        if (options.scale_from_model) {
+          out.notes.push_back("model scale " + std::to_string(scale) +
+                              " is too far from 1 to apply; the mounts' scale is kept");
+        }
+        out.model = *found;
+      }
+    }
+  }
+  out.table_from_world = table->table_from_world;
+  out.frame = table->frame;
+  out.table_points = table->table_points;
+  out.table_plane_rms_mm = table->rms_mm;
+  std::vector<double> heights;
+  for (const Eigen::Vector3d& p : out.points_in_table_m) heights.push_back(p.z());
+  if (!heights.empty()) {
+    const size_t k = std::min(heights.size() - 1, static_cast<size_t>(heights.size() * 0.999));
+    std::nth_element(heights.begin(), heights.begin() + static_cast<std::ptrdiff_t>(k),
+                     heights.end());
+    out.max_height_mm = heights[k] * 1e3;
+  }
+  out.planar = out.max_height_mm < options.planar_threshold_mm;
+
+  for (const auto& [id, unit] : units) {
+    UnitCalibration c;
+    c.unit_id = id;
+    c.source = kSourceStructuredLight;
+    c.camera = unit.camera;
+    c.projector = unit.projector;
+    c.projector_from_camera = unit.projector_from_camera;
+    c.table_from_projector = out.table_from_world * projector_from_world.at(id).Inverse();
+    if (out.model) c.table_from_model = out.model->table_from_model;
+    const auto report = out.bundle.units.find(id);
+    if (report != out.bundle.units.end()) {
+      c.camera_rms_px = report->second.camera_rms_px;
+      c.projector_rms_px = report->second.projector_rms_px;
+    }
+    out.calibrations[id] = c;
+  }
+  out.time_s = ThreadCpuSeconds() - cpu_start;
+  return out;
+}
+
+}  // namespace sandtable::node

@@ -1,0 +1,63 @@
+// The cluster's solve, on the node elected to run it (the lowest id of the calibrating
+// members): initial poses chained from the nodes' local geometry, the joint refinement
+// (cluster_bundle.h), the table plane (RANSAC + least squares) and the table frame
+// (docs/frames.md), and the model found on the scanned surface (model_registration.h), whose
+// metric size also fixes the cluster's scale (the mounts' baselines only know it to ~1 %).
+//
+// Output: one UnitCalibration per unit reached (source "structured_light", the refined
+// camera, projector and projector_from_camera, table_from_projector, table_from_model when a
+// model was given and found), and the report of every step.
+// Errors: DEGENERATE when the bundle or the table plane cannot be estimated; a model that is
+// not found is not an error: the solution carries no table_from_model and the note says why.
+#pragma once
+
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "common/base/status.h"
+#include "common/estimation/plane_fit.h"
+#include "common/estimation/table_frame.h"
+#include "common/io/unit_calibration_file.h"
+#include "common/scene/scene.h"
+#include "node/calibration/cluster_bundle.h"
+#include "node/calibration/cluster_initializer.h"
+#include "node/calibration/model_registration.h"
+
+namespace sandtable::node {
+
+struct ClusterSolveOptions {
+  BundleOptions bundle;
+  PlaneFitOptions plane;  // inlier threshold 3 mm by default here (set in the constructor)
+  ModelRegistrationOptions model;
+  bool scale_from_model = true;
+  // A model scale further than this from 1 is not applied (the model is then probably not
+  // the scanned scene, or not in metres): noted, and the mounts' scale is kept.
+  double max_scale_correction = 0.05;
+  // Planar site: every scanned point within this of the table plane (mm).
+  double planar_threshold_mm = 5.0;
+  ClusterSolveOptions() { plane.inlier_threshold_m = 0.003; }
+};
+
+struct ClusterSolution {
+  std::map<NodeId, UnitCalibration> calibrations;
+  Rigid3d table_from_world;
+  BundleReport bundle;
+  int table_points = 0;
+  double table_plane_rms_mm = 0.0;
+  double max_height_mm = 0.0;  // highest scanned point above the table (p99.9, robust)
+  bool planar = false;
+  TableFrameReport frame;
+  std::optional<ModelRegistration> model;
+  double scale_correction = 1.0;  // lengths multiplied by this after the model was found
+  std::vector<Eigen::Vector3d> points_in_table_m;
+  std::vector<std::string> notes;
+  double time_s = 0.0;  // thread CPU time of the whole solve
+};
+
+Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& observations,
+                                       const std::map<NodeId, LocalGeometry>& local,
+                                       const Scene* model, const ClusterSolveOptions& options = {});
+
+}  // namespace sandtable::node

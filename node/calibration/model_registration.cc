@@ -1,0 +1,362 @@
+#include "node/calibration/model_registration.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <Eigen/Dense>
+#include <Eigen/Geometry>
+#include <nanoflann.hpp>
+#include <opencv2/core.hpp>
+
+namespace sandtable::node {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// model_from_table as s R p + t.
+struct Similarity {
+  double s = 1.0;
+  Eigen::Matrix3d r = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  Eigen::Vector3d Apply(const Eigen::Vector3d& p) const { return s * (r * p) + t; }
+};
+
+struct Grid {
+  double min_x = 0, min_y = 0, cell = 0;
+  int width = 0, height = 0;
+  cv::Mat value;  // CV_32F: +1 structure, -1 table, 0 unknown
+};
+
+// Highest z per cell -> +1 / -1 / 0.
+Grid HeightGrid(std::span<const Eigen::Vector3d> points, const Eigen::Matrix3d& rotation,
+                double cell, double structure_height) {
+  Grid g;
+  g.cell = cell;
+  double min_x = std::numeric_limits<double>::infinity(), min_y = min_x, max_x = -min_x,
+         max_y = -min_x;
+  for (const Eigen::Vector3d& p0 : points) {
+    const Eigen::Vector3d p = rotation * p0;
+    min_x = std::min(min_x, p.x());
+    min_y = std::min(min_y, p.y());
+    max_x = std::max(max_x, p.x());
+    max_y = std::max(max_y, p.y());
+  }
+  g.min_x = min_x;
+  g.min_y = min_y;
+  g.width = static_cast<int>(std::floor((max_x - min_x) / cell)) + 1;
+  g.height = static_cast<int>(std::floor((max_y - min_y) / cell)) + 1;
+  cv::Mat top(g.height, g.width, CV_32F, cv::Scalar(-std::numeric_limits<float>::infinity()));
+  for (const Eigen::Vector3d& p0 : points) {
+    const Eigen::Vector3d p = rotation * p0;
+    const int i = std::clamp(static_cast<int>((p.x() - min_x) / cell), 0, g.width - 1);
+    const int j = std::clamp(static_cast<int>((p.y() - min_y) / cell), 0, g.height - 1);
+    float& v = top.at<float>(j, i);
+    v = std::max(v, static_cast<float>(p.z()));
+  }
+  g.value = cv::Mat(g.height, g.width, CV_32F, cv::Scalar(0));
+  for (int j = 0; j < g.height; ++j) {
+    for (int i = 0; i < g.width; ++i) {
+      const float z = top.at<float>(j, i);
+      if (std::isinf(z)) continue;
+      g.value.at<float>(j, i) = z > structure_height ? 1.0f : -1.0f;
+    }
+  }
+  return g;
+}
+
+struct Candidate {
+  double score = 0;
+  double yaw_rad = 0;
+  Similarity model_from_table;
+};
+
+}  // namespace
+
+struct ModelMatcher::Tree {
+  struct Adaptor {
+    const std::vector<Eigen::Vector3d>* points;
+    size_t kdtree_get_point_count() const { return points->size(); }
+    double kdtree_get_pt(size_t i, size_t d) const { return (*points)[i][static_cast<int>(d)]; }
+    template <class Box>
+    bool kdtree_get_bbox(Box&) const {
+      return false;
+    }
+  };
+  using Index = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, Adaptor>,
+                                                    Adaptor, 3, size_t>;
+  Adaptor adaptor;
+  std::unique_ptr<Index> index;
+  size_t Nearest(const Eigen::Vector3d& q, double* distance_sq) const {
+    size_t i = 0;
+    *distance_sq = std::numeric_limits<double>::infinity();
+    index->knnSearch(q.data(), 1, &i, distance_sq);
+    return i;
+  }
+};
+
+Status ModelRegistrationOptions::Check() const {
+  if (!(structure_height_m > 0) || !(coarse_cell_m > 0) || !(coarse_yaw_step_deg > 0) ||
+      !(sample_spacing_m > 0) || !(icp_max_distance_m > 0)) {
+    return InvalidArgumentError("model registration: heights, cells, steps must be > 0");
+  }
+  if (coarse_candidates < 1 || icp_iterations < 1 || min_points < 3 ||
+      !(min_inlier_fraction > 0 && min_inlier_fraction <= 1)) {
+    return InvalidArgumentError("model registration: counts >= 1, inlier fraction in (0, 1]");
+  }
+  return OkStatus();
+}
+
+ModelSurface SampleModelSurface(const Scene& model, double spacing_m) {
+  ModelSurface out;
+  for (int t = 0; t < model.NumTriangles(); ++t) {
+    const Eigen::Vector3i& tri = model.triangles[t];
+    const Eigen::Vector3d a = model.positions_in_table_m[tri[0]].cast<double>();
+    const Eigen::Vector3d b = model.positions_in_table_m[tri[1]].cast<double>();
+    const Eigen::Vector3d c = model.positions_in_table_m[tri[2]].cast<double>();
+    const Eigen::Vector3d n = model.FaceNormal(t);
+    if (n.squaredNorm() < 0.5) continue;  // degenerate
+    const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+    const int k = std::max(1, static_cast<int>(std::ceil(longest / spacing_m)));
+    // Centroids of the k^2 sub-triangles of a regular subdivision.
+    for (int i = 0; i < k; ++i) {
+      for (int j = 0; i + j < k; ++j) {
+        for (int up = 0; up < 2; ++up) {
+          if (up == 1 && i + j + 1 >= k) continue;
+          const double u = up == 0 ? (i + 1.0 / 3.0) / k : (i + 2.0 / 3.0) / k;
+          const double v = up == 0 ? (j + 1.0 / 3.0) / k : (j + 2.0 / 3.0) / k;
+          out.points_m.push_back(a + u * (b - a) + v * (c - a));
+          out.normals.push_back(n);
+          out.triangle.push_back(t);
+        }
+      }
+    }
+  }
+  return out;
+}
+
+ModelMatcher::ModelMatcher(const Scene& model, const ModelRegistrationOptions& options)
+    : options_(options),
+      surface_(SampleModelSurface(model, options.sample_spacing_m)),
+      tree_(std::make_unique<Tree>()) {
+  tree_->adaptor.points = &surface_.points_m;
+  tree_->index = std::make_unique<Tree::Index>(3, tree_->adaptor,
+                                               nanoflann::KDTreeSingleIndexAdaptorParams(16));
+  tree_->index->buildIndex();
+}
+
+ModelMatcher::~ModelMatcher() = default;
+
+double ModelMatcher::DistanceToModel_m(const Eigen::Vector3d& point_in_model_m) const {
+  if (surface_.points_m.empty()) return std::numeric_limits<double>::infinity();
+  double d2 = 0;
+  tree_->Nearest(point_in_model_m, &d2);
+  return std::sqrt(d2);
+}
+
+namespace {
+
+struct IcpOutcome {
+  Similarity model_from_table;
+  double rms_m = 0;
+  int inliers = 0;
+};
+
+}  // namespace
+
+static IcpOutcome RunIcp(const ModelMatcher::Tree& tree, const ModelSurface& surface,
+                         std::span<const Eigen::Vector3d> scan, Similarity x, bool scale_free,
+                         int iterations, double final_distance_m) {
+  IcpOutcome out;
+  const int n = static_cast<int>(scan.size());
+  for (int it = 0; it < iterations; ++it) {
+    // Wide pairing first (the coarse grid's resolution), then the final gate.
+    const double gate = it < iterations / 3 ? 3.0 * final_distance_m
+                                            : (it < 2 * iterations / 3 ? 1.5 * final_distance_m
+                                                                       : final_distance_m);
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    for (int i = 0; i < n; ++i) centre += x.Apply(scan[i]);
+    centre /= std::max(1, n);
+    Eigen::Matrix<double, 7, 7> a = Eigen::Matrix<double, 7, 7>::Zero();
+    Eigen::Matrix<double, 7, 1> b = Eigen::Matrix<double, 7, 1>::Zero();
+    double sum_sq = 0;
+    int inliers = 0;
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector3d p = x.Apply(scan[i]);
+      double d2 = 0;
+      const size_t k = tree.Nearest(p, &d2);
+      if (d2 > gate * gate) continue;
+      const Eigen::Vector3d& q = surface.points_m[k];
+      const Eigen::Vector3d& nq = surface.normals[k];
+      const double r = nq.dot(p - q);
+      Eigen::Matrix<double, 7, 1> j;
+      j.head<3>() = p.cross(nq);
+      j.segment<3>(3) = nq;
+      j[6] = scale_free ? nq.dot(p - centre) : 0.0;
+      a += j * j.transpose();
+      b -= j * r;
+      sum_sq += r * r;
+      ++inliers;
+    }
+    out.inliers = inliers;
+    out.rms_m = inliers ? std::sqrt(sum_sq / inliers) : std::numeric_limits<double>::infinity();
+    if (inliers < 10) break;
+    if (!scale_free) a(6, 6) = 1.0;
+    const Eigen::Matrix<double, 7, 1> d = a.ldlt().solve(b);
+    if (!d.allFinite()) break;
+    const Eigen::Vector3d w = d.head<3>();
+    const Eigen::Matrix3d rw =
+        w.norm() > 0 ? Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix()
+                     : Eigen::Matrix3d::Identity();
+    const double ds = scale_free ? d[6] : 0.0;
+    x.s *= (1.0 + ds);
+    x.r = rw * x.r;
+    x.t = rw * ((1.0 + ds) * (x.t - centre) + centre) + d.segment<3>(3);
+    Eigen::JacobiSVD<Eigen::Matrix3d> svd(x.r, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    x.r = svd.matrixU() * svd.matrixV().transpose();
+    if (d.norm() < 1e-10) break;
+  }
+  out.model_from_table = x;
+  return out;
+}
+
+Expected<ModelRegistration> ModelMatcher::Refine(std::span<const Eigen::Vector3d> scan,
+                                                 const Rigid3d& table_from_model,
+                                                 bool scale_free) const {
+  if (static_cast<int>(scan.size()) < options_.min_points) {
+    return DegenerateError("model registration: " + std::to_string(scan.size()) +
+                           " scanned points (at least " + std::to_string(options_.min_points) +
+                           ")");
+  }
+  const Rigid3d model_from_table = table_from_model.Inverse();
+  Similarity x;
+  x.r = model_from_table.RotationMatrix();
+  x.t = model_from_table.translation;
+  IcpOutcome icp = RunIcp(*tree_, surface_, scan, x, scale_free, options_.icp_iterations,
+                          options_.icp_max_distance_m);
+  ModelRegistration out;
+  out.scale = 1.0 / icp.model_from_table.s;
+  // table = (1/s) R^T (model - t): rigid part of the inverse with the scale taken out.
+  const Eigen::Matrix3d rt = icp.model_from_table.r.transpose();
+  out.table_from_model = Rigid3d(rt, -rt * icp.model_from_table.t);
+  out.rms_m = icp.rms_m;
+  out.inliers = icp.inliers;
+  out.points = static_cast<int>(scan.size());
+  return out;
+}
+
+Expected<ModelRegistration> ModelMatcher::Register(std::span<const Eigen::Vector3d> scan) const {
+  ST_RETURN_IF_ERROR(options_.Check());
+  const int n = static_cast<int>(scan.size());
+  if (n < options_.min_points) {
+    return DegenerateError("model registration: " + std::to_string(n) +
+                           " scanned points (at least " + std::to_string(options_.min_points) +
+                           ")");
+  }
+  if (surface_.points_m.empty()) return DegenerateError("model registration: the model is empty");
+  int structure = 0;
+  for (const Eigen::Vector3d& p : scan) structure += p.z() > options_.structure_height_m;
+  const Grid model_grid = HeightGrid(surface_.points_m, Eigen::Matrix3d::Identity(),
+                                     options_.coarse_cell_m, options_.structure_height_m);
+  // FFT of the model map, padded for every scan map (sizes bounded by the two extents).
+  const int pad_w = cv::getOptimalDFTSize(2 * model_grid.width + 8);
+  const int pad_h = cv::getOptimalDFTSize(2 * model_grid.height + 8);
+  cv::Mat model_padded(pad_h, pad_w, CV_32F, cv::Scalar(0));
+  model_grid.value.copyTo(model_padded(cv::Rect(0, 0, model_grid.width, model_grid.height)));
+  cv::Mat model_spectrum;
+  cv::dft(model_padded, model_spectrum, cv::DFT_COMPLEX_OUTPUT);
+
+  std::vector<Candidate> per_yaw;
+  const int steps = std::max(1, static_cast<int>(std::round(360.0 / options_.coarse_yaw_step_deg)));
+  for (int s = 0; s < steps; ++s) {
+    const double yaw = 2.0 * kPi * s / steps;
+    const Eigen::Matrix3d rz = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    const Grid scan_grid =
+        HeightGrid(scan, rz, options_.coarse_cell_m, options_.structure_height_m);
+    if (scan_grid.width > pad_w || scan_grid.height > pad_h) continue;
+    cv::Mat scan_padded(pad_h, pad_w, CV_32F, cv::Scalar(0));
+    scan_grid.value.copyTo(scan_padded(cv::Rect(0, 0, scan_grid.width, scan_grid.height)));
+    cv::Mat scan_spectrum, product, correlation;
+    cv::dft(scan_padded, scan_spectrum, cv::DFT_COMPLEX_OUTPUT);
+    cv::mulSpectrums(model_spectrum, scan_spectrum, product, 0, /*conjB=*/true);
+    cv::idft(product, correlation, cv::DFT_REAL_OUTPUT | cv::DFT_SCALE);
+    double best = 0;
+    cv::Point at;
+    cv::minMaxLoc(correlation, nullptr, &best, nullptr, &at);
+    // Index k (wrapped): model cell = scan cell + k.
+    const int kx = at.x > pad_w / 2 ? at.x - pad_w : at.x;
+    const int ky = at.y > pad_h / 2 ? at.y - pad_h : at.y;
+    Candidate c;
+    c.score = best / std::max(1.0, cv::countNonZero(scan_grid.value) * 1.0);
+    c.yaw_rad = yaw;
+    c.model_from_table.r = rz;
+    // Cell centres: scan cell i covers [min + i c, min + (i+1) c); model cell i + k.
+    c.model_from_table.t =
+        Eigen::Vector3d(model_grid.min_x - scan_grid.min_x + kx * options_.coarse_cell_m,
+                        model_grid.min_y - scan_grid.min_y + ky * options_.coarse_cell_m, 0.0);
+    per_yaw.push_back(c);
+  }
+  std::sort(per_yaw.begin(), per_yaw.end(),
+            [](const Candidate& a, const Candidate& b) { return a.score > b.score; });
+  std::vector<Candidate> chosen;
+  for (const Candidate& c : per_yaw) {
+    bool near = false;
+    for (const Candidate& k : chosen) {
+      double d = std::abs(c.yaw_rad - k.yaw_rad);
+      d = std::min(d, 2 * kPi - d);
+      near |= d < 2.5 * options_.coarse_yaw_step_deg * kPi / 180.0;
+    }
+    if (!near) chosen.push_back(c);
+    if (static_cast<int>(chosen.size()) >= options_.coarse_candidates) break;
+  }
+  // ICP on a subsample (every k-th point, at most ~20 000) per candidate, then all points.
+  std::vector<Eigen::Vector3d> subsample;
+  const int stride = std::max(1, n / 20000);
+  for (int i = 0; i < n; i += stride) subsample.push_back(scan[i]);
+  std::optional<IcpOutcome> best;
+  double best_score = 0;
+  int tried = 0;
+  for (const Candidate& c : chosen) {
+    ++tried;
+    IcpOutcome icp = RunIcp(*tree_, surface_, subsample, c.model_from_table, false,
+                            options_.icp_iterations, options_.icp_max_distance_m);
+    // Higher inlier fraction first, then lower rms.
+    const double score = icp.inliers / static_cast<double>(subsample.size()) -
+                         icp.rms_m / options_.icp_max_distance_m * 0.01;
+    if (!best || score > best_score) {
+      best = icp;
+      best_score = score;
+    }
+  }
+  if (!best ||
+      best->inliers < options_.min_inlier_fraction * static_cast<double>(subsample.size())) {
+    return NotFoundError(
+        "model registration: the model does not match the scanned surface (best candidate: " +
+        std::to_string(best ? best->inliers : 0) + " of " + std::to_string(subsample.size()) +
+        " points within " + std::to_string(options_.icp_max_distance_m * 1e3) + " mm)");
+  }
+  IcpOutcome fine = RunIcp(*tree_, surface_, scan, best->model_from_table,
+                           options_.estimate_scale, options_.icp_iterations,
+                           options_.icp_max_distance_m);
+  ModelRegistration out;
+  out.scale = 1.0 / fine.model_from_table.s;
+  const Eigen::Matrix3d rt = fine.model_from_table.r.transpose();
+  out.table_from_model = Rigid3d(rt, -rt * fine.model_from_table.t);
+  out.rms_m = fine.rms_m;
+  out.inliers = fine.inliers;
+  out.points = n;
+  out.coarse_score = chosen.empty() ? 0.0 : chosen.front().score;
+  out.candidates_tried = tried;
+  out.structure_fraction = static_cast<double>(structure) / n;
+  return out;
+}
+
+Expected<ModelRegistration> RegisterModel(const Scene& model,
+                                          std::span<const Eigen::Vector3d> scan_in_table_m,
+                                          const ModelRegistrationOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
+  ModelMatcher matcher(model, options);
+  return matcher.Register(scan_in_table_m);
+}
+
+}  // namespace sandtable::node

@@ -1,0 +1,100 @@
+// Finding the glTF model on the scanned table: table_from_model from the scanned surface points
+// alone (no guide lines, no initial placement), then what does not match.
+//
+// Inputs: the model (common/scene Scene, in its own frame: the loader's z-up table convention,
+// the table top at z = 0 of the MODEL, placement on the real table unknown) and the scanned
+// surface points in the cluster's table frame (z = 0 the fitted table plane, metres).
+// Method:
+//   1. Both become height maps on a grid of coarse_cell_m: the model's highest sampled surface
+//      per cell, the scan's highest point per cell. A cell is "structure" (+1) above
+//      structure_height_m and "table" (-1) below it; model cells outside the model and scan
+//      cells with no point are 0 (unknown).
+//   2. Coarse search over yaw (coarse_yaw_step_deg, all of 360 degrees) and x, y: for each yaw
+//      the scan map is rotated and cross-correlated with the model map by FFT (cv::dft); the
+//      score counts agreeing cells minus disagreeing ones. The best few peaks are kept.
+//   3. Each candidate is refined by point-to-plane ICP (model surface sampled every
+//      sample_spacing_m, a nanoflann k-d tree; pairs farther than icp_max_distance_m are
+//      dropped), first with a scale factor free (estimate_scale: the model is metric, the scan's
+//      scale is only as good as the units' mount baselines), then rigid. The candidate with the
+//      lowest trimmed rms wins.
+// Output: table_from_model (rigid), scale (scan length / model length), rms, inlier counts.
+// Errors: DEGENERATE when the scan has fewer than min_points points or shows no structure and
+// the model has some (nothing to register x, y and yaw on), NOT_FOUND when no candidate reaches
+// min_inlier_fraction of the scan within icp_max_distance_m ("the model does not match").
+// Cost: O(yaw steps x G log G) for G grid cells, plus O(iterations x N log M) for ICP.
+#pragma once
+
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "common/base/status.h"
+#include "common/geometry/rigid3.h"
+#include "common/scene/scene.h"
+
+namespace sandtable::node {
+
+struct ModelRegistrationOptions {
+  double structure_height_m = 0.005;
+  double coarse_cell_m = 0.02;
+  double coarse_yaw_step_deg = 3.0;
+  int coarse_candidates = 4;
+  double sample_spacing_m = 0.003;
+  int icp_iterations = 40;
+  double icp_max_distance_m = 0.01;
+  double min_inlier_fraction = 0.5;
+  bool estimate_scale = true;
+  int min_points = 100;
+  Status Check() const;
+};
+
+struct ModelRegistration {
+  Rigid3d table_from_model;
+  double scale = 1.0;             // scan = scale * (table_from_model * model), before rescaling
+  double rms_m = 0.0;             // point-to-plane rms of the inliers, final (rigid) fit
+  int inliers = 0, points = 0;
+  double coarse_score = 0.0;      // fraction of the best correlation's possible agreement
+  int candidates_tried = 0;
+  double structure_fraction = 0.0;  // scan points above structure_height_m
+};
+
+// The model's surface sampled for ICP: points and unit normals in the model frame.
+struct ModelSurface {
+  std::vector<Eigen::Vector3d> points_m;
+  std::vector<Eigen::Vector3d> normals;
+  std::vector<int> triangle;  // the triangle each sample came from
+};
+ModelSurface SampleModelSurface(const Scene& model, double spacing_m);
+
+// The model's sampled surface and its k-d tree, built once; Register() runs steps 1-3,
+// Refine() step 3 alone from a given placement (rigid when scale_free is false).
+class ModelMatcher {
+ public:
+  ModelMatcher(const Scene& model, const ModelRegistrationOptions& options);
+  ~ModelMatcher();
+  ModelMatcher(const ModelMatcher&) = delete;
+  ModelMatcher& operator=(const ModelMatcher&) = delete;
+
+  Expected<ModelRegistration> Register(std::span<const Eigen::Vector3d> scan_in_table_m) const;
+  Expected<ModelRegistration> Refine(std::span<const Eigen::Vector3d> scan_in_table_m,
+                                     const Rigid3d& table_from_model, bool scale_free) const;
+  // Distance from a point in the model frame to the nearest surface sample, m.
+  double DistanceToModel_m(const Eigen::Vector3d& point_in_model_m) const;
+  const ModelSurface& surface() const { return surface_; }
+
+  struct Tree;  // the k-d tree (nanoflann), defined in the .cc
+
+ private:
+  ModelRegistrationOptions options_;
+  ModelSurface surface_;
+  std::unique_ptr<Tree> tree_;
+};
+
+Expected<ModelRegistration> RegisterModel(const Scene& model,
+                                          std::span<const Eigen::Vector3d> scan_in_table_m,
+                                          const ModelRegistrationOptions& options = {});
+
+}  // namespace sandtable::node

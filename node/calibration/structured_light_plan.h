@@ -1,0 +1,62 @@
+// What a node projects and how a camera node turns what it captured into correspondences, for
+// the cluster self-calibration (docs/calibration.md).
+//
+// Pattern plan: Gray code + phase shift (common/structured_light/pattern_sequence.h). The
+// finest Gray stripes the cameras can still resolve set how many least significant Gray bits
+// are left out: a Gray cell of 2^skip projector px must cover at least
+// min_gray_cell_camera_px camera pixels of the coarsest camera that sees the footprint
+// (projector_px_per_camera_px, measured in the overlap pre-pass); the phase shift, of period
+// phase_period_cells cells, resolves the rest. Frames per projector:
+//   2 (white, black) + 2 (B_u - skip) + 2 (B_v - skip) + 2 N       (B: Gray bits, N: steps)
+// Camera side: captures (8 or 16 bit; 16-bit images are scaled to 8 bits by their bit depth)
+// -> DecodeStructuredLight -> SampleProjectorGrid.
+#pragma once
+
+#include <map>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "common/base/status.h"
+#include "common/structured_light/decoder.h"
+#include "common/structured_light/pattern_sequence.h"
+#include "common/structured_light/projector_grid.h"
+#include "node/calibration/cluster_problem.h"
+
+namespace sandtable::node {
+
+struct PatternPlanOptions {
+  double min_gray_cell_camera_px = 4.0;
+  int phase_steps = 8;
+  int phase_period_cells = 2;  // P = this x the Gray cell
+  int max_gray_lsb_skip = 7;
+  Status Check() const;
+};
+
+PatternOptions PlanPatterns(int projector_width_px, int projector_height_px,
+                            double projector_px_per_camera_px, const PatternPlanOptions& options);
+
+// The decoder's options for a plan (thresholds for 8-bit captures).
+DecoderOptions DecoderOptionsFor(const PatternOptions& patterns);
+
+// 8-bit view of a capture: CV_8UC1 as is, CV_16UC1 scaled by 255 / (2^bit_depth - 1).
+cv::Mat To8Bit(const cv::Mat& capture, int bit_depth);
+
+struct CameraDecodeReport {
+  DecodeReport decode;
+  ProjectorGridReport grid;
+};
+
+Expected<std::vector<ProjectorGridPoint>> DecodeToProjectorGrid(
+    const std::vector<cv::Mat>& captures_8bit, const PatternOptions& patterns,
+    const ProjectorGridOptions& grid, CameraDecodeReport* report = nullptr);
+
+// Tracks of one projector from the grid points each camera decoded (keyed by grid node).
+std::vector<Track> BuildTracks(NodeId projector_unit,
+                               const std::map<NodeId, std::vector<ProjectorGridPoint>>& by_camera);
+
+// Lit pixels of a white-minus-black difference (pre-pass): pixels with white - black above
+// threshold (8-bit levels).
+int CountLitPixels(const cv::Mat& white_8bit, const cv::Mat& black_8bit, int threshold);
+
+}  // namespace sandtable::node

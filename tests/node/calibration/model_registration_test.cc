@@ -1,0 +1,95 @@
+// Finding the model on the scanned table: a scan of the procedural scene, moved by a known
+// placement, is registered back; a scan of another scene is refused.
+#include "node/calibration/model_registration.h"
+
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "common/scene/procedural_scene.h"
+
+namespace sandtable::node {
+namespace {
+
+constexpr double kPlacementTolerance_mm = 0.3;
+constexpr double kAngleTolerance_deg = 0.05;
+constexpr double kPi = 3.14159265358979323846;
+
+Scene SandtableScene(uint64_t seed) {
+  ProceduralSceneOptions o;
+  o.seed = seed;
+  return MakeProceduralScene(o)->scene;
+}
+
+// A scan: surface samples of `scene` seen from above (z-facing or walls), in a disc of radius
+// `radius_m` about `centre`, in the table frame x_table = table_from_model * x_model, with
+// Gaussian noise of sigma_m per axis.
+std::vector<Eigen::Vector3d> Scan(const Scene& scene, const Rigid3d& table_from_model,
+                                  const Eigen::Vector2d& centre, double radius_m, double sigma_m,
+                                  uint64_t seed) {
+  const ModelSurface surface = SampleModelSurface(scene, 0.004);
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> n(0.0, sigma_m);
+  std::vector<Eigen::Vector3d> out;
+  for (size_t i = 0; i < surface.points_m.size(); ++i) {
+    const Eigen::Vector3d& p = surface.points_m[i];
+    if ((p.head<2>() - centre).norm() > radius_m) continue;
+    if (surface.normals[i].z() < -0.1) continue;  // faces down: never seen from above
+    out.push_back(table_from_model * p + Eigen::Vector3d(n(rng), n(rng), n(rng)));
+  }
+  return out;
+}
+
+TEST(ModelRegistration, FindsAnUnknownPlacementWithoutAGuess) {
+  const Scene scene = SandtableScene(1);
+  // The table frame of a cluster is where its rule put it: any yaw, any offset in the plane.
+  const Rigid3d table_from_model(
+      Eigen::AngleAxisd(37.0 * kPi / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
+      Eigen::Vector3d(0.71, 0.64, 0.0));
+  const std::vector<Eigen::Vector3d> scan =
+      Scan(scene, table_from_model, Eigen::Vector2d(0.05, -0.02), 0.55, 0.0003, 2);
+  ModelRegistrationOptions options;
+  options.estimate_scale = false;
+  Expected<ModelRegistration> found = RegisterModel(scene, scan, options);
+  ASSERT_TRUE(found.ok()) << found.status().ToString();
+  const Rigid3d error = table_from_model.Inverse() * found->table_from_model;
+  EXPECT_LT(error.translation.norm() * 1e3, kPlacementTolerance_mm);
+  EXPECT_LT(Eigen::AngleAxisd(error.rotation).angle() * 180.0 / kPi, kAngleTolerance_deg);
+  EXPECT_GT(found->inliers, static_cast<int>(0.9 * scan.size()));
+}
+
+TEST(ModelRegistration, RecoversTheScanScale) {
+  const Scene scene = SandtableScene(1);
+  const Rigid3d table_from_model(
+      Eigen::AngleAxisd(-80.0 * kPi / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
+      Eigen::Vector3d(0.2, 0.9, 0.0));
+  std::vector<Eigen::Vector3d> scan =
+      Scan(scene, table_from_model, Eigen::Vector2d(0.0, 0.0), 0.6, 0.0003, 3);
+  const double scale = 1.006;  // the mounts' baselines off by 0.6 %
+  for (Eigen::Vector3d& p : scan) p *= scale;
+  Expected<ModelRegistration> found = RegisterModel(scene, scan);
+  ASSERT_TRUE(found.ok()) << found.status().ToString();
+  EXPECT_NEAR(found->scale, scale, 2e-4);
+}
+
+TEST(ModelRegistration, RefusesAModelThatIsNotOnTheTable) {
+  const Scene scene = SandtableScene(1);
+  const Scene other = SandtableScene(99);  // another layout of buildings
+  std::vector<Eigen::Vector3d> scan =
+      Scan(other, Rigid3d::Identity(), Eigen::Vector2d(0, 0), 0.6, 0.0003, 4);
+  // Keep the buildings only (a table alone matches any model).
+  std::vector<Eigen::Vector3d> buildings;
+  for (const Eigen::Vector3d& p : scan) {
+    if (p.z() > 0.01) buildings.push_back(p);
+  }
+  ModelRegistrationOptions options;
+  options.min_inlier_fraction = 0.8;
+  options.icp_max_distance_m = 0.003;
+  Expected<ModelRegistration> found = RegisterModel(scene, buildings, options);
+  EXPECT_FALSE(found.ok());
+  EXPECT_EQ(found.status().code(), StatusCode::kNotFound) << found.status().ToString();
+}
+
+}  // namespace
+}  // namespace sandtable::node

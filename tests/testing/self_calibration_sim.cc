@@ -1,0 +1,174 @@
+#include "tests/testing/self_calibration_sim.h"
+
+#include <cmath>
+#include <ctime>
+
+#include "sim/transport/world.h"
+
+namespace sandtable::testing {
+namespace {
+
+double ThreadCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+}  // namespace
+
+Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Scene& scene,
+                                                 const SimCalibrationOptions& options) {
+  Expected<std::unique_ptr<sim::World>> created = sim::World::Create(site, scene);
+  if (!created.ok()) return created.status();
+  sim::World& world = **created;
+  SimCalibrationResult result;
+  node::ClusterObservations observations;
+  for (const sim::UnitSpec& unit : site.units) {
+    Expected<sim::FactoryCalibration> factory =
+        sim::MakeFactoryCalibration(unit, options.factory_error, options.seed);
+    if (!factory.ok()) return factory.status();
+    observations.units[unit.id] = {unit.id, factory->camera, factory->projector,
+                                   factory->projector_from_camera};
+  }
+  uint64_t capture_index = 0;
+  auto capture = [&](NodeId camera) -> Expected<cv::Mat> {
+    sim::CaptureNoise noise{.enabled = options.noise,
+                            .seed = options.seed * 1000003ull + (capture_index++)};
+    Expected<cv::Mat> image = world.Capture(camera, noise);
+    if (!image.ok()) return image.status();
+    const sim::UnitSpec* unit = site.FindUnit(camera);
+    return node::To8Bit(*image, unit->camera->bit_depth).clone();
+  };
+  // Pre-pass: black reference, then each projector white alone.
+  std::map<NodeId, cv::Mat> black;
+  for (const sim::UnitSpec& u : site.units) ST_RETURN_IF_ERROR(world.SetProjectorUniform(u.id, 0));
+  for (const sim::UnitSpec& u : site.units) {
+    Expected<cv::Mat> b = capture(u.id);
+    if (!b.ok()) return b.status();
+    black[u.id] = *b;
+  }
+  std::map<NodeId, std::vector<NodeId>> cameras_seeing;  // projector -> cameras
+  for (const sim::UnitSpec& p : site.units) {
+    ST_RETURN_IF_ERROR(world.SetProjectorUniform(p.id, 255));
+    for (const sim::UnitSpec& c : site.units) {
+      Expected<cv::Mat> w = capture(c.id);
+      if (!w.ok()) return w.status();
+      const int lit = node::CountLitPixels(*w, black[c.id], 20);
+      if (lit > 500) cameras_seeing[p.id].push_back(c.id);
+      if (c.id == p.id && lit > 0) {
+        result.projector_px_per_camera_px[p.id] = std::sqrt(
+            static_cast<double>(p.projector.model.width_px) * p.projector.model.height_px / lit);
+      }
+    }
+    ST_RETURN_IF_ERROR(world.SetProjectorUniform(p.id, 0));
+  }
+  // Sequences, one projector at a time (the distributed service runs a colour class at once;
+  // the captures are the same).
+  for (const sim::UnitSpec& p : site.units) {
+    const double ratio = result.projector_px_per_camera_px.count(p.id)
+                             ? result.projector_px_per_camera_px[p.id]
+                             : 2.0;
+    const PatternOptions patterns =
+        node::PlanPatterns(p.projector.model.width_px, p.projector.model.height_px,
+                           ratio * 1.4, options.plan);
+    Expected<std::vector<cv::Mat>> frames = GeneratePatterns(patterns);
+    if (!frames.ok()) return frames.status();
+    result.frames_per_projector[p.id] = static_cast<int>(frames->size());
+    std::map<NodeId, std::vector<cv::Mat>> captures;
+    for (const cv::Mat& frame : *frames) {
+      ST_RETURN_IF_ERROR(world.SetProjectorFrame(p.id, frame));
+      for (NodeId c : cameras_seeing[p.id]) {
+        Expected<cv::Mat> image = capture(c);
+        if (!image.ok()) return image.status();
+        captures[c].push_back(*image);
+      }
+    }
+    ST_RETURN_IF_ERROR(world.SetProjectorUniform(p.id, 0));
+    ProjectorGridOptions grid = options.grid;
+    grid.projector_width_px = p.projector.model.width_px;
+    grid.projector_height_px = p.projector.model.height_px;
+    std::map<NodeId, std::vector<ProjectorGridPoint>> by_camera;
+    for (auto& [c, images] : captures) {
+      const double t0 = ThreadCpuSeconds();
+      Expected<std::vector<ProjectorGridPoint>> points =
+          node::DecodeToProjectorGrid(images, patterns, grid);
+      result.decode_cpu_s += ThreadCpuSeconds() - t0;
+      if (!points.ok()) return points.status();
+      by_camera[c] = std::move(*points);
+    }
+    std::vector<node::Track> tracks = node::BuildTracks(p.id, by_camera);
+    result.tracks += static_cast<int>(tracks.size());
+    observations.tracks.insert(observations.tracks.end(), tracks.begin(), tracks.end());
+  }
+  // Local geometry per node.
+  std::map<NodeId, CameraModel> cameras;
+  for (const auto& [id, unit] : observations.units) cameras[id] = unit.camera;
+  std::map<NodeId, node::LocalGeometry> local;
+  for (const auto& [id, unit] : observations.units) {
+    std::vector<node::Track> own;
+    for (const node::Track& t : observations.tracks) {
+      if (t.projector_unit == id) own.push_back(t);
+    }
+    Expected<node::LocalGeometry> geometry = node::EstimateLocalGeometry(unit, cameras, own);
+    if (geometry.ok()) local[id] = *geometry;
+  }
+  // The model as the nodes get it: the scene moved by model_from_table.
+  Scene model = scene;
+  for (Eigen::Vector3f& v : model.positions_in_table_m) {
+    v = (options.model_from_table * v.cast<double>()).cast<float>();
+  }
+  const NodeId root = observations.units.begin()->first;
+  Expected<node::ClusterSolution> solution = node::SolveCluster(
+      root, observations, local, options.use_model ? &model : nullptr, options.solve);
+  if (!solution.ok()) return solution.status();
+  result.solution = std::move(*solution);
+  // Metric.
+  std::vector<sim::EstimatedRegistration> estimates;
+  for (const auto& [id, c] : result.solution.calibrations) {
+    sim::EstimatedRegistration e;
+    e.unit_id = id;
+    e.projector = c.projector;
+    e.table_from_projector = *c.table_from_projector;
+    e.table_from_model = c.table_from_model.value_or(options.model_from_table.Inverse());
+    estimates.push_back(e);
+  }
+  sim::RegistrationMetricOptions metric;
+  metric.num_samples = options.metric_samples;
+  metric.seed = options.seed;
+  metric.true_table_from_model = options.model_from_table.Inverse();
+  metric.keep_samples = false;
+  Expected<sim::RegistrationReport> report = sim::MeasureRegistration(world, estimates, metric);
+  if (!report.ok()) return report.status();
+  result.metric = *report;
+  // Model placement against the truth: the estimated table frame related to the true one
+  // through the projectors (mean of true_table_from_projector * projector_from_est_table).
+  if (result.solution.model) {
+    Eigen::Vector3d mean_t = Eigen::Vector3d::Zero();
+    Eigen::Vector4d mean_q = Eigen::Vector4d::Zero();
+    int n = 0;
+    for (const auto& [id, c] : result.solution.calibrations) {
+      const sim::UnitSpec* unit = site.FindUnit(id);
+      const Rigid3d true_from_est =
+          unit->projector.table_from_projector * c.table_from_projector->Inverse();
+      Eigen::Vector4d q = true_from_est.rotation.coeffs();
+      if (n > 0 && q.dot(mean_q) < 0) q = -q;
+      mean_q += q;
+      mean_t += true_from_est.translation;
+      ++n;
+    }
+    Eigen::Quaterniond q(mean_q[3], mean_q[0], mean_q[1], mean_q[2]);
+    q.normalize();
+    const Rigid3d true_from_est(q, mean_t / n);
+    const Rigid3d est = true_from_est * result.solution.model->table_from_model;
+    const Rigid3d truth = options.model_from_table.Inverse();
+    const Rigid3d diff = truth.Inverse() * est;  // model_from_model
+    const Eigen::Vector3d centre = scene.Bounds().center();
+    const Eigen::Vector3d centre_model = options.model_from_table * centre;
+    result.model_offset_mm = ((est * centre_model) - (truth * centre_model)).norm() * 1e3;
+    result.model_offset_deg =
+        Eigen::AngleAxisd(diff.rotation).angle() * 180.0 / 3.14159265358979323846;
+  }
+  return result;
+}
+
+}  // namespace sandtable::testing
