@@ -56,7 +56,7 @@ static int Run(int argc, char** argv) {
   uint32_t id = 0;
   std::string coordinator, curve_keys, world, factory_path, true_pose_path, export_dir;
   std::string projector_spec, camera_spec, model_path;
-  int grid_step_px = 16;
+  int grid_step_px = 32;
   int heartbeat_ms = 100;
   app.add_option("--id", id, "this unit's node id (below 4294967280)")
       ->check(cli::Integer<uint32_t>(0, kFirstReservedSenderId - 1));

@@ -56,6 +56,18 @@ struct CameraCost {
   }
 };
 
+struct PlaneCost {
+  Eigen::Vector3d on_plane, normal;
+  double inverse_sigma;
+  template <typename T>
+  bool operator()(const T* x, T* r) const {
+    r[0] = ((x[0] - on_plane.x()) * normal.x() + (x[1] - on_plane.y()) * normal.y() +
+            (x[2] - on_plane.z()) * normal.z()) *
+           inverse_sigma;
+    return true;
+  }
+};
+
 template <int N>
 struct PriorCost {
   double mean[N];
@@ -131,10 +143,12 @@ Status BundleOptions::Check() const {
 
 Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
                                      const std::map<NodeId, Rigid3d>& initial_projector_from_world,
-                                     NodeId root, const BundleOptions& options) {
+                                     NodeId root, const BundleOptions& options,
+                                     const BundleWarmStart* warm) {
   ST_RETURN_IF_ERROR(options.Check());
   const double cpu_start = ThreadCpuSeconds();
-  std::map<NodeId, UnitBlocks> blocks;
+  std::map<NodeId, UnitBlocks> blocks, factory;
+  const bool warm_start = warm && warm->previous;
   for (const auto& [id, unit] : observations.units) {
     auto pose = initial_projector_from_world.find(id);
     if (pose == initial_projector_from_world.end()) continue;  // not reached: left out
@@ -143,18 +157,28 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
     PoseToArray(unit.projector_from_camera.Inverse(), b.mount);
     ModelToArrays(unit.projector, b.pk, b.pd);
     ModelToArrays(unit.camera, b.ck, b.cd);
+    factory[id] = b;
+    if (warm_start && warm->previous->units.count(id)) {
+      const UnitModel& w = warm->previous->units.at(id);
+      PoseToArray(warm->previous->projector_from_world.at(id), b.pose);
+      PoseToArray(w.projector_from_camera.Inverse(), b.mount);
+      ModelToArrays(w.projector, b.pk, b.pd);
+      ModelToArrays(w.camera, b.ck, b.cd);
+    }
   }
   if (!blocks.count(root)) {
     return InvalidArgumentError("bundle: the root unit " + std::to_string(root) +
                                 " has no initial pose");
   }
-  const std::map<NodeId, UnitBlocks> factory = blocks;
-
   BundleResult result;
   // Triangulate every track from the initial poses.
   TriangulationOptions triangulation;
   triangulation.min_angle_deg = 1.0;
-  for (size_t t = 0; t < observations.tracks.size(); ++t) {
+  if (warm_start) {
+    result.points_in_world = warm->previous->points_in_world;
+    result.point_track = warm->previous->point_track;
+  }
+  for (size_t t = 0; t < (warm_start ? 0 : observations.tracks.size()); ++t) {
     const Track& track = observations.tracks[t];
     if (!blocks.count(track.projector_unit)) {
       ++result.report.tracks_untriangulated;
@@ -219,6 +243,16 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
                            o.camera_unit, true});
     }
   }
+  // The model's surface (second refinement).
+  if (warm_start) {
+    auto* surface_loss = new ceres::HuberLoss(2.0);
+    for (const SurfaceConstraint& s : warm->surface) {
+      if (s.point < 0 || s.point >= n_points) continue;
+      auto* cost = new ceres::AutoDiffCostFunction<PlaneCost, 1, 3>(
+          new PlaneCost{s.on_plane_in_world, s.normal_in_world, 1.0 / warm->surface_sigma_m});
+      problem.AddResidualBlock(cost, surface_loss, points[s.point].data());
+    }
+  }
   // Priors and held groups.
   const double rotation_sigma_rad = options.prior_mount_rotation_deg * M_PI / 180.0;
   for (auto& [id, b] : blocks) {
@@ -266,7 +300,7 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
       } else {
         problem.SetParameterBlockConstant(b.pd);
       }
-      if (id == root) {
+      if (id == root && !warm_start) {
         problem.SetParameterBlockConstant(b.pose);
       } else {
         unit_report.free_parameters.push_back("pose");
@@ -295,7 +329,7 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
         delete mount_prior;
         problem.SetParameterBlockConstant(b.mount);
       }
-      if (!has && id == root) problem.SetParameterBlockConstant(b.pose);
+      if (!has && id == root && !warm_start) problem.SetParameterBlockConstant(b.pose);
     } else {
       delete mount_prior;
     }
@@ -322,11 +356,17 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
   solver.max_num_iterations = options.max_iterations;
   solver.num_threads = 1;
   solver.logging_type = ceres::SILENT;
-  solver.function_tolerance = 1e-10;
+  solver.function_tolerance = options.function_tolerance;
+  if (getenv("SANDTABLE_BUNDLE_VERBOSE")) {
+    solver.minimizer_progress_to_stdout = true;
+    solver.logging_type = ceres::PER_MINIMIZER_ITERATION;
+  }
   solver.parameter_tolerance = 1e-10;
   for (int round = 0; round < options.rounds; ++round) {
     if (round > 0) {
-      // Drop observations the model does not explain.
+      // Drop observations the model does not explain; when none is dropped the last round's
+      // solution stands.
+      const int dropped_before = result.report.observations_dropped;
       for (Residual& r : residuals) {
         if (!r.id) continue;
         double cost = 0.0, v[2];
@@ -337,10 +377,12 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
           ++result.report.observations_dropped;
         }
       }
+      if (result.report.observations_dropped == dropped_before) break;
     }
     ceres::Solver::Summary summary;
     ceres::Solve(solver, &problem, &summary);
     result.report.iterations += static_cast<int>(summary.iterations.size());
+    if (getenv("SANDTABLE_BUNDLE_VERBOSE")) fprintf(stderr, "%s\n", summary.FullReport().c_str());
     result.report.termination = ceres::TerminationTypeToString(summary.termination_type);
     if (summary.termination_type == ceres::FAILURE || !summary.IsSolutionUsable()) {
       return NotConvergedError("bundle: Ceres " + result.report.termination + ": " +

@@ -53,7 +53,14 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
                           "with it); left out");
     }
   }
+  double stage_start = ThreadCpuSeconds();
+  auto stage_done = [&](const std::string& name) {
+    const double now = ThreadCpuSeconds();
+    out.stage_time_s[name] += now - stage_start;
+    stage_start = now;
+  };
   Expected<BundleResult> bundle = AdjustCluster(observations, initial, root, options.bundle);
+  stage_done("bundle");
   if (!bundle.ok()) return bundle.status();
   out.bundle = bundle->report;
   std::map<NodeId, Rigid3d> projector_from_world = bundle->projector_from_world;
@@ -68,14 +75,18 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
     for (const Eigen::Vector3d& p : points) out.points_in_table_m.push_back(fit.table_from_world * p);
   };
   to_table(*table);
+  stage_done("table");
 
-  if (model) {
-    ModelMatcher matcher(*model, options.model);
-    Expected<ModelRegistration> found = matcher.Register(out.points_in_table_m);
+  std::optional<ModelMatcher> matcher;
+  if (model) matcher.emplace(*model, options.model);
+  if (matcher) {
+    Expected<ModelRegistration> found = matcher->Register(out.points_in_table_m);
+    stage_done("model");
     if (!found.ok()) {
       out.notes.push_back(found.status().message());
     } else {
       double scale = found->scale;
+      std::optional<Rigid3d> table_from_model = found->table_from_model;
       if (options.scale_from_model && std::abs(scale - 1.0) <= options.max_scale_correction) {
         // Lengths / scale: points, projector translations, mount translations.
         const double k = 1.0 / scale;
@@ -87,21 +98,62 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
         if (!table.ok()) return DegenerateError("table plane: " + table.status().message());
         to_table(*table);
         Expected<ModelRegistration> refined =
-            matcher.Refine(out.points_in_table_m, found->table_from_model, /*scale_free=*/false);
-        if (refined.ok()) {
-          refined->coarse_score = found->coarse_score;
-          refined->candidates_tried = found->candidates_tried;
-          refined->structure_fraction = found->structure_fraction;
-          refined->scale = scale;
-          out.model = *refined;
+            matcher->Refine(out.points_in_table_m, found->table_from_model, false);
+        if (refined.ok()) table_from_model = refined->table_from_model;
+      } else if (options.scale_from_model) {
+        out.notes.push_back("model scale " + std::to_string(scale) +
+                            " is too far from 1 to apply; the mounts' scale is kept");
+      }
+      if (options.refine_with_model && table_from_model) {
+        // Second refinement: the points tied to the model's surface.
+        const Rigid3d world_from_model = table->table_from_world.Inverse() * *table_from_model;
+        const Rigid3d model_from_world = world_from_model.Inverse();
+        BundleResult previous;
+        previous.units = units;
+        previous.projector_from_world = projector_from_world;
+        previous.points_in_world = points;
+        previous.point_track = bundle->point_track;
+        BundleWarmStart warm;
+        warm.previous = &previous;
+        warm.surface_sigma_m = options.model_surface_sigma_m;
+        for (size_t i = 0; i < points.size(); ++i) {
+          Eigen::Vector3d q, n;
+          if (matcher->SurfacePlaneNear(model_from_world * points[i],
+                                        options.model_surface_max_distance_m, &q, &n)) {
+            warm.surface.push_back(
+                {static_cast<int>(i), world_from_model * q, world_from_model.rotation * n});
+          }
+        }
+        out.model_surface_points = static_cast<int>(warm.surface.size());
+        stage_done("model");
+        Expected<BundleResult> second =
+            AdjustCluster(observations, projector_from_world, root, options.bundle, &warm);
+        stage_done("model_bundle");
+        if (second.ok()) {
+          out.model_bundle = second->report;
+          units = second->units;
+          projector_from_world = second->projector_from_world;
+          points = second->points_in_world;
+          table = FitTable(points, options.plane, Eigen::Vector3d::Zero());
+          if (!table.ok()) return DegenerateError("table plane: " + table.status().message());
+          to_table(*table);
+          // The model stands where it was, in the refined world frame.
+          table_from_model = table->table_from_world * world_from_model;
         } else {
-          out.notes.push_back(refined.status().message());
+          out.notes.push_back("refinement against the model: " + second.status().message());
         }
+      }
+      Expected<ModelRegistration> final_fit =
+          matcher->Refine(out.points_in_table_m, *table_from_model, false);
+      stage_done("model");
+      if (final_fit.ok()) {
+        final_fit->coarse_score = found->coarse_score;
+        final_fit->candidates_tried = found->candidates_tried;
+        final_fit->structure_fraction = found->structure_fraction;
+        final_fit->scale = scale;
+        out.model = *final_fit;
       } else {
-        if (options.scale_from_model) {
-          out.notes.push_back("model scale " + std::to_string(scale) +
-                              " is too far from 1 to apply; the mounts' scale is kept");
-        }
+        out.notes.push_back(final_fit.status().message());
         out.model = *found;
       }
     }

@@ -35,6 +35,12 @@ struct ClusterSolveOptions {
   // A model scale further than this from 1 is not applied (the model is then probably not
   // the scanned scene, or not in metres): noted, and the mounts' scale is kept.
   double max_scale_correction = 0.05;
+  // A second joint refinement with the points tied to the found model's surface (the model is
+  // metric and rigid: it pins what the factory priors alone leave loose).
+  // Off by default: measured worse than without on sandtable-3 (docs/calibration.md).
+  bool refine_with_model = false;
+  double model_surface_sigma_m = 0.0002;
+  double model_surface_max_distance_m = 0.003;
   // Planar site: every scanned point within this of the table plane (mm).
   double planar_threshold_mm = 5.0;
   ClusterSolveOptions() { plane.inlier_threshold_m = 0.003; }
@@ -44,6 +50,8 @@ struct ClusterSolution {
   std::map<NodeId, UnitCalibration> calibrations;
   Rigid3d table_from_world;
   BundleReport bundle;
+  std::optional<BundleReport> model_bundle;  // the second refinement, when it ran
+  int model_surface_points = 0;
   int table_points = 0;
   double table_plane_rms_mm = 0.0;
   double max_height_mm = 0.0;  // highest scanned point above the table (p99.9, robust)
@@ -54,6 +62,8 @@ struct ClusterSolution {
   std::vector<Eigen::Vector3d> points_in_table_m;
   std::vector<std::string> notes;
   double time_s = 0.0;  // thread CPU time of the whole solve
+  // Thread CPU time per stage: "bundle", "table", "model", "model_bundle".
+  std::map<std::string, double> stage_time_s;
 };
 
 Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& observations,

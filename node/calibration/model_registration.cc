@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
@@ -117,7 +118,12 @@ ModelSurface SampleModelSurface(const Scene& model, double spacing_m) {
     const Eigen::Vector3d n = model.FaceNormal(t);
     if (n.squaredNorm() < 0.5) continue;  // degenerate
     const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
-    const int k = std::max(1, static_cast<int>(std::ceil(longest / spacing_m)));
+    // The table top (z = 0, facing up) is one plane: every sample of it gives ICP the same
+    // plane, so it is sampled 3x coarser (the bulk of the model's area, and of the k-d tree).
+    const bool table_top = std::abs(a.z()) < 1e-4 && std::abs(b.z()) < 1e-4 &&
+                           std::abs(c.z()) < 1e-4 && std::abs(n.z()) > 0.999;
+    const double spacing = table_top ? 3.0 * spacing_m : spacing_m;
+    const int k = std::max(1, static_cast<int>(std::ceil(longest / spacing)));
     // Centroids of the k^2 sub-triangles of a regular subdivision.
     for (int i = 0; i < k; ++i) {
       for (int j = 0; i + j < k; ++j) {
@@ -147,6 +153,24 @@ ModelMatcher::ModelMatcher(const Scene& model, const ModelRegistrationOptions& o
 
 ModelMatcher::~ModelMatcher() = default;
 
+bool ModelMatcher::SurfacePlaneNear(const Eigen::Vector3d& point_in_model_m, double max_distance_m,
+                                    Eigen::Vector3d* point_on_plane_m,
+                                    Eigen::Vector3d* normal) const {
+  constexpr size_t kK = 8;
+  if (surface_.points_m.size() < kK) return false;
+  size_t index[kK];
+  double d2[kK];
+  const size_t found = tree_->index->knnSearch(point_in_model_m.data(), kK, index, d2);
+  if (found < kK || d2[0] > max_distance_m * max_distance_m) return false;
+  const Eigen::Vector3d& n0 = surface_.normals[index[0]];
+  for (size_t i = 1; i < found; ++i) {
+    if (std::abs(surface_.normals[index[i]].dot(n0)) < 0.999) return false;
+  }
+  *point_on_plane_m = surface_.points_m[index[0]];
+  *normal = n0;
+  return true;
+}
+
 double ModelMatcher::DistanceToModel_m(const Eigen::Vector3d& point_in_model_m) const {
   if (surface_.points_m.empty()) return std::numeric_limits<double>::infinity();
   double d2 = 0;
@@ -170,10 +194,10 @@ static IcpOutcome RunIcp(const ModelMatcher::Tree& tree, const ModelSurface& sur
   IcpOutcome out;
   const int n = static_cast<int>(scan.size());
   for (int it = 0; it < iterations; ++it) {
-    // Wide pairing first (the coarse grid's resolution), then the final gate.
-    const double gate = it < iterations / 3 ? 3.0 * final_distance_m
-                                            : (it < 2 * iterations / 3 ? 1.5 * final_distance_m
-                                                                       : final_distance_m);
+    // Wide pairing for the first iterations (the coarse grid's resolution), then the final
+    // gate.
+    const double gate = it < 4 ? 3.0 * final_distance_m
+                               : (it < 8 ? 1.5 * final_distance_m : final_distance_m);
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (int i = 0; i < n; ++i) centre += x.Apply(scan[i]);
     centre /= std::max(1, n);
@@ -214,7 +238,8 @@ static IcpOutcome RunIcp(const ModelMatcher::Tree& tree, const ModelSurface& sur
     x.t = rw * ((1.0 + ds) * (x.t - centre) + centre) + d.segment<3>(3);
     Eigen::JacobiSVD<Eigen::Matrix3d> svd(x.r, Eigen::ComputeFullU | Eigen::ComputeFullV);
     x.r = svd.matrixU() * svd.matrixV().transpose();
-    if (d.norm() < 1e-10) break;
+    // Converged: the step moves no point by more than ~1e-8 m (rotation in rad, metres).
+    if (it >= 8 && d.head<6>().norm() < 1e-7 && std::abs(d[6]) < 1e-7) break;
   }
   out.model_from_table = x;
   return out;
@@ -309,9 +334,9 @@ Expected<ModelRegistration> ModelMatcher::Register(std::span<const Eigen::Vector
     if (!near) chosen.push_back(c);
     if (static_cast<int>(chosen.size()) >= options_.coarse_candidates) break;
   }
-  // ICP on a subsample (every k-th point, at most ~20 000) per candidate, then all points.
+  // ICP on a subsample (every k-th point, at most ~2 000) per candidate, then all points.
   std::vector<Eigen::Vector3d> subsample;
-  const int stride = std::max(1, n / 20000);
+  const int stride = std::max(1, n / 2000);
   for (int i = 0; i < n; i += stride) subsample.push_back(scan[i]);
   std::optional<IcpOutcome> best;
   double best_score = 0;
@@ -319,7 +344,7 @@ Expected<ModelRegistration> ModelMatcher::Register(std::span<const Eigen::Vector
   for (const Candidate& c : chosen) {
     ++tried;
     IcpOutcome icp = RunIcp(*tree_, surface_, subsample, c.model_from_table, false,
-                            options_.icp_iterations, options_.icp_max_distance_m);
+                            std::max(1, options_.icp_iterations / 2), options_.icp_max_distance_m);
     // Higher inlier fraction first, then lower rms.
     const double score = icp.inliers / static_cast<double>(subsample.size()) -
                          icp.rms_m / options_.icp_max_distance_m * 0.01;

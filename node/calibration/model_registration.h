@@ -42,8 +42,8 @@ struct ModelRegistrationOptions {
   double coarse_cell_m = 0.02;
   double coarse_yaw_step_deg = 3.0;
   int coarse_candidates = 4;
-  double sample_spacing_m = 0.003;
-  int icp_iterations = 40;
+  double sample_spacing_m = 0.004;
+  int icp_iterations = 30;
   double icp_max_distance_m = 0.01;
   double min_inlier_fraction = 0.5;
   bool estimate_scale = true;
@@ -81,6 +81,11 @@ class ModelMatcher {
   Expected<ModelRegistration> Register(std::span<const Eigen::Vector3d> scan_in_table_m) const;
   Expected<ModelRegistration> Refine(std::span<const Eigen::Vector3d> scan_in_table_m,
                                      const Rigid3d& table_from_model, bool scale_free) const;
+  // The model's surface plane near a point (model frame): the nearest sample within
+  // max_distance_m whose 8 nearest samples share its normal (cos > 0.999: not at an edge).
+  // False when there is none.
+  bool SurfacePlaneNear(const Eigen::Vector3d& point_in_model_m, double max_distance_m,
+                        Eigen::Vector3d* point_on_plane_m, Eigen::Vector3d* normal) const;
   // Distance from a point in the model frame to the nearest surface sample, m.
   double DistanceToModel_m(const Eigen::Vector3d& point_in_model_m) const;
   const ModelSurface& surface() const { return surface_; }

@@ -296,12 +296,16 @@ class LabRun {
       cv::Mat top, heatmap;
       double scale_mm = 0;
       std::string error;
+      std::optional<ModelPlacementError> placement;
     };
-    ModelOffset(estimates);
+    // The model's placement against the truth, when the nodes found it (structured light).
+    const bool model_placement = !TruePoseMode() && units_have_model_;
+    const Eigen::Vector3d model_centre = inputs_.model_from_table * scene_.Bounds().center();
     const RegistrationMetricOptions metric_options = result_.metric_options;
     const int width = options_.image_width_px;
     std::future<Work> future =
-        std::async(std::launch::async, [this, estimates, metric_options, width]() -> Work {
+        std::async(std::launch::async, [this, estimates, metric_options, width, model_placement,
+                                         model_centre]() -> Work {
           Work work;
           Expected<std::unique_ptr<World>> world = World::Create(inputs_.site, scene_);
           if (!world.ok()) {
@@ -315,6 +319,11 @@ class LabRun {
             return work;
           }
           work.report = std::move(*report);
+          if (model_placement) {
+            Expected<ModelPlacementError> placement = MeasureModelPlacement(
+                **world, estimates, metric_options.true_table_from_model, model_centre);
+            if (placement.ok()) work.placement = *placement;
+          }
           if (Expected<cv::Mat> top = TopViewWhite(world->get(), width); top.ok()) {
             work.top = *top;
           }
@@ -337,6 +346,11 @@ class LabRun {
     Work work = future.get();
     if (!work.error.empty()) return FailedWith("metrics", "registration metric: " + work.error);
     result_.registration = std::move(work.report);
+    if (work.placement) {
+      result_.model_offset_measured = true;
+      result_.model_offset_mm = work.placement->offset_mm;
+      result_.model_offset_deg = work.placement->offset_deg;
+    }
     result_.heatmap_scale_mm = work.scale_mm;
     const fs::path dir(options_.out_dir);
     // A picture that cannot be written is left out of the report, with the reason logged.
@@ -393,38 +407,6 @@ class LabRun {
       sc["messages_per_node"] = messages / calibrated_.size();
       sc["bytes_per_node"] = bytes / calibrated_.size();
     }
-  }
-
-  // The model's estimated placement against the truth: the estimated table frame is related
-  // to the true one through the projectors (the mean of true_table_from_projector *
-  // projector_from_estimated_table over the units), then compared at the model's centre.
-  void ModelOffset(const std::vector<EstimatedRegistration>& estimates) {
-    if (TruePoseMode() || estimates.empty()) return;
-    bool any_model = false;
-    Eigen::Vector4d mean_q = Eigen::Vector4d::Zero();
-    Eigen::Vector3d mean_t = Eigen::Vector3d::Zero();
-    for (const EstimatedRegistration& e : estimates) {
-      const UnitSpec* unit = inputs_.site.FindUnit(e.unit_id);
-      if (!unit) continue;
-      const Rigid3d true_from_est =
-          unit->projector.table_from_projector * e.table_from_projector.Inverse();
-      Eigen::Vector4d q = true_from_est.rotation.coeffs();
-      if (q.dot(mean_q) < 0) q = -q;
-      mean_q += q;
-      mean_t += true_from_est.translation;
-      any_model = true;
-    }
-    if (!any_model || !units_have_model_) return;
-    Eigen::Quaterniond q(mean_q[3], mean_q[0], mean_q[1], mean_q[2]);
-    q.normalize();
-    const Rigid3d true_from_est(q, mean_t / static_cast<double>(estimates.size()));
-    const Rigid3d estimated = true_from_est * estimates.front().table_from_model;
-    const Rigid3d truth = inputs_.model_from_table.Inverse();
-    const Eigen::Vector3d centre_in_model = inputs_.model_from_table * scene_.Bounds().center();
-    result_.model_offset_mm = (estimated * centre_in_model - truth * centre_in_model).norm() * 1e3;
-    result_.model_offset_deg = Eigen::AngleAxisd((truth.Inverse() * estimated).rotation).angle() *
-                               180.0 / 3.14159265358979323846;
-    result_.model_offset_measured = true;
   }
 
   int Finish() {

@@ -7,6 +7,7 @@
 #include <set>
 
 #include "common/base/units.h"
+#include "common/estimation/umeyama.h"
 
 namespace sandtable::sim {
 
@@ -241,6 +242,61 @@ Expected<RegistrationReport> MeasureRegistration(
   report.site = site_errors.Finish();
   for (const auto& [id, errors] : unit_errors) report.per_unit[id] = errors.Finish();
   return report;
+}
+
+}  // namespace sandtable::sim
+
+namespace sandtable::sim {
+
+Expected<ModelPlacementError> MeasureModelPlacement(
+    const World& world, const std::vector<EstimatedRegistration>& estimates,
+    const Rigid3d& true_table_from_model, const Eigen::Vector3d& model_centre_in_model_m,
+    int grid_step_px) {
+  std::vector<Eigen::Vector3d> estimated, truth;
+  for (const EstimatedRegistration& e : estimates) {
+    const UnitSpec* unit = world.site().FindUnit(e.unit_id);
+    if (!unit) continue;
+    const ProjectorSpec& spec = unit->projector;
+    for (int v = grid_step_px / 2; v < e.projector.height_px; v += grid_step_px) {
+      for (int u = grid_step_px / 2; u < e.projector.width_px; u += grid_step_px) {
+        const Eigen::Vector2d pixel(u, v);
+        Expected<Eigen::Vector3d> est_ray = e.projector.Unproject(pixel);
+        Expected<Eigen::Vector3d> true_ray = spec.model.Unproject(pixel);
+        if (!est_ray.ok() || !true_ray.ok()) continue;
+        const Eigen::Vector3d o = e.table_from_projector.translation;
+        const Eigen::Vector3d d = e.table_from_projector.rotation * *est_ray;
+        if (std::abs(d.z()) < 1e-9) continue;
+        const double s = -o.z() / d.z();
+        if (!(s > 0)) continue;
+        Expected<SurfaceTruth> hit = world.TruthAlongRay(
+            spec.table_from_projector.translation, spec.table_from_projector.rotation * *true_ray);
+        if (!hit.ok() || std::abs(hit->point_in_table_m.z()) > 1e-4 ||
+            hit->normal_in_table.z() < 0.999) {
+          continue;
+        }
+        estimated.push_back(o + s * d);
+        truth.push_back(hit->point_in_table_m);
+      }
+    }
+  }
+  if (estimated.size() < 10) {
+    return DegenerateError("model placement: " + std::to_string(estimated.size()) +
+                           " projector pixels land on the table (10 needed)");
+  }
+  Expected<RigidFitReport> fit = FitRigidUmeyama(estimated, truth);
+  if (!fit.ok()) return fit.status();
+  ModelPlacementError out;
+  out.true_table_from_estimated_table = fit->target_from_source;
+  out.pairs = static_cast<int>(estimated.size());
+  out.frame_fit_rms_mm = fit->rms_m * 1e3;
+  if (estimates.empty()) return out;
+  const Rigid3d placed = out.true_table_from_estimated_table * estimates.front().table_from_model;
+  out.offset_mm =
+      (placed * model_centre_in_model_m - true_table_from_model * model_centre_in_model_m).norm() *
+      1e3;
+  out.offset_deg = Eigen::AngleAxisd((true_table_from_model.Inverse() * placed).rotation).angle() *
+                   180.0 / 3.14159265358979323846;
+  return out;
 }
 
 }  // namespace sandtable::sim

@@ -124,3 +124,29 @@ Expected<RegistrationReport> MeasureRegistration(
     const RegistrationMetricOptions& options = {});
 
 }  // namespace sandtable::sim
+
+namespace sandtable::sim {
+
+// The model's estimated placement against the truth. The nodes' table frame is their own (the
+// table-frame rule of docs/frames.md), so it is first related to the true table frame through
+// what the nodes measured: for every unit, projector pixels on a grid (every grid_step_px) are
+// cast through the ESTIMATED projector onto the estimated table plane z = 0 and through the
+// TRUE projector onto the true surface; pixels whose true hit lies on a table face give point
+// pairs, and a rigid fit (Umeyama) of all pairs gives true_table_from_estimated_table. Then
+//   offset_mm  = |true_from_est * table_from_model_est * c - true_table_from_model * c|
+//                at the model's centre c (model frame), and
+//   offset_deg = the angle of the rotation between the two placements.
+struct ModelPlacementError {
+  double offset_mm = 0.0;
+  double offset_deg = 0.0;
+  double frame_fit_rms_mm = 0.0;  // residual of the table-frame fit
+  int pairs = 0;
+  Rigid3d true_table_from_estimated_table;
+};
+// Errors: DEGENERATE when fewer than 10 pixel pairs land on the table.
+Expected<ModelPlacementError> MeasureModelPlacement(
+    const World& world, const std::vector<EstimatedRegistration>& estimates,
+    const Rigid3d& true_table_from_model, const Eigen::Vector3d& model_centre_in_model_m,
+    int grid_step_px = 32);
+
+}  // namespace sandtable::sim

@@ -41,6 +41,16 @@ int main(int argc, char** argv) {
   app.add_option("--out", out_path, "CSV file (default: stdout only)");
   app.add_option("--seed", seed, "seed");
   app.add_flag("--quick", quick, "the default configuration only");
+  int max_iterations = 0, grid_step = 0;
+  double function_tolerance = 0, factory_error_scale = 1.0, prior_scale = 1.0;
+  bool no_noise = false, model_refinement = false;
+  app.add_flag("--model-refinement", model_refinement, "add the refinement against the model");
+  app.add_option("--factory-error-scale", factory_error_scale, "scale the factory errors");
+  app.add_option("--prior-scale", prior_scale, "scale the refinement's prior sigmas");
+  app.add_flag("--no-noise", no_noise, "captures without noise");
+  app.add_option("--max-iterations", max_iterations, "override: refinement iterations per round");
+  app.add_option("--grid-step", grid_step, "override: projector grid step, px");
+  app.add_option("--function-tolerance", function_tolerance, "override: Ceres function tolerance");
   cli::Configure(app);
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
 
@@ -72,6 +82,34 @@ int main(int argc, char** argv) {
   base.name = "default";
   base.options.seed = seed;
   base.options.model_from_table = model_from_table;
+  if (max_iterations > 0) base.options.solve.bundle.max_iterations = max_iterations;
+  base.options.noise = !no_noise;
+  base.options.solve.refine_with_model = model_refinement;
+  {
+    auto& e = base.options.factory_error;
+    e.focal_relative_sigma *= factory_error_scale;
+    e.principal_point_sigma_px *= factory_error_scale;
+    e.distortion_sigma *= factory_error_scale;
+    e.rotation_sigma_deg *= factory_error_scale;
+    e.translation_sigma_m *= factory_error_scale;
+    if (factory_error_scale == 0) {
+      e.focal_relative_sigma = e.principal_point_sigma_px = e.distortion_sigma = 0;
+    }
+    auto& b = base.options.solve.bundle;
+    b.prior_focal_relative *= prior_scale;
+    b.prior_principal_point_px *= prior_scale;
+    b.prior_k1 *= prior_scale;
+    b.prior_k2 *= prior_scale;
+    b.prior_p *= prior_scale;
+    b.prior_k3 *= prior_scale;
+    b.prior_mount_rotation_deg *= prior_scale;
+    b.prior_mount_translation_m *= prior_scale;
+  }
+  if (function_tolerance > 0) base.options.solve.bundle.function_tolerance = function_tolerance;
+  if (grid_step > 0) {
+    base.options.grid.step_px = grid_step;
+    base.options.grid.offset_px = grid_step / 2.0;
+  }
   configs.push_back(base);
   if (!quick) {
     Config c = base;
@@ -83,14 +121,18 @@ int main(int argc, char** argv) {
     c.options.solve.bundle.free_mounts = false;
     configs.push_back(c);
     c = base;
-    c.name = "grid_step_32";
-    c.options.grid.step_px = 32;
-    c.options.grid.offset_px = 16;
+    c.name = "grid_step_16";
+    c.options.grid.step_px = 16;
+    c.options.grid.offset_px = 8;
     configs.push_back(c);
     c = base;
-    c.name = "grid_step_8";
-    c.options.grid.step_px = 8;
-    c.options.grid.offset_px = 4;
+    c.name = "grid_step_64";
+    c.options.grid.step_px = 64;
+    c.options.grid.offset_px = 32;
+    configs.push_back(c);
+    c = base;
+    c.name = "model_refinement";
+    c.options.solve.refine_with_model = true;
     configs.push_back(c);
     c = base;
     c.name = "phase_4_steps";
@@ -114,7 +156,8 @@ int main(int argc, char** argv) {
   const std::string header =
       "config,frames_per_projector,device_time_per_projector_s,decode_cpu_s,solve_cpu_s,"
       "tracks,bundle_rms_px,rms_mm,p99_mm,max_mm,rms_px,table_rms_mm,table_max_mm,"
-      "buildings_rms_mm,buildings_max_mm,model_offset_mm,model_offset_deg,scale_correction";
+      "buildings_rms_mm,buildings_max_mm,model_offset_mm,model_offset_deg,scale_correction,"
+      "table_rms_px,buildings_rms_px,true_model_rms_mm,true_model_buildings_rms_mm";
   std::cout << header << "\n";
   if (csv) csv << header << "\n";
   for (const Config& config : configs) {
@@ -130,16 +173,20 @@ int main(int argc, char** argv) {
     char line[1024];
     std::snprintf(line, sizeof(line),
                   "%s,%d,%.3f,%.3f,%.3f,%d,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,"
-                  "%.6f",
+                  "%.6f,%.4f,%.4f,%.4f,%.4f",
                   config.name.c_str(), frames, frames * (kFramePeriod_s + kCaptureLatency_s),
                   r->decode_cpu_s, r->solution.time_s, r->tracks,
                   r->solution.bundle.final_rms_px, m.all.rms_mm, m.all.p99_mm, m.all.max_mm,
                   m.all.rms_px, m.table.rms_mm, m.table.max_mm, m.buildings.rms_mm,
                   m.buildings.max_mm, r->model_offset_mm, r->model_offset_deg,
-                  r->solution.scale_correction);
+                  r->solution.scale_correction, m.table.rms_px, m.buildings.rms_px,
+                  r->metric_true_model.site.all.rms_mm, r->metric_true_model.site.buildings.rms_mm);
     std::cout << line << std::endl;
     if (csv) csv << line << "\n";
     for (const std::string& note : r->solution.notes) std::cerr << "  note: " << note << "\n";
+    for (const auto& [stage, s] : r->solution.stage_time_s) {
+      std::cerr << "  " << stage << ": " << s << " s\n";
+    }
     std::cerr << "  bundle: " << r->solution.bundle.termination << " "
               << r->solution.bundle.iterations << " it, rms " << r->solution.bundle.initial_rms_px
               << " -> " << r->solution.bundle.final_rms_px << " px, dropped "

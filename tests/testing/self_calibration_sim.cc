@@ -95,6 +95,34 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
       result.decode_cpu_s += ThreadCpuSeconds() - t0;
       if (!points.ok()) return points.status();
       by_camera[c] = std::move(*points);
+      if (getenv("SANDTABLE_CORRESPONDENCE_TRUTH")) {
+        // Diagnostic: the true projector pixel of the surface point each camera position sees.
+        const sim::UnitSpec* cu = site.FindUnit(c);
+        const Rigid3d table_from_camera =
+            cu->projector.table_from_projector * cu->camera->projector_from_camera;
+        Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+        double sum_sq = 0;
+        int n = 0;
+        for (const ProjectorGridPoint& gp : by_camera[c]) {
+          Expected<Eigen::Vector3d> ray = cu->camera->model.Unproject(gp.camera_px.cast<double>());
+          if (!ray.ok()) continue;
+          Expected<sim::SurfaceTruth> hit = world.TruthAlongRay(
+              table_from_camera.translation, table_from_camera.rotation * *ray);
+          if (!hit.ok()) continue;
+          Expected<sim::ProjectorTruth> truth =
+              world.ProjectorTruthAtPoint(p.id, hit->point_in_table_m);
+          if (!truth.ok() || !truth->sample.projectable) continue;
+          const Eigen::Vector2d d = truth->sample.pixel_px - gp.projector_px.cast<double>();
+          if (d.norm() > 3) continue;
+          sum += d;
+          sum_sq += d.squaredNorm();
+          ++n;
+        }
+        if (n) {
+          fprintf(stderr, "projector %u camera %u: %d points, mean (%.4f, %.4f) rms %.4f px\n",
+                  p.id, c, n, sum.x() / n, sum.y() / n, std::sqrt(sum_sq / n));
+        }
+      }
     }
     std::vector<node::Track> tracks = node::BuildTracks(p.id, by_camera);
     result.tracks += static_cast<int>(tracks.size());
@@ -140,33 +168,21 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
   Expected<sim::RegistrationReport> report = sim::MeasureRegistration(world, estimates, metric);
   if (!report.ok()) return report.status();
   result.metric = *report;
-  // Model placement against the truth: the estimated table frame related to the true one
-  // through the projectors (mean of true_table_from_projector * projector_from_est_table).
+  // Model placement against the truth (sim/lab/registration_metric.h).
   if (result.solution.model) {
-    Eigen::Vector3d mean_t = Eigen::Vector3d::Zero();
-    Eigen::Vector4d mean_q = Eigen::Vector4d::Zero();
-    int n = 0;
-    for (const auto& [id, c] : result.solution.calibrations) {
-      const sim::UnitSpec* unit = site.FindUnit(id);
-      const Rigid3d true_from_est =
-          unit->projector.table_from_projector * c.table_from_projector->Inverse();
-      Eigen::Vector4d q = true_from_est.rotation.coeffs();
-      if (n > 0 && q.dot(mean_q) < 0) q = -q;
-      mean_q += q;
-      mean_t += true_from_est.translation;
-      ++n;
+    Expected<sim::ModelPlacementError> placement = sim::MeasureModelPlacement(
+        world, estimates, options.model_from_table.Inverse(),
+        options.model_from_table * scene.Bounds().center());
+    if (!placement.ok()) return placement.status();
+    result.model_offset_mm = placement->offset_mm;
+    result.model_offset_deg = placement->offset_deg;
+    std::vector<sim::EstimatedRegistration> true_model = estimates;
+    for (sim::EstimatedRegistration& e : true_model) {
+      e.table_from_model = placement->true_table_from_estimated_table.Inverse() *
+                           options.model_from_table.Inverse();
     }
-    Eigen::Quaterniond q(mean_q[3], mean_q[0], mean_q[1], mean_q[2]);
-    q.normalize();
-    const Rigid3d true_from_est(q, mean_t / n);
-    const Rigid3d est = true_from_est * result.solution.model->table_from_model;
-    const Rigid3d truth = options.model_from_table.Inverse();
-    const Rigid3d diff = truth.Inverse() * est;  // model_from_model
-    const Eigen::Vector3d centre = scene.Bounds().center();
-    const Eigen::Vector3d centre_model = options.model_from_table * centre;
-    result.model_offset_mm = ((est * centre_model) - (truth * centre_model)).norm() * 1e3;
-    result.model_offset_deg =
-        Eigen::AngleAxisd(diff.rotation).angle() * 180.0 / 3.14159265358979323846;
+    Expected<sim::RegistrationReport> own = sim::MeasureRegistration(world, true_model, metric);
+    if (own.ok()) result.metric_true_model = *own;
   }
   return result;
 }

@@ -41,6 +41,9 @@ struct SimCalibrationResult {
   int tracks = 0;
   sim::RegistrationReport metric;
   double model_offset_mm = 0.0, model_offset_deg = 0.0;
+  // The metric with the TRUE model placement (expressed in the nodes' table frame) in place
+  // of the found one: the calibration's own share of the error.
+  sim::RegistrationReport metric_true_model;
 };
 
 Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Scene& scene,
