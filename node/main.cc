@@ -221,10 +221,9 @@ static int Run(int argc, char** argv) {
   if (calibration && true_pose_path.empty() && projector && !camera_spec.empty()) {
     node::SelfCalibrationOptions sc;
     sc.grid_step_px = grid_step_px;
-    const NodeId id = options.id;
     self_calibration = std::make_unique<node::SelfCalibrationService>(
         *calibration, projector.get(), model, sc,
-        [&, id](const node::SelfCalibrationOutcome& outcome) {
+        [&, id = options.id](const node::SelfCalibrationOutcome& outcome) {
           calibration = outcome.calibration;
           if (export_dir.empty()) return;
           Expected<node::ExportedCalibration> exported =
@@ -253,7 +252,7 @@ static int Run(int argc, char** argv) {
                                     {"bytes_sent", outcome.bytes_sent},
                                     {"bytes_received", outcome.bytes_received}});
         },
-        [id](const std::string& reason) {
+        [id = options.id](const std::string& reason) {
           WriteJsonLine(std::cout, {{"calibration_failed", id}, {"reason", reason}});
         });
     runtime.AddService(self_calibration.get());

@@ -308,6 +308,7 @@ void SelfCalibrationService::RunnerInput(NodeId from, const wire::CalibrationInp
     runner_->left_out[from] = input.message();
     return;
   }
+  if (!input.message().empty()) runner_->notes.push_back(input.message());
   runner_->inputs[from] = input;
 }
 
@@ -362,7 +363,8 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
                           ? r.self
                           : observations.units.begin()->first;
   struct Solved {
-    Expected<ClusterSolution> solution = ClusterSolution{};
+    std::optional<ClusterSolution> solution;
+    Status status = OkStatus();
     double cpu_s = 0.0;
   };
   std::shared_ptr<const Scene> model = model_;
@@ -372,15 +374,23 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
        solve_options] {
         Solved s;
         const double t0 = ThreadCpuSeconds();
-        s.solution = SolveCluster(root, observations, local, model.get(), solve_options);
+        Expected<ClusterSolution> solved =
+            SolveCluster(root, observations, local, model.get(), solve_options);
+        if (solved.ok()) {
+          s.solution = std::move(*solved);
+        } else {
+          s.status = solved.status();
+        }
         s.cpu_s = ThreadCpuSeconds() - t0;
         return s;
       },
-      [this, &node](Solved s) { FinishRound(std::move(s.solution), s.cpu_s, node); });
+      [this, &node](Solved s) {
+        FinishRound(s.solution ? &*s.solution : nullptr, s.status, s.cpu_s, node);
+      });
 }
 
-void SelfCalibrationService::FinishRound(Expected<ClusterSolution> solution, double solve_cpu_s,
-                                         NodeRuntime& node) {
+void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const Status& status,
+                                         double solve_cpu_s, NodeRuntime& node) {
   Runner& r = *runner_;
   compute_s_ += solve_cpu_s;
   r.compute_s[r.self] += solve_cpu_s;
@@ -420,7 +430,7 @@ void SelfCalibrationService::FinishRound(Expected<ClusterSolution> solution, dou
   for (const auto& [id, why] : r.left_out) left[std::to_string(id)] = why;
   report["left_out"] = left;
   std::vector<std::string> notes = r.notes;
-  if (solution.ok()) {
+  if (solution) {
     const ClusterSolution& s = *solution;
     for (const std::string& n : s.notes) notes.push_back(n);
     nlohmann::json units = nlohmann::json::object();
@@ -462,24 +472,27 @@ void SelfCalibrationService::FinishRound(Expected<ClusterSolution> solution, dou
     }
     report["ok"] = true;
   } else {
-    notes.push_back("cluster solve: " + solution.status().message());
+    notes.push_back("cluster solve: " + status.message());
     report["ok"] = false;
-    report["error"] = solution.status().message();
+    report["error"] = status.message();
   }
   report["notes"] = notes;
   const std::string report_text = report.dump();
   ST_LOG(kInfo) << "self-calibration: round done in " << report["wall_s"].get<double>()
-                << " s; " << (solution.ok() ? "solved" : solution.status().message());
+                << " s; " << (solution ? "solved" : status.message());
   for (NodeId m : r.members) {
     wire::Envelope e;
     wire::CalibrationResult* result = e.mutable_calibration_result();
     result->set_round(r.round);
     result->set_projector_id(m);
     result->set_report_json(report_text);
-    auto c = solution.ok() ? solution->calibrations.find(m)
-                           : std::map<NodeId, UnitCalibration>::iterator{};
-    if (solution.ok() && c != solution->calibrations.end() && r.Active(m)) {
-      const UnitCalibration& u = c->second;
+    const UnitCalibration* found = nullptr;
+    if (solution) {
+      auto c = solution->calibrations.find(m);
+      if (c != solution->calibrations.end()) found = &c->second;
+    }
+    if (found && r.Active(m)) {
+      const UnitCalibration& u = *found;
       const Rigid3d projector_from_table = u.table_from_projector->Inverse();
       result->set_ok(true);
       *result->mutable_projector_model() = proto::ToWire(u.projector);
@@ -494,9 +507,9 @@ void SelfCalibrationService::FinishRound(Expected<ClusterSolution> solution, dou
     } else {
       result->set_ok(false);
       std::string why = r.left_out.count(m) ? r.left_out[m]
-                        : solution.ok()     ? "unit " + std::to_string(m) +
-                                              ": not reached by the cluster solve"
-                                            : solution.status().message();
+                        : solution          ? "unit " + std::to_string(m) +
+                                         ": not reached by the cluster solve"
+                                            : status.message();
       result->set_message(why);
     }
     Send(m, std::move(e), node);

@@ -341,6 +341,15 @@ void SelfCalibrationService::RunLocal(const wire::CalibrationStep& step, NodeId 
       points.push_back(p);
     }
     *input->add_correspondences() = set;
+    if (const char* dump = getenv("SANDTABLE_DEBUG_DUMP")) {
+      FILE* f = fopen((std::string(dump) + "/p" + std::to_string(node.id()) + "_c" +
+                       std::to_string(camera) + ".txt").c_str(), "w");
+      for (int i = 0; f && i + 1 < set.camera_px_xy_size(); i += 2) {
+        fprintf(f, "%.1f %.1f %.4f %.4f\n", set.projector_px_xy(i), set.projector_px_xy(i + 1),
+                set.camera_px_xy(i), set.camera_px_xy(i + 1));
+      }
+      if (f) fclose(f);
+    }
   }
   received_.clear();
   UnitModel self{node.id(), factory_.camera, factory_.projector, factory_.projector_from_camera};
@@ -358,16 +367,18 @@ void SelfCalibrationService::RunLocal(const wire::CalibrationStep& step, NodeId 
       },
       [this, e = std::move(e), step, from, &node](Local l) mutable {
         compute_s_ += l.cpu_s;
-        wire::CalibrationInput* input = e.mutable_calibration_input();
+        wire::CalibrationInput* in = e.mutable_calibration_input();
         if (!l.geometry.ok()) {
-          input->set_ok(false);
-          input->set_message(l.geometry.status().message());
+          // The correspondences still go to the runner: other units' relative poses may reach
+          // this one.
+          in->set_ok(true);
+          in->set_message(l.geometry.status().message());
           ST_LOG(kWarning) << "self-calibration: " << l.geometry.status().message();
         } else {
-          input->set_ok(true);
-          input->set_triangulated(static_cast<uint32_t>(l.geometry->triangulated));
+          in->set_ok(true);
+          in->set_triangulated(static_cast<uint32_t>(l.geometry->triangulated));
           for (const auto& [camera, relative] : l.geometry->neighbours) {
-            wire::RelativePose* r = input->add_relative_poses();
+            wire::RelativePose* r = in->add_relative_poses();
             r->set_camera_id(camera);
             *r->mutable_camera_from_projector() = proto::ToWire(relative.camera_from_projector);
             r->set_points(static_cast<uint32_t>(relative.points));

@@ -113,7 +113,9 @@ class SelfCalibrationService : public NodeService {
   void RunnerDone(NodeId from, const wire::CalibrationStepDone& done, NodeRuntime& node);
   void RunnerInput(NodeId from, const wire::CalibrationInput& input, NodeRuntime& node);
   void StartSolve(NodeRuntime& node);
-  void FinishRound(Expected<ClusterSolution> solution, double solve_cpu_s, NodeRuntime& node);
+  // `solution` is null when the solve failed with `status`.
+  void FinishRound(const ClusterSolution* solution, const Status& status, double solve_cpu_s,
+                   NodeRuntime& node);
 
   UnitCalibration factory_;
   ProjectorOutput* projector_;

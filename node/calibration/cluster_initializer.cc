@@ -20,12 +20,15 @@ Expected<LocalGeometry> EstimateLocalGeometry(const UnitModel& self,
   const Rigid3d camera_from_projector = self.projector_from_camera.Inverse();
   // Points in the projector's frame, per other camera: (point, pixel).
   std::map<NodeId, std::pair<std::vector<Eigen::Vector3d>, std::vector<Eigen::Vector2d>>> shared;
+  int with_own = 0;
+  std::string first_failure;
   for (const Track& track : tracks_of_self) {
     const CameraObservation* own = nullptr;
     for (const CameraObservation& o : track.cameras) {
       if (o.camera_unit == self.unit) own = &o;
     }
     if (!own) continue;
+    ++with_own;
     TriangulationView views[2];
     views[0].camera = self.projector;
     views[0].camera_from_world = Rigid3d::Identity();
@@ -34,7 +37,13 @@ Expected<LocalGeometry> EstimateLocalGeometry(const UnitModel& self,
     views[1].camera_from_world = camera_from_projector;
     views[1].observed_px = own->camera_px;
     Expected<TriangulationReport> point = TriangulatePoint(views, triangulation);
-    if (!point.ok() || point->rms_px > options.max_triangulation_rms_px) continue;
+    if (!point.ok() || point->rms_px > options.max_triangulation_rms_px) {
+      if (first_failure.empty()) {
+        first_failure = point.ok() ? "reprojection " + std::to_string(point->rms_px) + " px"
+                                   : point.status().message();
+      }
+      continue;
+    }
     ++out.triangulated;
     for (const CameraObservation& o : track.cameras) {
       if (o.camera_unit == self.unit || !cameras.count(o.camera_unit)) continue;
@@ -45,8 +54,10 @@ Expected<LocalGeometry> EstimateLocalGeometry(const UnitModel& self,
   }
   if (out.triangulated < options.min_shared_points) {
     return DegenerateError("unit " + std::to_string(self.unit) + ": its own camera triangulated " +
-                           std::to_string(out.triangulated) + " points of its projector (at least " +
-                           std::to_string(options.min_shared_points) + " needed)");
+                           std::to_string(out.triangulated) + " of the " + std::to_string(with_own) +
+                           " points of its projector it saw (at least " +
+                           std::to_string(options.min_shared_points) + " needed)" +
+                           (first_failure.empty() ? "" : "; first refused: " + first_failure));
   }
   for (const auto& [camera_unit, data] : shared) {
     const auto& [points, pixels] = data;
