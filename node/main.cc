@@ -19,12 +19,12 @@
 #include <string>
 #include <vector>
 
+#include "common/base/file_io.h"
 #include "common/base/log.h"
 #include "common/base/main_guard.h"
 #include "common/base/ready_line.h"
 #include "common/cli/command_line.h"
 #include "common/io/unit_calibration_file.h"
-#include "common/base/file_io.h"
 #include "common/scene/gltf_loader.h"
 #include "node/app/calibration_service.h"
 #include "node/app/self_calibration_service.h"
@@ -56,7 +56,7 @@ static int Run(int argc, char** argv) {
   uint32_t id = 0;
   std::string coordinator, curve_keys, world, factory_path, true_pose_path, export_dir;
   std::string projector_spec, camera_spec, model_path;
-  int grid_step_px = 32;
+  int grid_step_px = 16;
   int heartbeat_ms = 100;
   app.add_option("--id", id, "this unit's node id (below 4294967280)")
       ->check(cli::Integer<uint32_t>(0, kFirstReservedSenderId - 1));

@@ -33,11 +33,11 @@ namespace sandtable {
 struct ProjectorGridOptions {
   int projector_width_px = 1280;
   int projector_height_px = 800;
-  double step_px = 32.0;             // grid spacing, projector px (> 0)
-  double offset_px = 16.0;           // first node, projector px (>= 0)
-  double support_radius_px = 3.0;    // max-norm radius of a node's support, projector px
-  int min_support = 6;               // decoded camera pixels per node, at least (>= 3)
-  double max_fit_rms_px = 0.75;      // affine fit residual, camera px
+  double step_px = 16.0;           // grid spacing, projector px (> 0)
+  double offset_px = 8.0;          // first node, projector px (>= 0)
+  double support_radius_px = 3.0;  // max-norm radius of a node's support, projector px
+  int min_support = 6;             // decoded camera pixels per node, at least (>= 3)
+  double max_fit_rms_px = 0.75;    // affine fit residual, camera px
   Status Check() const;
 };
 

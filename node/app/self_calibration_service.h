@@ -56,7 +56,7 @@ struct SelfCalibrationOptions {
   // Cameras other than the projector's own see its footprint obliquely: the plan assumes
   // they resolve this factor worse than the own camera's measured resolution.
   double neighbour_resolution_factor = 1.4;
-  int grid_step_px = 32;  // measured better and 4x faster than 16 (docs/calibration.md)
+  int grid_step_px = 16;     // projector grid spacing (docs/calibration.md: error against step)
   int lit_threshold = 20;    // 8-bit levels, white - black
   int min_lit_pixels = 500;  // a camera "sees" a projector above this
   ClusterSolveOptions solve;
@@ -65,7 +65,7 @@ struct SelfCalibrationOptions {
 // What a node holds once a round ends, and the figures the lab reports.
 struct SelfCalibrationOutcome {
   UnitCalibration calibration;
-  nlohmann::json report;  // the runner's cluster report (docs/calibration.md)
+  nlohmann::json report;   // the runner's cluster report (docs/calibration.md)
   double compute_s = 0.0;  // this node's thread CPU time in the round
   uint64_t messages_sent = 0, messages_received = 0;
   uint64_t bytes_sent = 0, bytes_received = 0;

@@ -127,7 +127,7 @@ struct Residual {
 }  // namespace
 
 Status BundleOptions::Check() const {
-  if (!(observation_sigma_px > 0) || !(huber_whitened > 0) || !(outlier_px > 0)) {
+  if (!(observation_sigma_px > 0) || !(huber_whitened >= 0) || !(outlier_px > 0)) {
     return InvalidArgumentError("bundle: sigma, huber and outlier thresholds must be > 0");
   }
   if (!(prior_focal_relative > 0) || !(prior_principal_point_px > 0) || !(prior_k1 > 0) ||
@@ -209,8 +209,9 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
   }
   const int n_points = static_cast<int>(result.points_in_world.size());
   if (n_points < options.min_tracks) {
-    return DegenerateError("bundle: " + std::to_string(n_points) + " tracks triangulate (at least " +
-                           std::to_string(options.min_tracks) + " needed)");
+    return DegenerateError("bundle: " + std::to_string(n_points) +
+                           " tracks triangulate (at least " + std::to_string(options.min_tracks) +
+                           " needed)");
   }
   result.report.tracks_used = n_points;
   std::vector<std::array<double, 3>> points(n_points);
@@ -223,24 +224,25 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
   ceres::Problem problem(problem_options);
   const double inverse_sigma = 1.0 / options.observation_sigma_px;
   std::vector<Residual> residuals;
-  auto* loss = new ceres::HuberLoss(options.huber_whitened);
+  ceres::LossFunction* loss =
+      options.huber_whitened > 0 ? new ceres::HuberLoss(options.huber_whitened) : nullptr;
   for (int i = 0; i < n_points; ++i) {
     const Track& track = observations.tracks[result.point_track[i]];
     UnitBlocks& pb = blocks[track.projector_unit];
     auto* projector_cost = new ceres::AutoDiffCostFunction<ProjectorCost, 2, 6, 4, 5, 3>(
         new ProjectorCost{track.projector_px, inverse_sigma});
-    residuals.push_back({problem.AddResidualBlock(projector_cost, loss, pb.pose, pb.pk, pb.pd,
-                                                  points[i].data()),
-                         track.projector_unit, false});
+    residuals.push_back(
+        {problem.AddResidualBlock(projector_cost, loss, pb.pose, pb.pk, pb.pd, points[i].data()),
+         track.projector_unit, false});
     for (const CameraObservation& o : track.cameras) {
       auto cb = blocks.find(o.camera_unit);
       if (cb == blocks.end()) continue;
       auto* camera_cost = new ceres::AutoDiffCostFunction<CameraCost, 2, 6, 6, 4, 5, 3>(
           new CameraCost{o.camera_px, inverse_sigma});
-      residuals.push_back({problem.AddResidualBlock(camera_cost, loss, cb->second.pose,
-                                                    cb->second.mount, cb->second.ck, cb->second.cd,
-                                                    points[i].data()),
-                           o.camera_unit, true});
+      residuals.push_back(
+          {problem.AddResidualBlock(camera_cost, loss, cb->second.pose, cb->second.mount,
+                                    cb->second.ck, cb->second.cd, points[i].data()),
+           o.camera_unit, true});
     }
   }
   // The model's surface (second refinement).
@@ -397,8 +399,8 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
     double cost = 0.0, v[2];
     problem.EvaluateResidualBlock(r.id, false, &cost, v, nullptr);
     auto& s = r.camera ? camera_sum[r.unit] : projector_sum[r.unit];
-    s.first += (v[0] * v[0] + v[1] * v[1]) * options.observation_sigma_px *
-               options.observation_sigma_px;
+    s.first +=
+        (v[0] * v[0] + v[1] * v[1]) * options.observation_sigma_px * options.observation_sigma_px;
     ++s.second;
   }
   for (auto& [id, unit_report] : result.report.units) {

@@ -14,6 +14,8 @@ namespace sandtable::node {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
+// The smallest pairing gate of the ICP's last iterations (m): a few times the scan's noise.
+constexpr double kTightGate_m = 0.0015;
 
 // model_from_table as s R p + t.
 struct Similarity {
@@ -196,8 +198,13 @@ static IcpOutcome RunIcp(const ModelMatcher::Tree& tree, const ModelSurface& sur
   for (int it = 0; it < iterations; ++it) {
     // Wide pairing for the first iterations (the coarse grid's resolution), then the final
     // gate.
-    const double gate = it < 4 ? 3.0 * final_distance_m
-                               : (it < 8 ? 1.5 * final_distance_m : final_distance_m);
+    // After that, pairs farther than 3x the last rms (at least tight_gate_m) are dropped too:
+    // scan points that bridge an edge (a roof edge to the table) are not the model's surface.
+    double gate =
+        it < 4 ? 3.0 * final_distance_m : (it < 8 ? 1.5 * final_distance_m : final_distance_m);
+    if (it >= 8 && std::isfinite(out.rms_m)) {
+      gate = std::min(gate, std::max(kTightGate_m, 3.0 * out.rms_m));
+    }
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (int i = 0; i < n; ++i) centre += x.Apply(scan[i]);
     centre /= std::max(1, n);
@@ -229,9 +236,9 @@ static IcpOutcome RunIcp(const ModelMatcher::Tree& tree, const ModelSurface& sur
     const Eigen::Matrix<double, 7, 1> d = a.ldlt().solve(b);
     if (!d.allFinite()) break;
     const Eigen::Vector3d w = d.head<3>();
-    const Eigen::Matrix3d rw =
-        w.norm() > 0 ? Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix()
-                     : Eigen::Matrix3d::Identity();
+    const Eigen::Matrix3d rw = w.norm() > 0
+                                   ? Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix()
+                                   : Eigen::Matrix3d::Identity();
     const double ds = scale_free ? d[6] : 0.0;
     x.s *= (1.0 + ds);
     x.r = rw * x.r;
@@ -360,9 +367,8 @@ Expected<ModelRegistration> ModelMatcher::Register(std::span<const Eigen::Vector
         std::to_string(best ? best->inliers : 0) + " of " + std::to_string(subsample.size()) +
         " points within " + std::to_string(options_.icp_max_distance_m * 1e3) + " mm)");
   }
-  IcpOutcome fine = RunIcp(*tree_, surface_, scan, best->model_from_table,
-                           options_.estimate_scale, options_.icp_iterations,
-                           options_.icp_max_distance_m);
+  IcpOutcome fine = RunIcp(*tree_, surface_, scan, best->model_from_table, options_.estimate_scale,
+                           options_.icp_iterations, options_.icp_max_distance_m);
   ModelRegistration out;
   out.scale = 1.0 / fine.model_from_table.s;
   const Eigen::Matrix3d rt = fine.model_from_table.r.transpose();

@@ -75,8 +75,9 @@ int main(int argc, char** argv) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   const double yaw = u(rng) * 10.0 * M_PI / 180.0;
-  const Rigid3d model_from_table(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
-                                 Eigen::Vector3d(u(rng) * 0.035, u(rng) * 0.035, 0.0));
+  const Rigid3d model_from_table(
+      Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
+      Eigen::Vector3d(u(rng) * 0.035, u(rng) * 0.035, 0.0));
   std::vector<Config> configs;
   Config base;
   base.name = "default";
@@ -121,14 +122,14 @@ int main(int argc, char** argv) {
     c.options.solve.bundle.free_mounts = false;
     configs.push_back(c);
     c = base;
-    c.name = "grid_step_16";
-    c.options.grid.step_px = 16;
-    c.options.grid.offset_px = 8;
+    c.name = "grid_step_32";
+    c.options.grid.step_px = 32;
+    c.options.grid.offset_px = 16;
     configs.push_back(c);
     c = base;
-    c.name = "grid_step_64";
-    c.options.grid.step_px = 64;
-    c.options.grid.offset_px = 32;
+    c.name = "grid_step_8";
+    c.options.grid.step_px = 8;
+    c.options.grid.offset_px = 4;
     configs.push_back(c);
     c = base;
     c.name = "model_refinement";
@@ -175,12 +176,12 @@ int main(int argc, char** argv) {
                   "%s,%d,%.3f,%.3f,%.3f,%d,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,"
                   "%.6f,%.4f,%.4f,%.4f,%.4f",
                   config.name.c_str(), frames, frames * (kFramePeriod_s + kCaptureLatency_s),
-                  r->decode_cpu_s, r->solution.time_s, r->tracks,
-                  r->solution.bundle.final_rms_px, m.all.rms_mm, m.all.p99_mm, m.all.max_mm,
-                  m.all.rms_px, m.table.rms_mm, m.table.max_mm, m.buildings.rms_mm,
-                  m.buildings.max_mm, r->model_offset_mm, r->model_offset_deg,
-                  r->solution.scale_correction, m.table.rms_px, m.buildings.rms_px,
-                  r->metric_true_model.site.all.rms_mm, r->metric_true_model.site.buildings.rms_mm);
+                  r->decode_cpu_s, r->solution.time_s, r->tracks, r->solution.bundle.final_rms_px,
+                  m.all.rms_mm, m.all.p99_mm, m.all.max_mm, m.all.rms_px, m.table.rms_mm,
+                  m.table.max_mm, m.buildings.rms_mm, m.buildings.max_mm, r->model_offset_mm,
+                  r->model_offset_deg, r->solution.scale_correction, m.table.rms_px,
+                  m.buildings.rms_px, r->metric_true_model.site.all.rms_mm,
+                  r->metric_true_model.site.buildings.rms_mm);
     std::cout << line << std::endl;
     if (csv) csv << line << "\n";
     for (const std::string& note : r->solution.notes) std::cerr << "  note: " << note << "\n";

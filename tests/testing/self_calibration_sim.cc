@@ -68,9 +68,8 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
     const double ratio = result.projector_px_per_camera_px.count(p.id)
                              ? result.projector_px_per_camera_px[p.id]
                              : 2.0;
-    const PatternOptions patterns =
-        node::PlanPatterns(p.projector.model.width_px, p.projector.model.height_px,
-                           ratio * 1.4, options.plan);
+    const PatternOptions patterns = node::PlanPatterns(
+        p.projector.model.width_px, p.projector.model.height_px, ratio * 1.4, options.plan);
     Expected<std::vector<cv::Mat>> frames = GeneratePatterns(patterns);
     if (!frames.ok()) return frames.status();
     result.frames_per_projector[p.id] = static_cast<int>(frames->size());
@@ -97,10 +96,13 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
       by_camera[c] = std::move(*points);
       if (const char* dump = getenv("SANDTABLE_DEBUG_DUMP")) {
         FILE* f = fopen((std::string(dump) + "/sim_p" + std::to_string(p.id) + "_c" +
-                         std::to_string(c) + ".txt").c_str(), "w");
+                         std::to_string(c) + ".txt")
+                            .c_str(),
+                        "w");
         for (const ProjectorGridPoint& gp : by_camera[c]) {
-          if (f) fprintf(f, "%.1f %.1f %.4f %.4f\n", gp.projector_px.x(), gp.projector_px.y(),
-                         gp.camera_px.x(), gp.camera_px.y());
+          if (f)
+            fprintf(f, "%.1f %.1f %.4f %.4f\n", gp.projector_px.x(), gp.projector_px.y(),
+                    gp.camera_px.x(), gp.camera_px.y());
         }
         if (f) fclose(f);
       }
@@ -115,8 +117,8 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
         for (const ProjectorGridPoint& gp : by_camera[c]) {
           Expected<Eigen::Vector3d> ray = cu->camera->model.Unproject(gp.camera_px.cast<double>());
           if (!ray.ok()) continue;
-          Expected<sim::SurfaceTruth> hit = world.TruthAlongRay(
-              table_from_camera.translation, table_from_camera.rotation * *ray);
+          Expected<sim::SurfaceTruth> hit =
+              world.TruthAlongRay(table_from_camera.translation, table_from_camera.rotation * *ray);
           if (!hit.ok()) continue;
           Expected<sim::ProjectorTruth> truth =
               world.ProjectorTruthAtPoint(p.id, hit->point_in_table_m);
@@ -173,22 +175,41 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
   metric.num_samples = options.metric_samples;
   metric.seed = options.seed;
   metric.true_table_from_model = options.model_from_table.Inverse();
-  metric.keep_samples = false;
+  metric.keep_samples = getenv("SANDTABLE_ERROR_BREAKDOWN") != nullptr;
   Expected<sim::RegistrationReport> report = sim::MeasureRegistration(world, estimates, metric);
   if (!report.ok()) return report.status();
   result.metric = *report;
+  if (metric.keep_samples) {
+    std::map<NodeId, std::vector<Eigen::Vector2d>> errors;
+    for (const sim::RegistrationSample& s : report->samples) {
+      errors[s.unit_id].push_back(s.estimated_pixel_px - s.true_pixel_px);
+    }
+    for (const auto& [unit, e] : errors) {
+      Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+      for (const Eigen::Vector2d& v : e) mean += v;
+      mean /= static_cast<double>(e.size());
+      double rms = 0, rms_centred = 0;
+      for (const Eigen::Vector2d& v : e) {
+        rms += v.squaredNorm();
+        rms_centred += (v - mean).squaredNorm();
+      }
+      fprintf(stderr, "unit %u: px error mean (%.3f, %.3f), rms %.3f, rms about the mean %.3f\n",
+              unit, mean.x(), mean.y(), std::sqrt(rms / e.size()),
+              std::sqrt(rms_centred / e.size()));
+    }
+  }
   // Model placement against the truth (sim/lab/registration_metric.h).
   if (result.solution.model) {
-    Expected<sim::ModelPlacementError> placement = sim::MeasureModelPlacement(
-        world, estimates, options.model_from_table.Inverse(),
-        options.model_from_table * scene.Bounds().center());
+    Expected<sim::ModelPlacementError> placement =
+        sim::MeasureModelPlacement(world, estimates, options.model_from_table.Inverse(),
+                                   options.model_from_table * scene.Bounds().center());
     if (!placement.ok()) return placement.status();
     result.model_offset_mm = placement->offset_mm;
     result.model_offset_deg = placement->offset_deg;
     std::vector<sim::EstimatedRegistration> true_model = estimates;
     for (sim::EstimatedRegistration& e : true_model) {
-      e.table_from_model = placement->true_table_from_estimated_table.Inverse() *
-                           options.model_from_table.Inverse();
+      e.table_from_model =
+          placement->true_table_from_estimated_table.Inverse() * options.model_from_table.Inverse();
     }
     Expected<sim::RegistrationReport> own = sim::MeasureRegistration(world, true_model, metric);
     if (own.ok()) result.metric_true_model = *own;

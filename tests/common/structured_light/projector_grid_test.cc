@@ -4,14 +4,14 @@
 #include <cmath>
 #include <random>
 
-#include <Eigen/LU>
 #include <gtest/gtest.h>
+#include <Eigen/LU>
 
 namespace sandtable {
 namespace {
 
-constexpr double kExactTolerance_px = 1e-3;   // noise-free affine map: exact up to float
-constexpr double kNoisyTolerance_px = 0.05;   // 0.1 px decode noise averaged over the support
+constexpr double kExactTolerance_px = 1e-3;  // noise-free affine map: exact up to float
+constexpr double kNoisyTolerance_px = 0.05;  // 0.1 px decode noise averaged over the support
 
 // A decoding of a camera that sees the projector through an affine map:
 // projector = a * camera + b (so camera = a^-1 (projector - b)), with optional noise.
@@ -81,10 +81,10 @@ TEST(ProjectorGrid, AveragesDecodeNoise) {
 TEST(ProjectorGrid, RefusesSupportAcrossADepthEdge) {
   Eigen::Matrix2d a = Eigen::Matrix2d::Identity() * 1.4;
   Decoding d = AffineDecoding(300, 220, a, Eigen::Vector2d(0, 0), 0.0, 3);
-  // Columns x >= 150 see the projector through another map (a step in depth): the decoded
+  // Columns x >= 146 see the projector through another map (a step in depth): the decoded
   // projector x jumps back by 6 px there, so nodes near the seam get pixels from both sides.
   for (int y = 0; y < d.projector_px.rows; ++y) {
-    for (int x = 150; x < d.projector_px.cols; ++x) d.projector_px.at<cv::Vec2f>(y, x)[0] -= 6.0f;
+    for (int x = 146; x < d.projector_px.cols; ++x) d.projector_px.at<cv::Vec2f>(y, x)[0] -= 6.0f;
   }
   ProjectorGridReport report;
   Expected<std::vector<ProjectorGridPoint>> points = SampleProjectorGrid(d, Options(), &report);

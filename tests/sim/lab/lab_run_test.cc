@@ -85,8 +85,51 @@ class LabRunTest : public ::testing::Test {
 
 bool Finite(const json& value) { return value.is_number() && std::isfinite(value.get<double>()); }
 
-TEST_F(LabRunTest, Sandtable3WritesTheReportAndLeavesNoProcess) {
+// The acceptance figures for sandtable-3 (docs/calibration.md has the measured ones).
+constexpr double kAcceptanceRms_mm = 0.3;
+constexpr double kAcceptanceRms_px = 0.25;
+constexpr double kAcceptanceMax_mm = 1.5;
+constexpr double kAcceptanceModelOffset_mm = 0.3;
+constexpr double kAcceptanceModelOffset_deg = 0.05;
+
+TEST_F(LabRunTest, Sandtable3SelfCalibratesAndFindsTheModel) {
   ChildProcess lab(LabArgs({}));
+  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
+  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "report.md";
+  const json report = ReadJson("report.json");
+  ASSERT_FALSE(report.is_discarded());
+  EXPECT_EQ(report["status"], "ok");
+  const json& calibration = report["calibration"];
+  EXPECT_EQ(calibration["source"], "structured_light");
+  for (const char* scope : {"table", "buildings"}) {
+    EXPECT_LT(calibration[scope]["rms_mm"].get<double>(), kAcceptanceRms_mm) << scope;
+    EXPECT_LT(calibration[scope]["rms_px"].get<double>(), kAcceptanceRms_px) << scope;
+    EXPECT_LT(calibration[scope]["max_mm"].get<double>(), kAcceptanceMax_mm) << scope;
+  }
+  EXPECT_EQ(calibration["colours"], 3);  // every camera of sandtable-3 sees every projector
+  ASSERT_EQ(calibration["frames_per_projector"].size(), 3u);
+  for (const char* id : {"0", "1", "2"}) {
+    EXPECT_GT(calibration["frames_per_projector"][id].get<int>(), 0);
+    EXPECT_LE(calibration["device_time_per_projector_s"][id].get<double>(), 1.0);
+    EXPECT_EQ(calibration["per_unit"][id]["source"], "structured_light");
+    EXPECT_GT(calibration["per_unit"][id]["messages_sent"].get<int>(), 0);
+  }
+  EXPECT_TRUE(Finite(calibration["device_time_s"]));
+  EXPECT_TRUE(Finite(calibration["compute_time_s"]));
+  EXPECT_TRUE(Finite(calibration["messages_per_node"]));
+  EXPECT_TRUE(Finite(calibration["bytes_per_node"]));
+  EXPECT_EQ(calibration["self_calibration_report"]["bundle"]["units"].size(), 3u);
+  const json& registration = report["registration"];
+  EXPECT_TRUE(registration["model"]["found"].get<bool>());
+  EXPECT_LT(registration["model_offset_mm"].get<double>(), kAcceptanceModelOffset_mm);
+  EXPECT_LT(registration["model_offset_deg"].get<double>(), kAcceptanceModelOffset_deg);
+  EXPECT_TRUE(std::filesystem::exists(dir_ / "model.gltf"));
+  EXPECT_TRUE(std::filesystem::exists(dir_ / "calibration" / "self_calibration_report.json"));
+  EXPECT_TRUE(AllProcessesGone(ReadJson("processes.json")));
+}
+
+TEST_F(LabRunTest, Sandtable3WritesTheReportAndLeavesNoProcess) {
+  ChildProcess lab(LabArgs({"--calibration", "true-pose"}));
   ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
   ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "report.md";
   const json report = ReadJson("report.json");
@@ -123,7 +166,7 @@ TEST_F(LabRunTest, Sandtable3WritesTheReportAndLeavesNoProcess) {
 }
 
 TEST_F(LabRunTest, NodeKilledDuringTheRunEndsItWithAReportAndNoOrphan) {
-  ChildProcess lab(LabArgs({"--hold-s", "120"}));
+  ChildProcess lab(LabArgs({"--hold-s", "120", "--calibration", "true-pose"}));
   ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("phase", "") == "hold"; }));
   const json processes = ReadJson("processes.json");
   pid_t victim = -1;
@@ -166,9 +209,9 @@ TEST_F(LabRunTest, HelpListsEveryFlag) {
   std::string text;
   while (std::optional<std::string> line = lab.ReadLine(kRunDeadline)) text += *line + "\n";
   EXPECT_EQ(lab.Wait(), 0);
-  for (const char* flag :
-       {"--site", "--scene", "--out", "--seed", "--hold-s", "--bin-dir", "--samples",
-        "--start-timeout-s", "--calibration-timeout-s", "--image-width", "--progress"}) {
+  for (const char* flag : {"--site", "--scene", "--out", "--seed", "--hold-s", "--bin-dir",
+                           "--samples", "--start-timeout-s", "--calibration-timeout-s",
+                           "--image-width", "--progress", "--calibration", "--model"}) {
     EXPECT_NE(text.find(flag), std::string::npos) << flag;
   }
 }
