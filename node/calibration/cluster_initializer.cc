@@ -54,8 +54,8 @@ Expected<LocalGeometry> EstimateLocalGeometry(const UnitModel& self,
   }
   if (out.triangulated < options.min_shared_points) {
     return DegenerateError("unit " + std::to_string(self.unit) + ": its own camera triangulated " +
-                           std::to_string(out.triangulated) + " of the " + std::to_string(with_own) +
-                           " points of its projector it saw (at least " +
+                           std::to_string(out.triangulated) + " of the " +
+                           std::to_string(with_own) + " points of its projector it saw (at least " +
                            std::to_string(options.min_shared_points) + " needed)" +
                            (first_failure.empty() ? "" : "; first refused: " + first_failure));
   }
@@ -89,8 +89,7 @@ Expected<LocalGeometry> EstimateLocalGeometry(const UnitModel& self,
   return out;
 }
 
-std::map<NodeId, Rigid3d> ChainProjectorPoses(NodeId root,
-                                              const std::map<NodeId, UnitModel>& units,
+std::map<NodeId, Rigid3d> ChainProjectorPoses(NodeId root, const std::map<NodeId, UnitModel>& units,
                                               const std::map<NodeId, LocalGeometry>& local) {
   // Edges i -> j: projector_j_from_projector_i (and the inverse for j -> i).
   std::map<NodeId, std::map<NodeId, Rigid3d>> edges;  // edges[a][b] = projector_b_from_projector_a

@@ -41,8 +41,8 @@ struct RelativePose {
 
 struct LocalGeometry {
   NodeId unit = kInvalidNodeId;
-  int tracks = 0;        // tracks of this projector
-  int triangulated = 0;  // with the own camera
+  int tracks = 0;                             // tracks of this projector
+  int triangulated = 0;                       // with the own camera
   std::map<NodeId, RelativePose> neighbours;  // by camera unit (not the own one)
   std::vector<std::string> notes;             // cameras skipped, and why
 };
@@ -53,8 +53,7 @@ Expected<LocalGeometry> EstimateLocalGeometry(const UnitModel& self,
                                               const LocalGeometryOptions& options = {});
 
 // projector_from_world per reachable unit (world = root's projector frame).
-std::map<NodeId, Rigid3d> ChainProjectorPoses(NodeId root,
-                                              const std::map<NodeId, UnitModel>& units,
+std::map<NodeId, Rigid3d> ChainProjectorPoses(NodeId root, const std::map<NodeId, UnitModel>& units,
                                               const std::map<NodeId, LocalGeometry>& local);
 
 }  // namespace sandtable::node

@@ -72,7 +72,8 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
   if (!table.ok()) return DegenerateError("table plane: " + table.status().message());
   auto to_table = [&](const TableFit& fit) {
     out.points_in_table_m.clear();
-    for (const Eigen::Vector3d& p : points) out.points_in_table_m.push_back(fit.table_from_world * p);
+    for (const Eigen::Vector3d& p : points)
+      out.points_in_table_m.push_back(fit.table_from_world * p);
   };
   to_table(*table);
   stage_done("table");

@@ -41,8 +41,7 @@ std::map<NodeId, int> ColourGraph(const std::map<NodeId, std::set<NodeId>>& grap
         }
       }
       const int saturation = static_cast<int>(seen.size());
-      if (saturation > best_saturation ||
-          (saturation == best_saturation && degree > best_degree)) {
+      if (saturation > best_saturation || (saturation == best_saturation && degree > best_degree)) {
         best = v;
         best_saturation = saturation;
         best_degree = degree;

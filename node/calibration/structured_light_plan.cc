@@ -29,7 +29,8 @@ PatternOptions PlanPatterns(int projector_width_px, int projector_height_px,
   int skip = 0;
   while ((1 << skip) < needed_cell_px && skip < options.max_gray_lsb_skip) ++skip;
   // Never skip every bit of the smaller axis.
-  skip = std::min(skip, std::min(GrayBitsFor(projector_width_px), GrayBitsFor(projector_height_px)) - 1);
+  skip = std::min(skip,
+                  std::min(GrayBitsFor(projector_width_px), GrayBitsFor(projector_height_px)) - 1);
   skip = std::max(skip, 0);
   p.gray_lsb_skip = skip;
   p.phase_steps = options.phase_steps;
