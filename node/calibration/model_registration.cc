@@ -207,14 +207,16 @@ static IcpOutcome RunIcp(const ModelMatcher::Tree& tree, const ModelSurface& sur
   IcpOutcome out;
   const int n = static_cast<int>(scan.size());
   for (int it = 0; it < iterations; ++it) {
-    // Wide pairing for the first iterations (the coarse grid's resolution), then the final
-    // gate.
-    // After that, pairs farther than 3x the last rms (at least tight_gate_m) are dropped too:
-    // scan points that bridge an edge (a roof edge to the table) are not the model's surface.
-    double gate =
+    // Pairing: the nearest sample within `gate` (wide for the first iterations: the coarse
+    // grid's resolution; then the final distance; samples are up to ~0.7 x the spacing apart,
+    // 3x that on the table top). After that, pairs whose point-to-plane distance exceeds 3x
+    // the last rms (at least kTightGate_m) are dropped too: scan points that bridge an edge (a
+    // roof edge to the table) are not the model's surface.
+    const double gate =
         it < 4 ? 3.0 * final_distance_m : (it < 8 ? 1.5 * final_distance_m : final_distance_m);
+    double plane_gate = std::numeric_limits<double>::infinity();
     if (it >= 8 && std::isfinite(out.rms_m)) {
-      gate = std::min(gate, std::max(kTightGate_m, 3.0 * out.rms_m));
+      plane_gate = std::max(kTightGate_m, 3.0 * out.rms_m);
     }
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (int i = 0; i < n; ++i) centre += x.Apply(scan[i]);
@@ -231,6 +233,7 @@ static IcpOutcome RunIcp(const ModelMatcher::Tree& tree, const ModelSurface& sur
       const Eigen::Vector3d& q = surface.points_m[k];
       const Eigen::Vector3d& nq = surface.normals[k];
       const double r = nq.dot(p - q);
+      if (std::abs(r) > plane_gate) continue;
       Eigen::Matrix<double, 7, 1> j;
       j.head<3>() = p.cross(nq);
       j.segment<3>(3) = nq;
