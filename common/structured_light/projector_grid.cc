@@ -49,10 +49,12 @@ Expected<std::vector<ProjectorGridPoint>> SampleProjectorGrid(const Decoding& de
     return InvalidArgumentError(
         "projector grid: the decoding must be CV_32FC2 positions and a CV_8UC1 mask of one size");
   }
-  const int nx = static_cast<int>(
-      std::floor((options.projector_width_px - 0.5 - options.offset_px) / options.step_px)) + 1;
-  const int ny = static_cast<int>(
-      std::floor((options.projector_height_px - 0.5 - options.offset_px) / options.step_px)) + 1;
+  const int nx = static_cast<int>(std::floor(
+                     (options.projector_width_px - 0.5 - options.offset_px) / options.step_px)) +
+                 1;
+  const int ny = static_cast<int>(std::floor(
+                     (options.projector_height_px - 0.5 - options.offset_px) / options.step_px)) +
+                 1;
   ProjectorGridReport local;
   std::vector<ProjectorGridPoint> out;
   if (nx <= 0 || ny <= 0) {
@@ -135,8 +137,9 @@ Expected<std::vector<ProjectorGridPoint>> SampleProjectorGrid(const Decoding& de
         continue;
       }
       ProjectorGridPoint point;
-      point.projector_px = Eigen::Vector2f(static_cast<float>(options.offset_px + i * options.step_px),
-                                           static_cast<float>(options.offset_px + j * options.step_px));
+      point.projector_px =
+          Eigen::Vector2f(static_cast<float>(options.offset_px + i * options.step_px),
+                          static_cast<float>(options.offset_px + j * options.step_px));
       point.camera_px = Eigen::Vector2f(static_cast<float>(ax[0]), static_cast<float>(ay[0]));
       point.fit_rms_px = static_cast<float>(rms);
       point.support = static_cast<uint16_t>(std::min(s.count, 65535));

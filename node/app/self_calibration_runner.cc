@@ -127,8 +127,8 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
       const double ratio = own > 0 ? std::sqrt(static_cast<double>(w) * h / own) : 2.0;
       rr.resolution[p] = ratio;
       // The coarsest camera: the own one, or a neighbour at the stated factor.
-      const double coarsest = seeing.size() > 1 ? ratio * options_.neighbour_resolution_factor
-                                                : ratio;
+      const double coarsest =
+          seeing.size() > 1 ? ratio * options_.neighbour_resolution_factor : ratio;
       rr.plans[p] = PlanPatterns(w, h, coarsest, options_.plan);
     }
     ST_LOG(kInfo) << "self-calibration: " << rr.cameras_seeing.size() << " projectors in "
@@ -395,21 +395,21 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
   compute_s_ += solve_cpu_s;
   r.compute_s[r.self] += solve_cpu_s;
   const double period = options_.frame_period_s + options_.capture_latency_s;
-  nlohmann::json report{{"format", "sandtable.self_calibration_report"},
-                        {"version", 1},
-                        {"runner", r.self},
-                        {"round", r.round},
-                        {"members", r.members},
-                        {"frame_period_s", options_.frame_period_s},
-                        {"capture_latency_s", options_.capture_latency_s},
-                        {"prepass_frames", r.prepass_frames},
-                        {"site_frames", r.prepass_frames + r.site_frames},
-                        {"device_time_s", (r.prepass_frames + r.site_frames) * period},
-                        {"colours", ColourCount(r.colours)},
-                        {"solve_compute_s", solve_cpu_s},
-                        {"wall_s", std::chrono::duration<double>(std::chrono::steady_clock::now() -
-                                                                 r.round_started)
-                                       .count()}};
+  nlohmann::json report{
+      {"format", "sandtable.self_calibration_report"},
+      {"version", 1},
+      {"runner", r.self},
+      {"round", r.round},
+      {"members", r.members},
+      {"frame_period_s", options_.frame_period_s},
+      {"capture_latency_s", options_.capture_latency_s},
+      {"prepass_frames", r.prepass_frames},
+      {"site_frames", r.prepass_frames + r.site_frames},
+      {"device_time_s", (r.prepass_frames + r.site_frames) * period},
+      {"colours", ColourCount(r.colours)},
+      {"solve_compute_s", solve_cpu_s},
+      {"wall_s",
+       std::chrono::duration<double>(std::chrono::steady_clock::now() - r.round_started).count()}};
   nlohmann::json per_projector = nlohmann::json::object();
   for (const auto& [p, plan] : r.plans) {
     const int frames = r.frames_per_projector[p];
@@ -452,12 +452,9 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
                         {"final_rms_px", s.bundle.final_rms_px},
                         {"solve_time_s", s.bundle.solve_time_s},
                         {"units", units}};
-    report["table"] = {{"points", s.table_points},
-                       {"plane_rms_mm", s.table_plane_rms_mm},
-                       {"max_height_mm", s.max_height_mm},
-                       {"planar", s.planar},
-                       {"extent_x_m", s.frame.extent_x_m},
-                       {"extent_y_m", s.frame.extent_y_m}};
+    report["table"] = {{"points", s.table_points},         {"plane_rms_mm", s.table_plane_rms_mm},
+                       {"max_height_mm", s.max_height_mm}, {"planar", s.planar},
+                       {"extent_x_m", s.frame.extent_x_m}, {"extent_y_m", s.frame.extent_y_m}};
     if (s.model) {
       report["model"] = {{"found", true},
                          {"table_from_model", io::RigidToJson(s.model->table_from_model)},
@@ -478,8 +475,8 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
   }
   report["notes"] = notes;
   const std::string report_text = report.dump();
-  ST_LOG(kInfo) << "self-calibration: round done in " << report["wall_s"].get<double>()
-                << " s; " << (solution ? "solved" : status.message());
+  ST_LOG(kInfo) << "self-calibration: round done in " << report["wall_s"].get<double>() << " s; "
+                << (solution ? "solved" : status.message());
   for (NodeId m : r.members) {
     wire::Envelope e;
     wire::CalibrationResult* result = e.mutable_calibration_result();
@@ -500,16 +497,17 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
       *result->mutable_projector_from_table() = proto::ToWire(projector_from_table);
       *result->mutable_camera_from_table() =
           proto::ToWire(u.projector_from_camera.Inverse() * projector_from_table);
-      if (u.table_from_model) *result->mutable_table_from_model() = proto::ToWire(*u.table_from_model);
+      if (u.table_from_model)
+        *result->mutable_table_from_model() = proto::ToWire(*u.table_from_model);
       result->set_reprojection_rms_px(u.projector_rms_px);
       result->set_camera_rms_px(u.camera_rms_px);
       result->set_compute_time_s(r.compute_s[m]);
     } else {
       result->set_ok(false);
       std::string why = r.left_out.count(m) ? r.left_out[m]
-                        : solution          ? "unit " + std::to_string(m) +
-                                         ": not reached by the cluster solve"
-                                            : status.message();
+                        : solution
+                            ? "unit " + std::to_string(m) + ": not reached by the cluster solve"
+                            : status.message();
       result->set_message(why);
     }
     Send(m, std::move(e), node);

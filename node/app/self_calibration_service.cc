@@ -190,8 +190,8 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
           [this, from, done, step, &node](Expected<cv::Mat> image) mutable {
             if (!image.ok()) {
               done.set_ok(false);
-              done.set_message("unit " + std::to_string(node.id()) + " camera: " +
-                               image.status().message());
+              done.set_message("unit " + std::to_string(node.id()) +
+                               " camera: " + image.status().message());
               Answer(from, done, node);
               return;
             }
@@ -212,8 +212,8 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
       std::vector<cv::Mat> captures;
       for (uint32_t i = 0; i < step.frames(); ++i) {
         auto it = slots_.find(step.slot() + i);
-        if (it == slots_.end()) return fail("capture slot " + std::to_string(step.slot() + i) +
-                                            " missing");
+        if (it == slots_.end())
+          return fail("capture slot " + std::to_string(step.slot() + i) + " missing");
         captures.push_back(it->second);
       }
       for (uint32_t i = 0; i < step.frames(); ++i) slots_.erase(step.slot() + i);
@@ -261,8 +261,8 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
               set->add_projector_px_xy(p.projector_px.y());
             }
             ST_LOG(kInfo) << "self-calibration: projector " << step.projector_id() << " decoded "
-                          << d.report.decode.decoded_pixels << " camera px -> "
-                          << d.points->size() << " grid points (" << d.cpu_s << " s)";
+                          << d.report.decode.decoded_pixels << " camera px -> " << d.points->size()
+                          << " grid points (" << d.cpu_s << " s)";
             Send(step.projector_id(), std::move(e), node);  // to the projecting node only
             done.set_ok(true);
             done.set_points(static_cast<uint32_t>(d.points->size()));
@@ -343,7 +343,9 @@ void SelfCalibrationService::RunLocal(const wire::CalibrationStep& step, NodeId 
     *input->add_correspondences() = set;
     if (const char* dump = getenv("SANDTABLE_DEBUG_DUMP")) {
       FILE* f = fopen((std::string(dump) + "/p" + std::to_string(node.id()) + "_c" +
-                       std::to_string(camera) + ".txt").c_str(), "w");
+                       std::to_string(camera) + ".txt")
+                          .c_str(),
+                      "w");
       for (int i = 0; f && i + 1 < set.camera_px_xy_size(); i += 2) {
         fprintf(f, "%.1f %.1f %.4f %.4f\n", set.projector_px_xy(i), set.projector_px_xy(i + 1),
                 set.camera_px_xy(i), set.camera_px_xy(i + 1));

@@ -116,7 +116,7 @@ class NodeRuntime {
   const std::optional<wire::MemberList>& member_list() const { return last_member_list_; }
   std::chrono::milliseconds member_list_age() const {
     return std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() -
-                                                                  member_list_changed_);
+                                                                 member_list_changed_);
   }
   const proto::MessageCounters& counters() const { return counters_; }
   uint64_t registrations() const { return registrations_; }

@@ -226,7 +226,8 @@ std::string LabReportMarkdown(const LabResult& r) {
        << Fixed(r.self_calibration.value("bytes_per_node", 0.0) / 1024.0, 0)
        << " KiB per node.\n\n";
     md << "| projector | colour | cameras | frames | projection (s) | Gray bits skipped | phase "
-          "steps x period (px) | compute (s) |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n";
+          "steps x period (px) | compute (s) |\n| --- | --- | --- | --- | --- | --- | --- | --- "
+          "|\n";
     if (rr.contains("projectors") && rr["projectors"].is_object()) {
       for (const auto& [id, p] : rr["projectors"].items()) {
         std::string cameras;
@@ -243,8 +244,8 @@ std::string LabReportMarkdown(const LabResult& r) {
     if (rr.contains("bundle")) {
       const json& b = rr["bundle"];
       md << "\nJoint refinement (Ceres): " << b.value("termination", std::string()) << ", "
-         << b.value("iterations", 0) << " iterations, " << b.value("tracks", 0)
-         << " tracks, rms " << Fixed(b.value("initial_rms_px", 0.0), 3) << " -> "
+         << b.value("iterations", 0) << " iterations, " << b.value("tracks", 0) << " tracks, rms "
+         << Fixed(b.value("initial_rms_px", 0.0), 3) << " -> "
          << Fixed(b.value("final_rms_px", 0.0), 3) << " px.\n\n"
          << "| unit | projector rms (px) | camera rms (px) | free parameters |\n"
          << "| --- | --- | --- | --- |\n";

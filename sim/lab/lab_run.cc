@@ -107,9 +107,8 @@ class LabRun {
 
   int Prepare() {
     Phase("prepare", 0);
-    Expected<LabInputs> inputs =
-        PrepareLabInputs(options_.site, options_.scene, options_.seed, options_.out_dir,
-                         options_.model);
+    Expected<LabInputs> inputs = PrepareLabInputs(options_.site, options_.scene, options_.seed,
+                                                  options_.out_dir, options_.model);
     if (!inputs.ok()) {
       progress_.End("failed");
       err_ << "sandtable-lab run: " << inputs.status().message() << "\n";
@@ -306,9 +305,9 @@ class LabRun {
     const Eigen::Vector3d model_centre = inputs_.model_from_table * scene_.Bounds().center();
     const RegistrationMetricOptions metric_options = result_.metric_options;
     const int width = options_.image_width_px;
-    std::future<Work> future =
-        std::async(std::launch::async, [this, estimates, metric_options, width, model_placement,
-                                         model_centre]() -> Work {
+    std::future<Work> future = std::async(
+        std::launch::async,
+        [this, estimates, metric_options, width, model_placement, model_centre]() -> Work {
           Work work;
           Expected<std::unique_ptr<World>> world = World::Create(inputs_.site, scene_);
           if (!world.ok()) {

@@ -26,9 +26,9 @@ TEST(ClusterSelfCalibration, Sandtable3ReachesTheAcceptanceFigures) {
   ASSERT_TRUE(scene.ok());
   testing::SimCalibrationOptions options;
   options.seed = 1;
-  options.model_from_table = Rigid3d(
-      Eigen::AngleAxisd(7.0 * M_PI / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
-      Eigen::Vector3d(0.03, -0.02, 0.0));
+  options.model_from_table =
+      Rigid3d(Eigen::AngleAxisd(7.0 * M_PI / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
+              Eigen::Vector3d(0.03, -0.02, 0.0));
   Expected<testing::SimCalibrationResult> r =
       testing::RunSimCalibration(*site, scene->scene, options);
   ASSERT_TRUE(r.ok()) << r.status().ToString();

@@ -36,7 +36,8 @@ TEST(Schedule, AGridNeedsColoursNotProjectors) {
       for (int dr = -1; dr <= 1; ++dr) {
         for (int dc = -1; dc <= 1; ++dc) {
           const int rr = r + dr, cc = c + dc;
-          if (rr >= 0 && rr < 4 && cc >= 0 && cc < 4) seeing[p].insert(static_cast<NodeId>(4 * rr + cc));
+          if (rr >= 0 && rr < 4 && cc >= 0 && cc < 4)
+            seeing[p].insert(static_cast<NodeId>(4 * rr + cc));
         }
       }
     }
