@@ -86,6 +86,8 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
       wire::CalibrationStep s = MakeStep(r.round, wire::CALIBRATION_ACTION_CAPTURE);
       s.set_slot(kWhiteSlot);
       s.set_reference_slot(kBlackSlot);
+      s.set_about_projector(p);
+      s.set_has_about_projector(true);
       capture.commands.push_back({c, s, p});
     }
     off.label = "pre-pass off " + std::to_string(p);
@@ -118,7 +120,15 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
       }
       rr.cameras_seeing[p] = seeing;
     }
-    const std::map<NodeId, std::set<NodeId>> graph = ConflictGraph(rr.cameras_seeing);
+    // Conflicts: projector pairs whose lit regions some camera cannot tell apart.
+    std::map<NodeId, std::set<NodeId>> graph;
+    for (const auto& [p, seeing] : rr.cameras_seeing) graph[p];
+    for (const auto& [a, b] : rr.overlaps) {
+      if (graph.count(a) && graph.count(b)) {
+        graph[a].insert(b);
+        graph[b].insert(a);
+      }
+    }
     rr.colours = ColourGraph(graph);
     const int colour_count = ColourCount(rr.colours);
     for (const auto& [p, seeing] : rr.cameras_seeing) {
@@ -187,6 +197,11 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
           d.set_grid_step_px(static_cast<uint32_t>(options_.grid_step_px));
           decode.commands.push_back({cam, d});
         }
+      }
+      // The last decode of each camera in this colour frees its captures.
+      std::set<NodeId> released;
+      for (auto it = decode.commands.rbegin(); it != decode.commands.rend(); ++it) {
+        if (released.insert(it->to).second) it->step.set_release_slots(true);
       }
       rr.stages.push_back(off);
       rr.stages.push_back(decode);
@@ -292,6 +307,10 @@ void SelfCalibrationService::RunnerDone(NodeId from, const wire::CalibrationStep
   if (command.step.action() == wire::CALIBRATION_ACTION_CAPTURE &&
       command.about != kInvalidNodeId) {
     r.lit[command.about][from] = done.lit_pixels();
+    for (uint32_t other : done.overlapping_projectors()) {
+      r.overlaps.insert({std::min<NodeId>(other, command.about),
+                         std::max<NodeId>(other, command.about)});
+    }
   }
   if (command.step.action() == wire::CALIBRATION_ACTION_DECODE && done.points() < 50) {
     r.notes.push_back("camera " + std::to_string(from) + " decoded " +

@@ -47,6 +47,7 @@ struct SelfCalibrationService::Runner {
   // Pre-pass and plan.
   std::map<NodeId, std::map<NodeId, uint32_t>> lit;  // lit[projector][camera]
   std::map<NodeId, std::set<NodeId>> cameras_seeing;
+  std::set<std::pair<NodeId, NodeId>> overlaps;  // projector pairs a camera cannot separate
   std::map<NodeId, int> colours;
   std::map<NodeId, PatternOptions> plans;
   std::map<NodeId, double> resolution;  // projector px per own-camera px

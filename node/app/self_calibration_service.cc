@@ -134,6 +134,7 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
     // A new round: forget the last one's captures and correspondences.
     round_ = step.round();
     slots_.clear();
+    lit_masks_.clear();
     received_.clear();
     pending_local_.reset();
   }
@@ -198,8 +199,19 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
             if (step.reference_slot() != 0) {
               auto ref = slots_.find(step.reference_slot());
               if (ref != slots_.end() && ref->second.size() == image->size()) {
-                done.set_lit_pixels(static_cast<uint32_t>(
-                    CountLitPixels(*image, ref->second, options_.lit_threshold)));
+                cv::Mat mask = LitMask(*image, ref->second, options_.lit_threshold);
+                const int lit = cv::countNonZero(mask);
+                done.set_lit_pixels(static_cast<uint32_t>(lit));
+                if (step.has_about_projector() && lit >= options_.min_lit_pixels) {
+                  for (const auto& [other, other_mask] : lit_masks_) {
+                    if (other != step.about_projector() &&
+                        MasksOverlap(mask, other_mask, options_.mask_margin_px,
+                                     options_.min_overlap_pixels)) {
+                      done.add_overlapping_projectors(other);
+                    }
+                  }
+                  lit_masks_[step.about_projector()] = mask;
+                }
               }
             }
             slots_[step.slot()] = std::move(*image);
@@ -216,7 +228,9 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
           return fail("capture slot " + std::to_string(step.slot() + i) + " missing");
         captures.push_back(it->second);
       }
-      for (uint32_t i = 0; i < step.frames(); ++i) slots_.erase(step.slot() + i);
+      if (step.release_slots()) {
+        slots_.erase(slots_.lower_bound(step.slot()), slots_.lower_bound(step.slot() + 1000));
+      }
       const PatternOptions patterns = PatternOptionsFromWire(step.plan());
       ProjectorGridOptions grid;
       grid.projector_width_px = patterns.projector_width_px;
@@ -229,11 +243,14 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
         CameraDecodeReport report;
         double cpu_s = 0.0;
       };
+      cv::Mat mask;
+      if (auto m = lit_masks_.find(step.projector_id()); m != lit_masks_.end()) mask = m->second;
       node.workers().Run<Decoded>(
-          [captures = std::move(captures), patterns, grid] {
+          [captures = std::move(captures), patterns, grid, mask] {
             Decoded d;
             const double t0 = ThreadCpuSeconds();
-            d.points = DecodeToProjectorGrid(captures, patterns, grid, &d.report);
+            d.points = DecodeToProjectorGrid(captures, patterns, grid, &d.report,
+                                             mask.empty() ? nullptr : &mask);
             d.cpu_s = ThreadCpuSeconds() - t0;
             return d;
           },

@@ -59,6 +59,10 @@ struct SelfCalibrationOptions {
   int grid_step_px = 16;     // projector grid spacing (docs/calibration.md: error against step)
   int lit_threshold = 20;    // 8-bit levels, white - black
   int min_lit_pixels = 500;  // a camera "sees" a projector above this
+  // Two projectors conflict (cannot share a colour) when one camera's lit masks of them come
+  // within mask_margin_px of each other on more than min_overlap_pixels pixels.
+  int mask_margin_px = 6;
+  int min_overlap_pixels = 50;
   ClusterSolveOptions solve;
 };
 
@@ -128,6 +132,7 @@ class SelfCalibrationService : public NodeService {
   // Node side state of the current round.
   uint64_t round_ = 0;
   std::map<uint32_t, cv::Mat> slots_;  // captures (8 bit)
+  std::map<NodeId, cv::Mat> lit_masks_;  // per projector, from the pre-pass
   std::map<std::string, std::vector<cv::Mat>> pattern_cache_;
   std::map<NodeId, wire::CorrespondenceSet> received_;  // by camera, for own projector
   std::deque<std::pair<wire::CalibrationStep, NodeId>> deferred_;

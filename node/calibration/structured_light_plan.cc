@@ -3,6 +3,8 @@
 #include <cmath>
 #include <tuple>
 
+#include <opencv2/imgproc.hpp>
+
 namespace sandtable::node {
 
 Status PatternPlanOptions::Check() const {
@@ -58,11 +60,17 @@ cv::Mat To8Bit(const cv::Mat& capture, int bit_depth) {
 
 Expected<std::vector<ProjectorGridPoint>> DecodeToProjectorGrid(
     const std::vector<cv::Mat>& captures_8bit, const PatternOptions& patterns,
-    const ProjectorGridOptions& grid, CameraDecodeReport* report) {
+    const ProjectorGridOptions& grid, CameraDecodeReport* report, const cv::Mat* mask) {
   CameraDecodeReport local;
   Expected<Decoding> decoding =
       DecodeStructuredLight(captures_8bit, patterns, DecoderOptionsFor(patterns), &local.decode);
   if (!decoding.ok()) return decoding.status();
+  if (mask && !mask->empty() && mask->size() == decoding->valid.size() &&
+      mask->type() == CV_8UC1) {
+    cv::Mat keep;
+    cv::bitwise_and(decoding->valid, *mask, keep);
+    decoding->valid = keep;
+  }
   Expected<std::vector<ProjectorGridPoint>> points =
       SampleProjectorGrid(*decoding, grid, &local.grid);
   if (report) *report = local;
@@ -87,6 +95,21 @@ std::vector<Track> BuildTracks(NodeId projector_unit,
     }
   }
   return tracks;
+}
+
+cv::Mat LitMask(const cv::Mat& white_8bit, const cv::Mat& black_8bit, int threshold) {
+  cv::Mat diff;
+  cv::subtract(white_8bit, black_8bit, diff, cv::noArray(), CV_16S);
+  return diff > threshold;
+}
+
+bool MasksOverlap(const cv::Mat& a, const cv::Mat& b, int margin_px, int min_pixels) {
+  if (a.size() != b.size() || a.empty()) return false;
+  cv::Mat grown, both;
+  cv::dilate(a, grown, cv::getStructuringElement(cv::MORPH_RECT,
+                                                 cv::Size(2 * margin_px + 1, 2 * margin_px + 1)));
+  cv::bitwise_and(grown, b, both);
+  return cv::countNonZero(both) > min_pixels;
 }
 
 int CountLitPixels(const cv::Mat& white_8bit, const cv::Mat& black_8bit, int threshold) {

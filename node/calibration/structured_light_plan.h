@@ -47,9 +47,18 @@ struct CameraDecodeReport {
   ProjectorGridReport grid;
 };
 
+// `mask` (optional, CV_8UC1 of the camera size): only camera pixels where it is non-zero are
+// used (the pixels this projector lit in the pre-pass, so projectors of one colour that the
+// camera sees apart do not mix).
 Expected<std::vector<ProjectorGridPoint>> DecodeToProjectorGrid(
     const std::vector<cv::Mat>& captures_8bit, const PatternOptions& patterns,
-    const ProjectorGridOptions& grid, CameraDecodeReport* report = nullptr);
+    const ProjectorGridOptions& grid, CameraDecodeReport* report = nullptr,
+    const cv::Mat* mask = nullptr);
+
+// The lit mask of a pre-pass capture: white - black > threshold (8-bit levels).
+cv::Mat LitMask(const cv::Mat& white_8bit, const cv::Mat& black_8bit, int threshold);
+// True when the two masks come within margin_px of each other on more than min_pixels pixels.
+bool MasksOverlap(const cv::Mat& a, const cv::Mat& b, int margin_px, int min_pixels);
 
 // Tracks of one projector from the grid points each camera decoded (keyed by grid node).
 std::vector<Track> BuildTracks(NodeId projector_unit,

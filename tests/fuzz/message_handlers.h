@@ -59,6 +59,22 @@ inline bool HandleUntrustedMessage(const uint8_t* data, size_t size, HandlerStat
       (void)proto::FromWire(e.calibration_result().projector_model());
       (void)proto::FromWire(e.calibration_result().projector_from_table());
       (void)proto::FromWire(e.calibration_result().camera_model());
+      (void)proto::FromWire(e.calibration_result().camera_from_table());
+      (void)proto::FromWire(e.calibration_result().table_from_model());
+      break;
+    case wire::Envelope::kCorrespondenceSet:
+      (void)proto::FromWire(e.correspondence_set().camera_model());
+      break;
+    case wire::Envelope::kCalibrationInput:
+      (void)proto::FromWire(e.calibration_input().camera_model());
+      (void)proto::FromWire(e.calibration_input().projector_model());
+      (void)proto::FromWire(e.calibration_input().projector_from_camera());
+      for (const wire::RelativePose& r : e.calibration_input().relative_poses()) {
+        (void)proto::FromWire(r.camera_from_projector());
+      }
+      for (const wire::CorrespondenceSet& c : e.calibration_input().correspondences()) {
+        (void)proto::FromWire(c.camera_model());
+      }
       break;
     case wire::Envelope::kCursor:
       (void)proto::FromWire(e.cursor().hit_in_table_m());
