@@ -1,9 +1,9 @@
 // The runner side of SelfCalibrationService (self_calibration_service.h).
 #include <algorithm>
 #include <cmath>
-#include <ctime>
 
 #include "common/base/log.h"
+#include "common/base/thread_cpu_time.h"
 #include "common/io/json_codec.h"
 #include "node/app/self_calibration_runner.h"
 #include "node/calibration/schedule.h"
@@ -12,12 +12,6 @@
 
 namespace sandtable::node {
 namespace {
-
-double ThreadCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 constexpr uint32_t kBlackSlot = 1;
 constexpr uint32_t kWhiteSlot = 2;
@@ -308,8 +302,8 @@ void SelfCalibrationService::RunnerDone(NodeId from, const wire::CalibrationStep
       command.about != kInvalidNodeId) {
     r.lit[command.about][from] = done.lit_pixels();
     for (uint32_t other : done.overlapping_projectors()) {
-      r.overlaps.insert({std::min<NodeId>(other, command.about),
-                         std::max<NodeId>(other, command.about)});
+      r.overlaps.insert(
+          {std::min<NodeId>(other, command.about), std::max<NodeId>(other, command.about)});
     }
   }
   if (command.step.action() == wire::CALIBRATION_ACTION_DECODE && done.points() < 50) {

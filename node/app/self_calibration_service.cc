@@ -1,20 +1,13 @@
 #include "node/app/self_calibration_service.h"
 
-#include <ctime>
-
 #include "common/base/log.h"
+#include "common/base/thread_cpu_time.h"
 #include "node/app/self_calibration_runner.h"
 #include "node/calibration/cluster_initializer.h"
 #include "proto/convert.h"
 
 namespace sandtable::node {
 namespace {
-
-double ThreadCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 // The bounds a received correspondence set must keep (docs/calibration.md).
 constexpr int kMaxCorrespondencesPerSet = 1 << 20;

@@ -1,22 +1,16 @@
 #include "node/calibration/cluster_bundle.h"
 
 #include <cmath>
-#include <ctime>
 
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
 
+#include "common/base/thread_cpu_time.h"
 #include "common/estimation/triangulation.h"
 #include "node/calibration/procam_model.h"
 
 namespace sandtable::node {
 namespace {
-
-double ThreadCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 // x_b = R(pose[0..2]) x_a + pose[3..5]
 template <typename T>

@@ -2,16 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
-#include <ctime>
+
+#include "common/base/thread_cpu_time.h"
 
 namespace sandtable::node {
 namespace {
-
-double ThreadCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 struct TableFit {
   Rigid3d table_from_world;

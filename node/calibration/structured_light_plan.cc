@@ -65,8 +65,7 @@ Expected<std::vector<ProjectorGridPoint>> DecodeToProjectorGrid(
   Expected<Decoding> decoding =
       DecodeStructuredLight(captures_8bit, patterns, DecoderOptionsFor(patterns), &local.decode);
   if (!decoding.ok()) return decoding.status();
-  if (mask && !mask->empty() && mask->size() == decoding->valid.size() &&
-      mask->type() == CV_8UC1) {
+  if (mask && !mask->empty() && mask->size() == decoding->valid.size() && mask->type() == CV_8UC1) {
     cv::Mat keep;
     cv::bitwise_and(decoding->valid, *mask, keep);
     decoding->valid = keep;
@@ -106,8 +105,9 @@ cv::Mat LitMask(const cv::Mat& white_8bit, const cv::Mat& black_8bit, int thresh
 bool MasksOverlap(const cv::Mat& a, const cv::Mat& b, int margin_px, int min_pixels) {
   if (a.size() != b.size() || a.empty()) return false;
   cv::Mat grown, both;
-  cv::dilate(a, grown, cv::getStructuringElement(cv::MORPH_RECT,
-                                                 cv::Size(2 * margin_px + 1, 2 * margin_px + 1)));
+  cv::dilate(
+      a, grown,
+      cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * margin_px + 1, 2 * margin_px + 1)));
   cv::bitwise_and(grown, b, both);
   return cv::countNonZero(both) > min_pixels;
 }

@@ -1,21 +1,11 @@
 #include "tests/testing/self_calibration_sim.h"
 
 #include <cmath>
-#include <ctime>
 
+#include "common/base/thread_cpu_time.h"
 #include "sim/transport/world.h"
 
 namespace sandtable::testing {
-namespace {
-
-double ThreadCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
-
-}  // namespace
-
 Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Scene& scene,
                                                  const SimCalibrationOptions& options) {
   Expected<std::unique_ptr<sim::World>> created = sim::World::Create(site, scene);
