@@ -288,7 +288,7 @@ Expected<ModelRegistration> ModelMatcher::Refine(std::span<const Eigen::Vector3d
   out.table_from_model = Rigid3d(rt, -rt * icp.model_from_table.t);
   out.rms_m = icp.rms_m;
   out.inliers = icp.inliers;
-  out.points = static_cast<int>(scan.size());
+  out.points = static_cast<int>(points.size());  // the points fitted (subsampled)
   return out;
 }
 
@@ -392,7 +392,7 @@ Expected<ModelRegistration> ModelMatcher::Register(std::span<const Eigen::Vector
   out.table_from_model = Rigid3d(rt, -rt * fine.model_from_table.t);
   out.rms_m = fine.rms_m;
   out.inliers = fine.inliers;
-  out.points = n;
+  out.points = static_cast<int>(points.size());  // the points fitted (subsampled)
   out.coarse_score = chosen.empty() ? 0.0 : chosen.front().score;
   out.candidates_tried = tried;
   out.structure_fraction = static_cast<double>(structure) / n;

@@ -53,10 +53,10 @@ struct ModelRegistrationOptions {
 
 struct ModelRegistration {
   Rigid3d table_from_model;
-  double scale = 1.0;  // scan = scale * (table_from_model * model), before rescaling
-  double rms_m = 0.0;  // point-to-plane rms of the inliers, final (rigid) fit
-  int inliers = 0, points = 0;
-  double coarse_score = 0.0;  // fraction of the best correlation's possible agreement
+  double scale = 1.0;           // scan = scale * (table_from_model * model), before rescaling
+  double rms_m = 0.0;           // point-to-plane rms of the inliers, final (rigid) fit
+  int inliers = 0, points = 0;  // of the scan points fitted (at most 5 000, evenly subsampled)
+  double coarse_score = 0.0;    // fraction of the best correlation's possible agreement
   int candidates_tried = 0;
   double structure_fraction = 0.0;  // scan points above structure_height_m
 };

@@ -56,7 +56,7 @@ TEST(ModelRegistration, FindsAnUnknownPlacementWithoutAGuess) {
   const Rigid3d error = table_from_model.Inverse() * found->table_from_model;
   EXPECT_LT(error.translation.norm() * 1e3, kPlacementTolerance_mm);
   EXPECT_LT(Eigen::AngleAxisd(error.rotation).angle() * 180.0 / kPi, kAngleTolerance_deg);
-  EXPECT_GT(found->inliers, static_cast<int>(0.9 * scan.size()));
+  EXPECT_GT(found->inliers, static_cast<int>(0.9 * found->points));
 }
 
 TEST(ModelRegistration, RecoversTheScanScale) {
