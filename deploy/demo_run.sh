@@ -41,6 +41,8 @@ bench="$build/tests/bench"
 #    per unit) on localhost, measured against the world's truth (docs/lab.md); then the
 #    ceiling-grid site over the city table.
 step lab "$lab" run --site sandtable-3 --scene sandtable --out "$out/lab" --progress plain
+step lab_true_pose "$lab" run --site sandtable-3 --scene sandtable --calibration true-pose \
+  --out "$out/lab-true-pose" --progress plain
 step lab_grid8 "$lab" run --site grid-8 --scene city --out "$out/lab-grid8" --progress plain
 
 # 2. The simulated world alone: a TR09-017 sand table lit white by three projectors.

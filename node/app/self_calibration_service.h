@@ -131,7 +131,7 @@ class SelfCalibrationService : public NodeService {
 
   // Node side state of the current round.
   uint64_t round_ = 0;
-  std::map<uint32_t, cv::Mat> slots_;  // captures (8 bit)
+  std::map<uint32_t, cv::Mat> slots_;    // captures (8 bit)
   std::map<NodeId, cv::Mat> lit_masks_;  // per projector, from the pre-pass
   std::map<std::string, std::vector<cv::Mat>> pattern_cache_;
   std::map<NodeId, wire::CorrespondenceSet> received_;  // by camera, for own projector
