@@ -42,7 +42,9 @@ struct LabRunOptions {
   double hold_s = 0.0;
   std::string bin_dir;            // where sandtable-world/-coordinator/-node are ("" = find them)
   double start_timeout_s = 60.0;  // per readiness phase
-  double calibration_timeout_s = 120.0;
+  // Structured light on a grid site takes minutes of wall time: the world renders every
+  // capture on one thread (grid-8: ~160 s, grid-16: ~190 s on a 2-core machine).
+  double calibration_timeout_s = 900.0;
   double teardown_grace_s = 5.0;
   int metric_samples = 40000;
   int image_width_px = 640;
