@@ -26,7 +26,8 @@ wire::CalibrationStep MakeStep(uint64_t round, wire::CalibrationAction action) {
 }  // namespace
 
 void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
-  if (runner_ || calibrated_ || !camera_ || !node.registered()) return;
+  if (!camera_ || !node.registered()) return;
+  if (runner_ && !runner_->finished) return;
   const std::optional<wire::MemberList>& list = node.member_list();
   if (!list) return;
   std::vector<NodeId> members;
@@ -40,6 +41,19 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
   }
   if (members.empty() || members.front() != node.id()) return;  // not the runner
   if (node.member_list_age() < options_.settle) return;
+  // A round already ran: a new one only when units joined that it did not include (a node
+  // that started late, or after the round). Units that left cause none.
+  if (runner_ || calibrated_) {
+    if (!runner_) return;  // calibrated by another runner: that runner decides
+    bool grew = false;
+    for (NodeId m : members) {
+      grew |= std::find(runner_->members.begin(), runner_->members.end(), m) ==
+              runner_->members.end();
+    }
+    if (!grew) return;
+    ST_LOG(kInfo) << "self-calibration: units joined after the last round; calibrating again";
+    runner_.reset();
+  }
   for (NodeId m : members) {
     if (m == node.id()) continue;
     auto peer = node.peers().find(m);
