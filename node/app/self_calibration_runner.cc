@@ -47,8 +47,8 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
     if (!runner_) return;  // calibrated by another runner: that runner decides
     bool grew = false;
     for (NodeId m : members) {
-      grew |= std::find(runner_->members.begin(), runner_->members.end(), m) ==
-              runner_->members.end();
+      grew |=
+          std::find(runner_->members.begin(), runner_->members.end(), m) == runner_->members.end();
     }
     if (!grew) return;
     ST_LOG(kInfo) << "self-calibration: units joined after the last round; calibrating again";
