@@ -129,14 +129,9 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
       rr.cameras_seeing[p] = seeing;
     }
     // Conflicts: projector pairs whose lit regions some camera cannot tell apart.
-    std::map<NodeId, std::set<NodeId>> graph;
-    for (const auto& [p, seeing] : rr.cameras_seeing) graph[p];
-    for (const auto& [a, b] : rr.overlaps) {
-      if (graph.count(a) && graph.count(b)) {
-        graph[a].insert(b);
-        graph[b].insert(a);
-      }
-    }
+    std::set<NodeId> scheduled;
+    for (const auto& [p, seeing] : rr.cameras_seeing) scheduled.insert(p);
+    const std::map<NodeId, std::set<NodeId>> graph = ConflictGraphFromPairs(scheduled, rr.overlaps);
     rr.colours = ColourGraph(graph);
     const int colour_count = ColourCount(rr.colours);
     for (const auto& [p, seeing] : rr.cameras_seeing) {
@@ -229,6 +224,17 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
   };
 }
 
+bool SelfCalibrationService::EndStage(NodeRuntime& node) {
+  Runner& r = *runner_;
+  r.stage_active = false;
+  if (r.current_after) {
+    auto after = std::move(r.current_after);
+    r.current_after = nullptr;
+    after(node);
+  }
+  return !r.solving && !r.finished;
+}
+
 void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
   if (!runner_ || runner_->finished || runner_->solving) return;
   Runner& r = *runner_;
@@ -255,13 +261,7 @@ void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
       }
     }
     if (!r.awaiting.empty()) return;
-    r.stage_active = false;
-    if (r.current_after) {
-      auto after = std::move(r.current_after);
-      r.current_after = nullptr;
-      after(node);
-      if (!runner_ || r.solving || r.finished) return;
-    }
+    if (!EndStage(node)) return;
   }
   while (!r.stage_active && !r.stages.empty()) {
     Runner::Stage stage = std::move(r.stages.front());
@@ -281,15 +281,7 @@ void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
       *e.mutable_calibration_step() = c.step;
       Send(c.to, std::move(e), node);
     }
-    if (r.awaiting.empty()) {  // nothing to wait for
-      r.stage_active = false;
-      if (r.current_after) {
-        auto after = std::move(r.current_after);
-        r.current_after = nullptr;
-        after(node);
-        if (!runner_ || r.solving || r.finished) return;
-      }
-    }
+    if (r.awaiting.empty() && !EndStage(node)) return;  // nothing to wait for
   }
 }
 
@@ -369,14 +361,8 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
     local[id] = geometry;
     std::map<NodeId, std::vector<ProjectorGridPoint>> by_camera;
     for (const wire::CorrespondenceSet& set : input.correspondences()) {
-      if (set.camera_px_xy_size() != set.projector_px_xy_size()) continue;
-      std::vector<ProjectorGridPoint>& points = by_camera[set.camera_id()];
-      for (int i = 0; i + 1 < set.camera_px_xy_size(); i += 2) {
-        ProjectorGridPoint p;
-        p.camera_px = Eigen::Vector2f(set.camera_px_xy(i), set.camera_px_xy(i + 1));
-        p.projector_px = Eigen::Vector2f(set.projector_px_xy(i), set.projector_px_xy(i + 1));
-        if (p.camera_px.allFinite() && p.projector_px.allFinite()) points.push_back(p);
-      }
+      std::vector<ProjectorGridPoint> points = GridPointsFromWire(set);
+      if (!points.empty()) by_camera[set.camera_id()] = std::move(points);
     }
     const std::vector<Track> tracks = BuildTracks(id, by_camera);
     observations.tracks.insert(observations.tracks.end(), tracks.begin(), tracks.end());

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "common/structured_light/pattern_sequence.h"
+#include "common/structured_light/projector_grid.h"
 #include "node/app/self_calibration_service.h"
 #include "proto/calibration.pb.h"
 
@@ -18,6 +19,10 @@ namespace sandtable::node {
 
 PatternOptions PatternOptionsFromWire(const wire::PatternPlan& plan);
 wire::PatternPlan PatternPlanToWire(const PatternOptions& patterns);
+// The grid points of a correspondence set (none when the arrays differ in size; pairs with a
+// non-finite coordinate are skipped), and the other way.
+std::vector<ProjectorGridPoint> GridPointsFromWire(const wire::CorrespondenceSet& set);
+void GridPointsToWire(const std::vector<ProjectorGridPoint>& points, wire::CorrespondenceSet* set);
 
 struct SelfCalibrationService::Runner {
   struct Command {

@@ -36,6 +36,27 @@ wire::PatternPlan PatternPlanToWire(const PatternOptions& p) {
   return plan;
 }
 
+std::vector<ProjectorGridPoint> GridPointsFromWire(const wire::CorrespondenceSet& set) {
+  std::vector<ProjectorGridPoint> points;
+  if (set.camera_px_xy_size() != set.projector_px_xy_size()) return points;
+  for (int i = 0; i + 1 < set.camera_px_xy_size(); i += 2) {
+    ProjectorGridPoint p;
+    p.camera_px = Eigen::Vector2f(set.camera_px_xy(i), set.camera_px_xy(i + 1));
+    p.projector_px = Eigen::Vector2f(set.projector_px_xy(i), set.projector_px_xy(i + 1));
+    if (p.camera_px.allFinite() && p.projector_px.allFinite()) points.push_back(p);
+  }
+  return points;
+}
+
+void GridPointsToWire(const std::vector<ProjectorGridPoint>& points, wire::CorrespondenceSet* set) {
+  for (const ProjectorGridPoint& p : points) {
+    set->add_camera_px_xy(p.camera_px.x());
+    set->add_camera_px_xy(p.camera_px.y());
+    set->add_projector_px_xy(p.projector_px.x());
+    set->add_projector_px_xy(p.projector_px.y());
+  }
+}
+
 SelfCalibrationService::SelfCalibrationService(UnitCalibration factory, ProjectorOutput* projector,
                                                std::shared_ptr<const Scene> model,
                                                SelfCalibrationOptions options,
@@ -264,12 +285,7 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
             set->set_camera_id(node.id());
             set->set_projector_id(step.projector_id());
             *set->mutable_camera_model() = proto::ToWire(factory_.camera);
-            for (const ProjectorGridPoint& p : *d.points) {
-              set->add_camera_px_xy(p.camera_px.x());
-              set->add_camera_px_xy(p.camera_px.y());
-              set->add_projector_px_xy(p.projector_px.x());
-              set->add_projector_px_xy(p.projector_px.y());
-            }
+            GridPointsToWire(*d.points, set);
             ST_LOG(kInfo) << "self-calibration: projector " << step.projector_id() << " decoded "
                           << d.report.decode.decoded_pixels << " camera px -> " << d.points->size()
                           << " grid points (" << d.cpu_s << " s)";
@@ -342,26 +358,8 @@ void SelfCalibrationService::RunLocal(const wire::CalibrationStep& step, NodeId 
       continue;
     }
     cameras[camera] = *model;
-    std::vector<ProjectorGridPoint>& points = by_camera[camera];
-    for (int i = 0; i + 1 < set.camera_px_xy_size(); i += 2) {
-      ProjectorGridPoint p;
-      p.camera_px = Eigen::Vector2f(set.camera_px_xy(i), set.camera_px_xy(i + 1));
-      p.projector_px = Eigen::Vector2f(set.projector_px_xy(i), set.projector_px_xy(i + 1));
-      if (!p.camera_px.allFinite() || !p.projector_px.allFinite()) continue;
-      points.push_back(p);
-    }
+    by_camera[camera] = GridPointsFromWire(set);
     *input->add_correspondences() = set;
-    if (const char* dump = getenv("SANDTABLE_DEBUG_DUMP")) {
-      FILE* f = fopen((std::string(dump) + "/p" + std::to_string(node.id()) + "_c" +
-                       std::to_string(camera) + ".txt")
-                          .c_str(),
-                      "w");
-      for (int i = 0; f && i + 1 < set.camera_px_xy_size(); i += 2) {
-        fprintf(f, "%.1f %.1f %.4f %.4f\n", set.projector_px_xy(i), set.projector_px_xy(i + 1),
-                set.camera_px_xy(i), set.camera_px_xy(i + 1));
-      }
-      if (f) fclose(f);
-    }
   }
   received_.clear();
   UnitModel self{node.id(), factory_.camera, factory_.projector, factory_.projector_from_camera};

@@ -114,6 +114,9 @@ class SelfCalibrationService : public NodeService {
   // Runner side (self_calibration_runner.cc).
   void MaybeStartRound(NodeRuntime& node);
   void RunnerStep(NodeRuntime& node);
+  // The current stage is answered: runs its `after`; false when the round moved on to the
+  // solve (nothing more to send).
+  bool EndStage(NodeRuntime& node);
   void RunnerDone(NodeId from, const wire::CalibrationStepDone& done, NodeRuntime& node);
   void RunnerInput(NodeId from, const wire::CalibrationInput& input, NodeRuntime& node);
   void StartSolve(NodeRuntime& node);

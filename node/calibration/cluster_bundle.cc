@@ -353,7 +353,7 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
   solver.num_threads = 1;
   solver.logging_type = ceres::SILENT;
   solver.function_tolerance = options.function_tolerance;
-  if (getenv("SANDTABLE_BUNDLE_VERBOSE")) {
+  if (options.log_progress) {
     solver.minimizer_progress_to_stdout = true;
     solver.logging_type = ceres::PER_MINIMIZER_ITERATION;
   }
@@ -383,7 +383,7 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
     ceres::Solver::Summary summary;
     ceres::Solve(solver, &problem, &summary);
     result.report.iterations += static_cast<int>(summary.iterations.size());
-    if (getenv("SANDTABLE_BUNDLE_VERBOSE")) fprintf(stderr, "%s\n", summary.FullReport().c_str());
+    if (options.log_progress) fprintf(stderr, "%s\n", summary.FullReport().c_str());
     result.report.termination = ceres::TerminationTypeToString(summary.termination_type);
     if (summary.termination_type == ceres::FAILURE || !summary.IsSolutionUsable()) {
       return NotConvergedError("bundle: Ceres " + result.report.termination + ": " +

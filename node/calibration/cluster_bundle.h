@@ -58,6 +58,7 @@ struct BundleOptions {
   double function_tolerance = 1e-5;
   int min_tracks = 50;
   int rounds = 2;
+  bool log_progress = false;  // Ceres' per-iteration lines and full report on stderr (sweeps)
   Status Check() const;
 };
 

@@ -120,7 +120,6 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
                 {static_cast<int>(i), world_from_model * q, world_from_model.rotation * n});
           }
         }
-        out.model_surface_points = static_cast<int>(warm.surface.size());
         stage_done("model");
         Expected<BundleResult> second =
             AdjustCluster(observations, projector_from_world, root, options.bundle, &warm);

@@ -51,7 +51,6 @@ struct ClusterSolution {
   Rigid3d table_from_world;
   BundleReport bundle;
   std::optional<BundleReport> model_bundle;  // the second refinement, when it ran
-  int model_surface_points = 0;
   int table_points = 0;
   double table_plane_rms_mm = 0.0;
   double max_height_mm = 0.0;  // highest scanned point above the table (p99.9, robust)

@@ -173,13 +173,6 @@ bool ModelMatcher::SurfacePlaneNear(const Eigen::Vector3d& point_in_model_m, dou
   return true;
 }
 
-double ModelMatcher::DistanceToModel_m(const Eigen::Vector3d& point_in_model_m) const {
-  if (surface_.points_m.empty()) return std::numeric_limits<double>::infinity();
-  double d2 = 0;
-  tree_->Nearest(point_in_model_m, &d2);
-  return std::sqrt(d2);
-}
-
 namespace {
 
 // At most this many scan points in an ICP (every k-th): 5 000 points already pin the placement
@@ -198,6 +191,19 @@ struct IcpOutcome {
   double rms_m = 0;
   int inliers = 0;
 };
+
+// The registration an ICP outcome gives: table = (1/s) R^T (model - t), i.e. the rigid part of
+// the inverse with the scale taken out.
+ModelRegistration FromIcp(const IcpOutcome& icp, int points_fitted) {
+  ModelRegistration out;
+  out.scale = 1.0 / icp.model_from_table.s;
+  const Eigen::Matrix3d rt = icp.model_from_table.r.transpose();
+  out.table_from_model = Rigid3d(rt, -rt * icp.model_from_table.t);
+  out.rms_m = icp.rms_m;
+  out.inliers = icp.inliers;
+  out.points = points_fitted;
+  return out;
+}
 
 }  // namespace
 
@@ -281,15 +287,7 @@ Expected<ModelRegistration> ModelMatcher::Refine(std::span<const Eigen::Vector3d
   const std::vector<Eigen::Vector3d> points = Subsample(scan, kMaxIcpPoints);
   IcpOutcome icp = RunIcp(*tree_, surface_, points, x, scale_free, options_.icp_iterations,
                           options_.icp_max_distance_m);
-  ModelRegistration out;
-  out.scale = 1.0 / icp.model_from_table.s;
-  // table = (1/s) R^T (model - t): rigid part of the inverse with the scale taken out.
-  const Eigen::Matrix3d rt = icp.model_from_table.r.transpose();
-  out.table_from_model = Rigid3d(rt, -rt * icp.model_from_table.t);
-  out.rms_m = icp.rms_m;
-  out.inliers = icp.inliers;
-  out.points = static_cast<int>(points.size());  // the points fitted (subsampled)
-  return out;
+  return FromIcp(icp, static_cast<int>(points.size()));
 }
 
 Expected<ModelRegistration> ModelMatcher::Register(std::span<const Eigen::Vector3d> scan) const {
@@ -386,13 +384,7 @@ Expected<ModelRegistration> ModelMatcher::Register(std::span<const Eigen::Vector
   IcpOutcome fine =
       RunIcp(*tree_, surface_, points, best->model_from_table, options_.estimate_scale,
              options_.icp_iterations, options_.icp_max_distance_m);
-  ModelRegistration out;
-  out.scale = 1.0 / fine.model_from_table.s;
-  const Eigen::Matrix3d rt = fine.model_from_table.r.transpose();
-  out.table_from_model = Rigid3d(rt, -rt * fine.model_from_table.t);
-  out.rms_m = fine.rms_m;
-  out.inliers = fine.inliers;
-  out.points = static_cast<int>(points.size());  // the points fitted (subsampled)
+  ModelRegistration out = FromIcp(fine, static_cast<int>(points.size()));
   out.coarse_score = chosen.empty() ? 0.0 : chosen.front().score;
   out.candidates_tried = tried;
   out.structure_fraction = static_cast<double>(structure) / n;

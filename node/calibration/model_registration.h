@@ -86,8 +86,6 @@ class ModelMatcher {
   // False when there is none.
   bool SurfacePlaneNear(const Eigen::Vector3d& point_in_model_m, double max_distance_m,
                         Eigen::Vector3d* point_on_plane_m, Eigen::Vector3d* normal) const;
-  // Distance from a point in the model frame to the nearest surface sample, m.
-  double DistanceToModel_m(const Eigen::Vector3d& point_in_model_m) const;
   const ModelSurface& surface() const { return surface_; }
 
   struct Tree;  // the k-d tree (nanoflann), defined in the .cc

@@ -4,22 +4,34 @@
 
 namespace sandtable::node {
 
-std::map<NodeId, std::set<NodeId>> ConflictGraph(
-    const std::map<NodeId, std::set<NodeId>>& cameras_seeing) {
+std::map<NodeId, std::set<NodeId>> ConflictGraphFromPairs(
+    const std::set<NodeId>& projectors, const std::set<std::pair<NodeId, NodeId>>& pairs) {
   std::map<NodeId, std::set<NodeId>> graph;
-  std::map<NodeId, std::vector<NodeId>> seen_by_camera;
-  for (const auto& [p, cameras] : cameras_seeing) {
-    graph[p];
-    for (NodeId c : cameras) seen_by_camera[c].push_back(p);
-  }
-  for (const auto& [c, projectors] : seen_by_camera) {
-    for (NodeId a : projectors) {
-      for (NodeId b : projectors) {
-        if (a != b) graph[a].insert(b);
-      }
+  for (NodeId p : projectors) graph[p];
+  for (const auto& [a, b] : pairs) {
+    if (a != b && projectors.count(a) && projectors.count(b)) {
+      graph[a].insert(b);
+      graph[b].insert(a);
     }
   }
   return graph;
+}
+
+std::map<NodeId, std::set<NodeId>> ConflictGraph(
+    const std::map<NodeId, std::set<NodeId>>& cameras_seeing) {
+  std::set<NodeId> projectors;
+  std::map<NodeId, std::vector<NodeId>> seen_by_camera;
+  for (const auto& [p, cameras] : cameras_seeing) {
+    projectors.insert(p);
+    for (NodeId c : cameras) seen_by_camera[c].push_back(p);
+  }
+  std::set<std::pair<NodeId, NodeId>> pairs;
+  for (const auto& [c, seen] : seen_by_camera) {
+    for (NodeId a : seen) {
+      for (NodeId b : seen) pairs.insert({a, b});
+    }
+  }
+  return ConflictGraphFromPairs(projectors, pairs);
 }
 
 std::map<NodeId, int> ColourGraph(const std::map<NodeId, std::set<NodeId>>& graph) {

@@ -20,6 +20,10 @@ namespace sandtable::node {
 // every projector present as a key).
 std::map<NodeId, std::set<NodeId>> ConflictGraph(
     const std::map<NodeId, std::set<NodeId>>& cameras_seeing);
+// The same graph from explicit conflicting pairs (a, b) over `projectors` (pairs naming a
+// projector not listed are ignored). The runner uses it with the pairs whose lit masks touch.
+std::map<NodeId, std::set<NodeId>> ConflictGraphFromPairs(
+    const std::set<NodeId>& projectors, const std::set<std::pair<NodeId, NodeId>>& pairs);
 
 std::map<NodeId, int> ColourGraph(const std::map<NodeId, std::set<NodeId>>& graph);
 

@@ -43,10 +43,9 @@ PatternOptions PlanPatterns(int projector_width_px, int projector_height_px,
   return p;
 }
 
-DecoderOptions DecoderOptionsFor(const PatternOptions& patterns) {
+DecoderOptions CalibrationDecoderOptions() {
   DecoderOptions d;
-  d.num_threads = 1;  // one core per node (the budget)
-  (void)patterns;
+  d.num_threads = 1;
   return d;
 }
 
@@ -63,7 +62,7 @@ Expected<std::vector<ProjectorGridPoint>> DecodeToProjectorGrid(
     const ProjectorGridOptions& grid, CameraDecodeReport* report, const cv::Mat* mask) {
   CameraDecodeReport local;
   Expected<Decoding> decoding =
-      DecodeStructuredLight(captures_8bit, patterns, DecoderOptionsFor(patterns), &local.decode);
+      DecodeStructuredLight(captures_8bit, patterns, CalibrationDecoderOptions(), &local.decode);
   if (!decoding.ok()) return decoding.status();
   if (mask && !mask->empty() && mask->size() == decoding->valid.size() && mask->type() == CV_8UC1) {
     cv::Mat keep;
@@ -113,9 +112,7 @@ bool MasksOverlap(const cv::Mat& a, const cv::Mat& b, int margin_px, int min_pix
 }
 
 int CountLitPixels(const cv::Mat& white_8bit, const cv::Mat& black_8bit, int threshold) {
-  cv::Mat diff;
-  cv::subtract(white_8bit, black_8bit, diff, cv::noArray(), CV_16S);
-  return cv::countNonZero(diff > threshold);
+  return cv::countNonZero(LitMask(white_8bit, black_8bit, threshold));
 }
 
 }  // namespace sandtable::node

@@ -36,8 +36,9 @@ struct PatternPlanOptions {
 PatternOptions PlanPatterns(int projector_width_px, int projector_height_px,
                             double projector_px_per_camera_px, const PatternPlanOptions& options);
 
-// The decoder's options for a plan (thresholds for 8-bit captures).
-DecoderOptions DecoderOptionsFor(const PatternOptions& patterns);
+// The decoder's options in self-calibration: the defaults (thresholds for 8-bit captures), one
+// thread (a node's budget is one core).
+DecoderOptions CalibrationDecoderOptions();
 
 // 8-bit view of a capture: CV_8UC1 as is, CV_16UC1 scaled by 255 / (2^bit_depth - 1).
 cv::Mat To8Bit(const cv::Mat& capture, int bit_depth);

@@ -4,6 +4,9 @@
 // configuration: frames per projector, modeled projection time, compute time, registration
 // error (site, table, buildings), model placement error.
 //   self_calibration_sweep --site sandtable-3 --scene sandtable [--quick] [--out FILE.csv]
+// Diagnostics on stderr (environment): SANDTABLE_CORRESPONDENCE_TRUTH=1 prints, per projector
+// and camera, the grid correspondences against the world's truth (mean and rms, px);
+// SANDTABLE_ERROR_BREAKDOWN=1 the registration error per unit split into its mean and the rest.
 #include <cmath>
 #include <fstream>
 #include <iostream>
@@ -43,7 +46,8 @@ int main(int argc, char** argv) {
   app.add_flag("--quick", quick, "the default configuration only");
   int max_iterations = 0, grid_step = 0;
   double function_tolerance = 0, factory_error_scale = 1.0, prior_scale = 1.0;
-  bool no_noise = false, model_refinement = false;
+  bool no_noise = false, model_refinement = false, log_progress = false;
+  app.add_flag("--log-progress", log_progress, "Ceres' iterations and report on stderr");
   app.add_flag("--model-refinement", model_refinement, "add the refinement against the model");
   app.add_option("--factory-error-scale", factory_error_scale, "scale the factory errors");
   app.add_option("--prior-scale", prior_scale, "scale the refinement's prior sigmas");
@@ -85,6 +89,7 @@ int main(int argc, char** argv) {
   base.options.model_from_table = model_from_table;
   if (max_iterations > 0) base.options.solve.bundle.max_iterations = max_iterations;
   base.options.noise = !no_noise;
+  base.options.solve.bundle.log_progress = log_progress;
   base.options.solve.refine_with_model = model_refinement;
   {
     auto& e = base.options.factory_error;

@@ -84,18 +84,6 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
       result.decode_cpu_s += ThreadCpuSeconds() - t0;
       if (!points.ok()) return points.status();
       by_camera[c] = std::move(*points);
-      if (const char* dump = getenv("SANDTABLE_DEBUG_DUMP")) {
-        FILE* f = fopen((std::string(dump) + "/sim_p" + std::to_string(p.id) + "_c" +
-                         std::to_string(c) + ".txt")
-                            .c_str(),
-                        "w");
-        for (const ProjectorGridPoint& gp : by_camera[c]) {
-          if (f)
-            fprintf(f, "%.1f %.1f %.4f %.4f\n", gp.projector_px.x(), gp.projector_px.y(),
-                    gp.camera_px.x(), gp.camera_px.y());
-        }
-        if (f) fclose(f);
-      }
       if (getenv("SANDTABLE_CORRESPONDENCE_TRUTH")) {
         // Diagnostic: the true projector pixel of the surface point each camera position sees.
         const sim::UnitSpec* cu = site.FindUnit(c);
