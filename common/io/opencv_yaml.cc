@@ -1,5 +1,7 @@
 #include "common/io/opencv_yaml.h"
 
+#include <exception>
+
 #include <array>
 #include <cmath>
 
@@ -74,6 +76,8 @@ class YamlReader {
     try {
       node >> m;
     } catch (const cv::Exception& e) {
+      return Error(field, std::string("is not a matrix (") + e.what() + ")");
+    } catch (const std::exception& e) {
       return Error(field, std::string("is not a matrix (") + e.what() + ")");
     }
     if (m.rows != rows || m.cols != cols || m.type() != CV_64F) {
@@ -214,10 +218,16 @@ Expected<OpenCvYamlCalibration> ParseOpenCvYaml(const std::string& text, const s
     }
   } catch (const cv::Exception& e) {
     return ParseError(path + ": not an OpenCV YAML file (" + e.what() + ")");
+  } catch (const std::exception& e) {
+    // OpenCV's parser lets standard exceptions through (a length_error from a crafted scalar,
+    // found by fuzz_json_formats).
+    return ParseError(path + ": not an OpenCV YAML file (" + e.what() + ")");
   }
   try {
     return ParseOpenCvYamlRoot(fs, path);
   } catch (const cv::Exception& e) {
+    return ParseError(path + ": not an OpenCV YAML calibration (" + e.what() + ")");
+  } catch (const std::exception& e) {
     return ParseError(path + ": not an OpenCV YAML calibration (" + e.what() + ")");
   }
 }
