@@ -25,6 +25,10 @@ pkg_check_modules(HTTPLIB REQUIRED IMPORTED_TARGET GLOBAL cpp-httplib)
 if(NOT TARGET httplib::httplib)
   add_library(httplib::httplib ALIAS PkgConfig::HTTPLIB)
 endif()
+# MPCDI export and import (common/io/mpcdi.h): the ZIP container and the XML descriptor, through
+# their pkg-config files (Debian libminizip-dev, libtinyxml2-dev).
+pkg_check_modules(MINIZIP REQUIRED IMPORTED_TARGET minizip)     # PkgConfig::MINIZIP
+pkg_check_modules(TINYXML2 REQUIRED IMPORTED_TARGET tinyxml2)   # PkgConfig::TINYXML2
 
 if(SANDTABLE_BUILD_TESTS)
   find_package(GTest REQUIRED)                        # GTest::gtest, GTest::gmock

@@ -23,6 +23,8 @@ PACKAGES=(
   libsqlite3-dev sqlite3 libusb-1.0-0-dev
   # command lines, HTTP, k-d trees
   libcli11-dev libcpp-httplib-dev libnanoflann-dev
+  # MPCDI export: ZIP container, XML descriptor
+  libminizip-dev libtinyxml2-dev
   # tests, benchmarks, plots
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox python3
 )
