@@ -1,5 +1,6 @@
 #include "common/scene/procedural_scene.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -125,6 +126,16 @@ Status ProceduralSceneOptions::Check() const {
   for (double albedo : {table_albedo, building_albedo}) {
     if (!(albedo >= 0.0 && albedo <= 1.0)) {
       return InvalidArgumentError("albedo " + std::to_string(albedo) + " must be in [0, 1]");
+    }
+  }
+  for (int i : remove_buildings) {
+    if (i < 0) return InvalidArgumentError("remove_buildings: index " + std::to_string(i) + " < 0");
+  }
+  for (const auto& [i, offset] : move_buildings) {
+    if (i < 0) return InvalidArgumentError("move_buildings: index " + std::to_string(i) + " < 0");
+    if (!offset.allFinite() || offset.norm() > 1.0) {
+      return InvalidArgumentError("move_buildings: building " + std::to_string(i) +
+                                  " offset must be finite and at most 1 m");
     }
   }
   return OkStatus();
@@ -263,7 +274,29 @@ Expected<ProceduralScene> MakeProceduralScene(const ProceduralSceneOptions& opti
       out.scene.Append(MakeRectangleMesh(out.table_size_m, 0));
       break;
   }
-  for (const Building& b : out.buildings) out.scene.Append(MakeBuildingMesh(b, 1));
+  const int layout_count = static_cast<int>(out.buildings.size());
+  auto out_of_range = [&](int i) {
+    return InvalidArgumentError("building " + std::to_string(i) +
+                                " does not exist (the layout has " + std::to_string(layout_count) +
+                                ")");
+  };
+  for (int i : options.remove_buildings) {
+    if (i >= layout_count) return out_of_range(i);
+  }
+  for (const auto& [i, offset] : options.move_buildings) {
+    if (i >= layout_count) return out_of_range(i);
+    out.buildings[i].centre_in_table_m += offset;
+  }
+  std::vector<Building> built;
+  for (int i = 0; i < layout_count; ++i) {
+    if (std::find(options.remove_buildings.begin(), options.remove_buildings.end(), i) !=
+        options.remove_buildings.end()) {
+      continue;
+    }
+    built.push_back(out.buildings[i]);
+    out.scene.Append(MakeBuildingMesh(out.buildings[i], 1));
+  }
+  out.buildings = std::move(built);
   return out;
 }
 

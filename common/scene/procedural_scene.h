@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "common/base/status.h"
@@ -43,12 +44,17 @@ struct ProceduralSceneOptions {
   int num_buildings = -1;        // sandtable only; -1 = preset default (14)
   double table_albedo = 0.8;     // grey level of the table top (linear)
   double building_albedo = 0.9;  // grey level of the buildings (linear)
+  // The physical scene changed against the layout (to test the nodes' change report): the
+  // buildings with these indices (into the layout's order) are left out, these moved by an
+  // offset in x, y (metres). The layout, and so every other building, stays the seed's.
+  std::vector<int> remove_buildings;
+  std::vector<std::pair<int, Eigen::Vector2d>> move_buildings;
   Status Check() const;
 };
 
 struct ProceduralScene {
   Scene scene;
-  std::vector<Building> buildings;
+  std::vector<Building> buildings;  // as built: removed ones left out, moved ones moved
   bool table_is_disc = true;
   double table_radius_m = 0.0;                             // disc only
   Eigen::Vector2d table_size_m = Eigen::Vector2d::Zero();  // rectangle only (x, y)

@@ -1,6 +1,9 @@
 // The runner side of SelfCalibrationService (self_calibration_service.h).
 #include <algorithm>
 #include <cmath>
+#include <sstream>
+#include <string>
+#include <vector>
 
 #include "common/base/log.h"
 #include "common/base/thread_cpu_time.h"
@@ -334,6 +337,80 @@ void SelfCalibrationService::RunnerInput(NodeId from, const wire::CalibrationInp
 }  // namespace sandtable::node
 
 namespace sandtable::node {
+namespace {
+
+std::string Fixed(double value, int digits) {
+  std::ostringstream out;
+  out.setf(std::ios::fixed);
+  out.precision(digits);
+  out << value;
+  return out.str();
+}
+
+std::vector<double> Mm(const Eigen::VectorXd& v) {
+  std::vector<double> out;
+  for (int i = 0; i < v.size(); ++i) out.push_back(std::round(v[i] * 1e4) / 10.0);  // 0.1 mm
+  return out;
+}
+
+// The change report in the runner's report (docs/file-formats.md, self_calibration_report.json):
+// positions and sizes in the MODEL frame, mm.
+nlohmann::json ModelChangesToJson(const ModelChangeReport& c) {
+  nlohmann::json parts = nlohmann::json::array();
+  for (const PartChange& p : c.parts) {
+    nlohmann::json j = {{"building", p.part},
+                        {"state", std::string(PartStateName(p.state))},
+                        {"centre_in_model_mm", Mm(p.centre_in_model_m)},
+                        {"size_mm", Mm(p.size_m)},
+                        {"points", p.points_on_footprint},
+                        {"support", p.support}};
+    if (p.state == PartState::kPresent || p.state == PartState::kMoved) {
+      j["moved_by_mm"] = Mm(p.moved_by_m);
+      j["moved_mm"] = p.moved_by_m.norm() * 1e3;
+      j["moved_yaw_deg"] = p.moved_yaw_deg;
+      j["fit_rms_mm"] = p.fit_rms_mm;
+    }
+    parts.push_back(j);
+  }
+  nlohmann::json extras = nlohmann::json::array();
+  for (const ExtraStructure& e : c.extras) {
+    extras.push_back({{"centre_in_model_mm", Mm(e.centre_in_model_m)},
+                      {"size_mm", Mm(e.size_m)},
+                      {"height_mm", e.height_m * 1e3},
+                      {"points", e.points}});
+  }
+  return {{"buildings", parts},   {"not_in_model", extras}, {"present", c.present},
+          {"moved", c.moved},     {"missing", c.missing},   {"unobserved", c.unobserved},
+          {"compute_s", c.time_s}};
+}
+
+// One log line per building that is not where the model has it, and per extra structure.
+void LogModelChanges(const ModelChangeReport& c) {
+  for (const PartChange& p : c.parts) {
+    if (p.state == PartState::kPresent) continue;
+    std::ostringstream line;
+    line << "self-calibration: model building " << p.part << " at ("
+         << Fixed(p.centre_in_model_m.x() * 1e3, 0) << ", "
+         << Fixed(p.centre_in_model_m.y() * 1e3, 0) << ") mm (model frame) is "
+         << PartStateName(p.state);
+    if (p.state == PartState::kMoved) {
+      line << " by " << Fixed(p.moved_by_m.norm() * 1e3, 1) << " mm ("
+           << Fixed(p.moved_by_m.x() * 1e3, 1) << ", " << Fixed(p.moved_by_m.y() * 1e3, 1)
+           << ") and " << Fixed(p.moved_yaw_deg, 2) << " deg";
+    }
+    if (p.state == PartState::kUnobserved) line << ": no camera saw where it stands";
+    ST_LOG(kWarning) << line.str();
+  }
+  for (const ExtraStructure& e : c.extras) {
+    ST_LOG(kWarning) << "self-calibration: structure not in the model at ("
+                     << Fixed(e.centre_in_model_m.x() * 1e3, 0) << ", "
+                     << Fixed(e.centre_in_model_m.y() * 1e3, 0) << ") mm (model frame), "
+                     << Fixed(e.size_m.x() * 1e3, 0) << " x " << Fixed(e.size_m.y() * 1e3, 0)
+                     << " mm, " << Fixed(e.height_m * 1e3, 0) << " mm high";
+  }
+}
+
+}  // namespace
 
 void SelfCalibrationService::StartSolve(NodeRuntime& node) {
   Runner& r = *runner_;
@@ -477,6 +554,10 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
                          {"inliers", s.model->inliers},
                          {"points", s.model->points},
                          {"coarse_score", s.model->coarse_score}};
+      if (s.changes) {
+        report["model"]["changes"] = ModelChangesToJson(*s.changes);
+        LogModelChanges(*s.changes);
+      }
     } else {
       report["model"] = {{"found", false}};
     }

@@ -151,6 +151,14 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
         out.notes.push_back(final_fit.status().message());
         out.model = *found;
       }
+      Expected<ModelChangeReport> changes = DetectModelChanges(
+          *model, out.points_in_table_m, out.model->table_from_model, options.changes);
+      stage_done("changes");
+      if (changes.ok()) {
+        out.changes = std::move(*changes);
+      } else {
+        out.notes.push_back("change report: " + changes.status().message());
+      }
     }
   }
   out.table_from_world = table->table_from_world;

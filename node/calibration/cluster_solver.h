@@ -6,7 +6,8 @@
 //
 // Output: one UnitCalibration per unit reached (source "structured_light", the refined
 // camera, projector and projector_from_camera, table_from_projector, table_from_model when a
-// model was given and found), and the report of every step.
+// model was given and found), the change report per building of the model
+// (model_changes.h), and the report of every step.
 // Errors: DEGENERATE when the bundle or the table plane cannot be estimated; a model that is
 // not found is not an error: the solution carries no table_from_model and the note says why.
 #pragma once
@@ -23,6 +24,7 @@
 #include "common/scene/scene.h"
 #include "node/calibration/cluster_bundle.h"
 #include "node/calibration/cluster_initializer.h"
+#include "node/calibration/model_changes.h"
 #include "node/calibration/model_registration.h"
 
 namespace sandtable::node {
@@ -31,6 +33,7 @@ struct ClusterSolveOptions {
   BundleOptions bundle;
   PlaneFitOptions plane;  // inlier threshold 3 mm by default here (set in the constructor)
   ModelRegistrationOptions model;
+  ModelChangeOptions changes;  // what differs from the model, once it is found
   bool scale_from_model = true;
   // A model scale further than this from 1 is not applied (the model is then probably not
   // the scanned scene, or not in metres): noted, and the mounts' scale is kept.
@@ -57,11 +60,12 @@ struct ClusterSolution {
   bool planar = false;
   TableFrameReport frame;
   std::optional<ModelRegistration> model;
-  double scale_correction = 1.0;  // lengths multiplied by this after the model was found
+  std::optional<ModelChangeReport> changes;  // per building of the model, once it is found
+  double scale_correction = 1.0;             // lengths multiplied by this after the model was found
   std::vector<Eigen::Vector3d> points_in_table_m;
   std::vector<std::string> notes;
   double time_s = 0.0;  // thread CPU time of the whole solve
-  // Thread CPU time per stage: "bundle", "table", "model", "model_bundle".
+  // Thread CPU time per stage: "bundle", "table", "model", "model_bundle", "changes".
   std::map<std::string, double> stage_time_s;
 };
 

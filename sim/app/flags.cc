@@ -70,6 +70,12 @@ void AddWorldCommands(CLI::App& app, WorldCommandLine& line) {
   scene->add_option("--seed", s.seed, "random seed of the layout")->check(kSeed);
   scene->add_option("--buildings", s.buildings, "number of buildings (-1: the preset's)")
       ->check(cli::Integer(-1, 1000));
+  scene
+      ->add_option("--remove-building", s.remove_buildings,
+                   "leave the layout's building I out (repeatable; to test change reports)")
+      ->check(cli::Integer(0, 1000));
+  scene->add_option("--move-building", s.move_buildings,
+                    "move the layout's building I by DX, DY metres: I:DX:DY (repeatable)");
   scene->add_option("-o,--output", s.output, "output .gltf or .glb")->required();
   line.make_scene_command = scene;
 

@@ -1,6 +1,7 @@
 // The command line of sandtable-world (CLI11; exit-code policy in common/cli/command_line.h):
 //
-//   make-scene --preset sandtable|city|flat [--seed N] [--buildings N] -o scene.gltf|.glb
+//   make-scene --preset sandtable|city|flat [--seed N] [--buildings N] [--remove-building I]...
+//              [--move-building I:DX_M:DY_M]... -o scene.gltf|.glb
 //   make-site  --preset sandtable-3|grid-N|flat-4 [--seed N] [--factory-dir DIR] -o site.json
 //   render     --site S --scene G [--white | --frame ID=FILE.png ...] --view top|camera:ID
 //              [--width W] [--height H] [--white-nits L] [--threads N] -o out.png
@@ -24,8 +25,10 @@ namespace sandtable::sim {
 struct MakeSceneArgs {
   std::string preset;  // sandtable | city | flat (checked while parsing)
   uint64_t seed = 1;
-  int buildings = -1;  // -1: the preset's count
-  std::string output;  // .gltf or .glb
+  int buildings = -1;                       // -1: the preset's count
+  std::vector<int> remove_buildings;        // indices into the layout
+  std::vector<std::string> move_buildings;  // "I:DX_M:DY_M" (checked after parsing)
+  std::string output;                       // .gltf or .glb
 };
 
 struct MakeSiteArgs {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <sstream>
 
@@ -74,9 +75,19 @@ int MakeSceneCommand(const MakeSceneArgs& args, std::ostream& out, std::ostream&
   options.preset = *preset;
   options.seed = args.seed;
   options.num_buildings = args.buildings;
+  options.remove_buildings = args.remove_buildings;
+  for (const std::string& move : args.move_buildings) {
+    int index = -1;
+    double dx = 0, dy = 0;
+    char tail = 0;
+    if (std::sscanf(move.c_str(), "%d:%lf:%lf%c", &index, &dx, &dy, &tail) != 3) {
+      return Usage(err, kName, "--move-building " + move + ": expected I:DX_M:DY_M");
+    }
+    options.move_buildings.emplace_back(index, Eigen::Vector2d(dx, dy));
+  }
   if (Status valid = options.Check(); !valid.ok()) return Usage(err, kName, valid.message());
   Expected<ProceduralScene> scene = MakeProceduralScene(options);
-  if (!scene.ok()) return Failure(err, kName, scene.status().ToString());
+  if (!scene.ok()) return Usage(err, kName, scene.status().message());
   const std::string& path = args.output;
   if (Status written = WriteGltfScene(scene->scene, path); !written.ok()) {
     return Failure(err, kName, written.ToString());

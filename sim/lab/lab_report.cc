@@ -34,6 +34,46 @@ std::string Fixed(double value, int digits = 3) {
   return text;
 }
 
+// The runner's change report (model.changes of self_calibration_report.json) as a table.
+std::string ModelChangesMarkdown(const json& c) {
+  std::ostringstream md;
+  md << "\nWhat the scan shows against the model: " << c.value("present", 0)
+     << " buildings present, " << c.value("moved", 0) << " moved, " << c.value("missing", 0)
+     << " missing, " << c.value("unobserved", 0) << " unobserved; "
+     << c.value("not_in_model", json::array()).size() << " structures not in the model.\n\n";
+  bool header = false;
+  for (const json& b : c.value("buildings", json::array())) {
+    const std::string state = b.value("state", std::string());
+    if (state == "present") continue;
+    if (!header) {
+      md << "| building | centre in the model (mm) | state | moved by (mm) | yaw (deg) |\n"
+         << "| --- | --- | --- | --- | --- |\n";
+      header = true;
+    }
+    const json centre = b.value("centre_in_model_mm", json::array());
+    md << "| " << b.value("building", -1) << " | "
+       << (centre.size() >= 2
+               ? Fixed(centre[0].get<double>(), 0) + ", " + Fixed(centre[1].get<double>(), 0)
+               : std::string("?"))
+       << " | " << state << " | "
+       << (b.contains("moved_mm") ? Fixed(b["moved_mm"].get<double>(), 1) : std::string("-"))
+       << " | "
+       << (b.contains("moved_yaw_deg") ? Fixed(b["moved_yaw_deg"].get<double>(), 2)
+                                       : std::string("-"))
+       << " |\n";
+  }
+  for (const json& e : c.value("not_in_model", json::array())) {
+    const json centre = e.value("centre_in_model_mm", json::array());
+    const json size = e.value("size_mm", json::array());
+    if (centre.size() < 2 || size.size() < 2) continue;
+    md << "\nNot in the model: a structure at (" << Fixed(centre[0].get<double>(), 0) << ", "
+       << Fixed(centre[1].get<double>(), 0) << ") mm, " << Fixed(size[0].get<double>(), 0) << " x "
+       << Fixed(size[1].get<double>(), 0) << " mm, " << Fixed(e.value("height_mm", 0.0), 0)
+       << " mm high.\n";
+  }
+  return md.str();
+}
+
 std::string StatsRow(const std::string& label, const ErrorStats& s) {
   if (s.count == 0) return "| " + label + " | 0 | - | - | - | - |\n";
   return "| " + label + " | " + std::to_string(s.count) + " | " + Fixed(s.rms_mm) + " | " +
@@ -143,6 +183,9 @@ json LabReportJson(const LabResult& r) {
     }
     if (sc.contains("runner_report") && sc["runner_report"].contains("model")) {
       registration["model"] = sc["runner_report"]["model"];
+      if (registration["model"].contains("changes")) {
+        registration["changes"] = registration["model"]["changes"];
+      }
     }
     out["registration"] = registration;
   }
@@ -278,6 +321,7 @@ std::string LabReportMarkdown(const LabResult& r) {
              << Fixed(r.model_offset_deg, 4) << " deg**.";
         }
         md << "\n";
+        if (m.contains("changes")) md << ModelChangesMarkdown(m["changes"]);
       } else {
         md << "\nThe model was not found on the scanned surface.\n";
       }

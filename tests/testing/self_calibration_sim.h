@@ -29,6 +29,9 @@ struct SimCalibrationOptions {
   // Where the model file places the scene: model_from_table (the lab's seeded unknown
   // placement); the metric gets its inverse as the true table_from_model.
   Rigid3d model_from_table = Rigid3d::Identity();
+  // The model the nodes get, before model_from_table moves it: nullptr = the scene itself
+  // (else a scene that differs from the physical one: the change report's test).
+  const Scene* model = nullptr;
   int metric_samples = 20000;
 };
 

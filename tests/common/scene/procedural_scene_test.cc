@@ -1,5 +1,6 @@
 #include "common/scene/procedural_scene.h"
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -140,3 +141,40 @@ TEST(ProceduralScene, BadOptionsAndPresetNames) {
 
 }  // namespace
 }  // namespace sandtable::sim
+
+namespace sandtable {
+namespace {
+
+// The physical scene changed against the layout: one building left out, one moved; every
+// other building where the seed put it; bad indices and offsets refused.
+TEST(ProceduralScene, RemovesAndMovesBuildingsOfTheLayout) {
+  const Expected<ProceduralScene> layout = MakeProceduralScene({});
+  ASSERT_TRUE(layout.ok());
+  ProceduralSceneOptions changed;
+  changed.remove_buildings = {2};
+  const Eigen::Vector2d offset(0.006, 0.008);
+  changed.move_buildings = {{5, offset}};
+  const Expected<ProceduralScene> built = MakeProceduralScene(changed);
+  ASSERT_TRUE(built.ok()) << built.status().ToString();
+  ASSERT_EQ(built->buildings.size(), layout->buildings.size() - 1);
+  for (size_t i = 0, j = 0; i < layout->buildings.size(); ++i) {
+    if (i == 2) continue;
+    const Eigen::Vector2d expected =
+        layout->buildings[i].centre_in_table_m + (i == 5 ? offset : Eigen::Vector2d::Zero());
+    EXPECT_LT((built->buildings[j].centre_in_table_m - expected).norm(), 1e-12) << "building " << i;
+    ++j;
+  }
+  EXPECT_LT(built->scene.NumTriangles(), layout->scene.NumTriangles());
+
+  ProceduralSceneOptions bad;
+  bad.remove_buildings = {99};
+  EXPECT_EQ(MakeProceduralScene(bad).status().code(), StatusCode::kInvalidArgument);
+  bad.remove_buildings = {-1};
+  EXPECT_EQ(MakeProceduralScene(bad).status().code(), StatusCode::kInvalidArgument);
+  bad.remove_buildings.clear();
+  bad.move_buildings = {{1, Eigen::Vector2d(std::nan(""), 0.0)}};
+  EXPECT_EQ(MakeProceduralScene(bad).status().code(), StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace sandtable

@@ -1,6 +1,7 @@
 // The cluster self-calibration end to end in one process against the simulated world
 // (tests/testing/self_calibration_sim.h): sandtable-3 with factory errors and noise, the model
-// at an unknown placement; the registration metric of the lab on the result.
+// at an unknown placement, one of its buildings missing from the table and one moved by 1 cm;
+// the registration metric of the lab on the result.
 #include <cmath>
 
 #include <gtest/gtest.h>
@@ -18,17 +19,27 @@ constexpr double kMaxRms_px = 0.25;
 constexpr double kMaxError_mm = 1.5;
 constexpr double kModelOffset_mm = 0.3;
 constexpr double kModelOffset_deg = 0.05;
+constexpr double kMoveTolerance_mm = 1.0;
 
 TEST(ClusterSelfCalibration, Sandtable3ReachesTheAcceptanceFigures) {
   Expected<sim::Site> site = sim::MakeSitePreset("sandtable-3");
   ASSERT_TRUE(site.ok());
-  Expected<ProceduralScene> scene = MakeProceduralScene({});
+  Expected<ProceduralScene> model = MakeProceduralScene({});
+  ASSERT_TRUE(model.ok());
+  // The table as built: building 2 left out, building 5 moved by 1 cm.
+  constexpr int kMissing = 2, kMoved = 5;
+  const Eigen::Vector2d move_in_table_m(0.006, 0.008);
+  ProceduralSceneOptions physical_options;
+  physical_options.remove_buildings = {kMissing};
+  physical_options.move_buildings = {{kMoved, move_in_table_m}};
+  Expected<ProceduralScene> scene = MakeProceduralScene(physical_options);
   ASSERT_TRUE(scene.ok());
   testing::SimCalibrationOptions options;
   options.seed = 1;
   options.model_from_table =
       Rigid3d(Eigen::AngleAxisd(7.0 * M_PI / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
               Eigen::Vector3d(0.03, -0.02, 0.0));
+  options.model = &model->scene;
   Expected<testing::SimCalibrationResult> r =
       testing::RunSimCalibration(*site, scene->scene, options);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
@@ -44,6 +55,26 @@ TEST(ClusterSelfCalibration, Sandtable3ReachesTheAcceptanceFigures) {
   EXPECT_LT(r->model_offset_mm, kModelOffset_mm);
   EXPECT_LT(r->model_offset_deg, kModelOffset_deg);
   EXPECT_FALSE(r->solution.planar);
+
+  // The change report, per building of the model (its frame: the move turned by the yaw).
+  ASSERT_TRUE(r->solution.changes.has_value());
+  const node::ModelChangeReport& changes = *r->solution.changes;
+  ASSERT_EQ(changes.parts.size(), model->buildings.size());
+  const Eigen::Vector2d move_in_model_m =
+      options.model_from_table.RotationMatrix().topLeftCorner<2, 2>() * move_in_table_m;
+  for (const node::PartChange& c : changes.parts) {
+    if (c.part == kMissing) {
+      EXPECT_EQ(c.state, node::PartState::kMissing);
+    } else if (c.part == kMoved) {
+      EXPECT_EQ(c.state, node::PartState::kMoved);
+      EXPECT_NEAR(c.moved_by_m.norm() * 1e3, 10.0, kMoveTolerance_mm);
+      EXPECT_LT((c.moved_by_m - move_in_model_m).norm() * 1e3, kMoveTolerance_mm)
+          << "found " << c.moved_by_m.transpose() * 1e3 << " mm";
+    } else {
+      EXPECT_EQ(c.state, node::PartState::kPresent) << "building " << c.part;
+    }
+  }
+  EXPECT_TRUE(changes.extras.empty());
 }
 
 }  // namespace

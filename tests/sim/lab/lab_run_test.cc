@@ -123,6 +123,11 @@ TEST_F(LabRunTest, Sandtable3SelfCalibratesAndFindsTheModel) {
   EXPECT_TRUE(registration["model"]["found"].get<bool>());
   EXPECT_LT(registration["model_offset_mm"].get<double>(), kAcceptanceModelOffset_mm);
   EXPECT_LT(registration["model_offset_deg"].get<double>(), kAcceptanceModelOffset_deg);
+  // The table is built as modelled: every building present, nothing else on it.
+  const json& changes = registration["changes"];
+  EXPECT_EQ(changes["present"].get<int>(), static_cast<int>(changes["buildings"].size()));
+  EXPECT_EQ(changes["buildings"].size(), 14u);
+  EXPECT_TRUE(changes["not_in_model"].empty());
   EXPECT_TRUE(std::filesystem::exists(dir_ / "model.gltf"));
   EXPECT_TRUE(std::filesystem::exists(dir_ / "calibration" / "self_calibration_report.json"));
   EXPECT_TRUE(AllProcessesGone(ReadJson("processes.json")));
