@@ -24,6 +24,7 @@
 #include "common/base/main_guard.h"
 #include "common/base/ready_line.h"
 #include "common/cli/command_line.h"
+#include "common/io/mpcdi.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/gltf_loader.h"
 #include "node/app/calibration_service.h"
@@ -241,11 +242,20 @@ static int Run(int argc, char** argv) {
               report_path.clear();
             }
           }
+          std::string mpcdi_path;
+          if (outcome.site_mpcdi) {
+            mpcdi_path = export_dir + "/site.mpcdi";
+            if (Status written = WriteMpcdi(mpcdi_path, *outcome.site_mpcdi); !written.ok()) {
+              ST_LOG(kError) << "cannot write the MPCDI export: " << written.ToString();
+              mpcdi_path.clear();
+            }
+          }
           WriteJsonLine(std::cout, {{"calibrated", id},
                                     {"source", outcome.calibration.source},
                                     {"json", exported->json_path},
                                     {"yaml", exported->yaml_path},
                                     {"report", report_path},
+                                    {"mpcdi", mpcdi_path},
                                     {"compute_s", outcome.compute_s},
                                     {"messages_sent", outcome.messages_sent},
                                     {"messages_received", outcome.messages_received},

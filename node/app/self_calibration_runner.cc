@@ -8,6 +8,8 @@
 #include "common/base/log.h"
 #include "common/base/thread_cpu_time.h"
 #include "common/io/json_codec.h"
+#include "common/io/mpcdi_builder.h"
+#include "common/scene/procedural_scene.h"
 #include "node/app/self_calibration_runner.h"
 #include "node/calibration/schedule.h"
 #include "proto/convert.h"
@@ -410,6 +412,23 @@ void LogModelChanges(const ModelChangeReport& c) {
   }
 }
 
+// The site as MPCDI: each unit's region, its warp cast on the found model (in the table frame)
+// or, without one, on the table plane (a 20 m square at z = 0).
+Expected<MpcdiSite> SiteAsMpcdi(const ClusterSolution& solution, const Scene* model) {
+  auto scene = std::make_shared<Scene>();
+  if (model && solution.model) {
+    *scene = *model;
+    for (Eigen::Vector3f& v : scene->positions_in_table_m) {
+      v = (solution.model->table_from_model * v.cast<double>()).cast<float>();
+    }
+  } else {
+    scene->Append(MakeRectangleMesh(Eigen::Vector2d(20.0, 20.0), 0));
+  }
+  std::vector<MpcdiUnit> units;
+  for (const auto& [id, c] : solution.calibrations) units.push_back({"", c, std::nullopt});
+  return BuildMpcdiSite(units, std::shared_ptr<const Scene>(scene));
+}
+
 }  // namespace
 
 void SelfCalibrationService::StartSolve(NodeRuntime& node) {
@@ -456,6 +475,7 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
     std::optional<ClusterSolution> solution;
     Status status = OkStatus();
     double cpu_s = 0.0;
+    std::shared_ptr<const MpcdiSite> mpcdi;
   };
   std::shared_ptr<const Scene> model = model_;
   const ClusterSolveOptions solve_options = options_.solve;
@@ -468,6 +488,12 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
             SolveCluster(root, observations, local, model.get(), solve_options);
         if (solved.ok()) {
           s.solution = std::move(*solved);
+          Expected<MpcdiSite> site = SiteAsMpcdi(*s.solution, model.get());
+          if (site.ok()) {
+            s.mpcdi = std::make_shared<const MpcdiSite>(std::move(*site));
+          } else {
+            s.solution->notes.push_back("MPCDI export: " + site.status().message());
+          }
         } else {
           s.status = solved.status();
         }
@@ -475,6 +501,7 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
         return s;
       },
       [this, &node](Solved s) {
+        site_mpcdi_ = s.mpcdi;
         FinishRound(s.solution ? &*s.solution : nullptr, s.status, s.cpu_s, node);
       });
 }

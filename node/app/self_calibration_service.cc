@@ -447,6 +447,7 @@ void SelfCalibrationService::HandleResult(const wire::CalibrationResult& result,
   outcome.messages_received = messages_received_;
   outcome.bytes_sent = bytes_sent_;
   outcome.bytes_received = bytes_received_;
+  outcome.site_mpcdi = site_mpcdi_;
   calibrated_ = true;
   ST_LOG(kInfo) << "self-calibration: calibrated (projector rms " << c.projector_rms_px
                 << " px, compute " << compute_s_ << " s)";

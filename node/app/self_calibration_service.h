@@ -33,6 +33,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
+#include "common/io/mpcdi.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/scene.h"
 #include "node/calibration/cluster_solver.h"
@@ -73,6 +74,9 @@ struct SelfCalibrationOutcome {
   double compute_s = 0.0;  // this node's thread CPU time in the round
   uint64_t messages_sent = 0, messages_received = 0;
   uint64_t bytes_sent = 0, bytes_received = 0;
+  // The runner only: the site as MPCDI (common/io/mpcdi_builder.h; the warp cast on the found
+  // model, or on the table plane when there is none), ready for WriteMpcdi.
+  std::shared_ptr<const MpcdiSite> site_mpcdi;
 };
 
 class SelfCalibrationService : public NodeService {
@@ -144,6 +148,7 @@ class SelfCalibrationService : public NodeService {
   bool calibrated_ = false;
   double compute_s_ = 0.0;
   uint64_t messages_sent_ = 0, messages_received_ = 0, bytes_sent_ = 0, bytes_received_ = 0;
+  std::shared_ptr<const MpcdiSite> site_mpcdi_;  // the runner's, of the last round solved
 
   std::unique_ptr<Runner> runner_;
 };

@@ -159,6 +159,7 @@ json LabReportJson(const LabResult& r) {
     if (rr.contains("table")) calibration["table_plane"] = rr["table"];
     calibration["self_calibration_report"] = rr;
   }
+  if (sc.contains("mpcdi")) calibration["mpcdi"] = sc["mpcdi"];
   if (sc.contains("compute_time_s")) {
     calibration["compute_time_s"] = sc["compute_time_s"];
     calibration["messages_per_node"] = sc.value("messages_per_node", 0.0);
@@ -341,6 +342,23 @@ std::string LabReportMarkdown(const LabResult& r) {
          << unit.yaml_path << "` |\n";
     }
     md << "\n";
+    const json& sc = r.self_calibration;
+    if (sc.contains("mpcdi")) {
+      const json& m = sc["mpcdi"];
+      md << "MPCDI export (profile `sl`, read back by the lab): `" << m.value("path", std::string())
+         << "`";
+      if (m.contains("error")) {
+        md << ": **does not read back**: " << m.value("error", std::string()) << "\n\n";
+      } else {
+        md << ", regions:";
+        for (const json& region : m.value("regions", json::array())) {
+          md << " `" << region.value("id", std::string()) << "` ("
+             << region.value("warp_samples_on_surface", 0) << " of "
+             << region.value("warp_samples", 0) << " warp samples on the surface)";
+        }
+        md << ".\n\n";
+      }
+    }
   }
   if (!r.top_white_png.empty()) {
     md << "## The world, every projector white (top view)\n\n![top view, all white]("

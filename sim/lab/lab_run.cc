@@ -17,6 +17,7 @@
 #include "common/base/log.h"
 #include "common/base/ready_line.h"
 #include "common/io/image_file.h"
+#include "common/io/mpcdi.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/gltf_loader.h"
 #include "net/curve.h"
@@ -388,6 +389,30 @@ class LabRun {
       if (!text.ok()) continue;
       json parsed = json::parse(*text, nullptr, false);
       if (!parsed.is_discarded() && parsed.is_object()) sc["runner_report"] = parsed;
+    }
+    // The runner's MPCDI export, read back with the same reader as the files of other tools.
+    for (const auto& [id, line] : calibrated_) {
+      const std::string path = line.value("mpcdi", std::string());
+      if (path.empty()) continue;
+      Expected<MpcdiSite> site = ReadMpcdi(path);
+      if (!site.ok()) {
+        sc["mpcdi"] = {{"path", path}, {"error", site.status().message()}};
+        continue;
+      }
+      json regions = json::array();
+      for (const MpcdiRegion& region : site->regions) {
+        int samples = 0, hits = 0;
+        if (region.warp) {
+          samples = static_cast<int>(region.warp->samples.size());
+          for (const Eigen::Vector3f& v : region.warp->samples) hits += v.allFinite();
+        }
+        regions.push_back({{"id", region.id},
+                           {"resolution_px", {region.x_resolution_px, region.y_resolution_px}},
+                           {"warp_samples", samples},
+                           {"warp_samples_on_surface", hits},
+                           {"alpha", region.alpha.has_value()}});
+      }
+      sc["mpcdi"] = {{"path", path}, {"profile", site->profile}, {"regions", regions}};
     }
     json per_unit = json::object();
     double slowest = 0.0;

@@ -119,6 +119,17 @@ TEST_F(LabRunTest, Sandtable3SelfCalibratesAndFindsTheModel) {
   EXPECT_TRUE(Finite(calibration["messages_per_node"]));
   EXPECT_TRUE(Finite(calibration["bytes_per_node"]));
   EXPECT_EQ(calibration["self_calibration_report"]["bundle"]["units"].size(), 3u);
+  // The runner's MPCDI export reads back: a region per unit, warp samples on the surface.
+  const json& mpcdi = calibration["mpcdi"];
+  ASSERT_FALSE(mpcdi.contains("error")) << mpcdi.dump();
+  EXPECT_EQ(mpcdi["profile"], "sl");
+  ASSERT_EQ(mpcdi["regions"].size(), 3u);
+  for (const json& region : mpcdi["regions"]) {
+    EXPECT_GT(region["warp_samples_on_surface"].get<int>(), region["warp_samples"].get<int>() / 2)
+        << region.dump();
+    EXPECT_TRUE(region["alpha"].get<bool>());
+  }
+  EXPECT_TRUE(std::filesystem::exists(dir_ / "calibration" / "site.mpcdi"));
   const json& registration = report["registration"];
   EXPECT_TRUE(registration["model"]["found"].get<bool>());
   EXPECT_LT(registration["model_offset_mm"].get<double>(), kAcceptanceModelOffset_mm);
