@@ -4,6 +4,7 @@
 //
 //   sandtable-node --id N --coordinator REQUESTS,EVENTS [--world ENDPOINT] [--factory FILE]
 //                  [--true-pose FILE] [--export-dir DIR] [--projector SPEC] [--camera SPEC]
+//                  [--model FILE] [--saved-calibration FILE] [--grid-step-px N]
 //                  [--bind ENDPOINT] [--curve-keys FILE] [--heartbeat-ms N] [--workers N]
 //   (--world E is short for --projector world:E --camera world:E; node/devices/device_factory.h)
 //   sandtable-node calibrate-unit --poses DIR -o unit.json ...   (the unit's factory calibration)
@@ -12,6 +13,8 @@
 //   {"ready":"sandtable-node","id":3,"peer":"tcp://127.0.0.1:40123"}
 // and, once it holds an exported calibration:
 //   {"calibrated":3,"source":"factory+true_pose","json":"DIR/unit-3.json","yaml":"DIR/unit-3.yaml"}
+// (self-calibration adds report, mpcdi, round, verified and its compute and traffic figures);
+// with --saved-calibration, the check's figures first: {"verification":3,"holds":true,...}.
 // Exit status: 0 after SIGINT/SIGTERM (Goodbye said), 1 when it cannot start, 2 for a bad flag
 // or a bad input file.
 #include <csignal>
@@ -56,6 +59,7 @@ static int Run(int argc, char** argv) {
   node::NodeOptions options;
   uint32_t id = 0;
   std::string coordinator, curve_keys, world, factory_path, true_pose_path, export_dir;
+  std::string saved_path;
   std::string projector_spec, camera_spec, model_path;
   int grid_step_px = 16;
   int heartbeat_ms = 100;
@@ -93,6 +97,10 @@ static int Run(int argc, char** argv) {
   app.add_option("--export-dir", export_dir, "where unit-<id>.json and .yaml are written");
   app.add_option("--model", model_path,
                  "the glTF model on the table: self-calibration finds where it stands")
+      ->check(CLI::ExistingFile);
+  app.add_option("--saved-calibration", saved_path,
+                 "a calibration this unit saved in an earlier run (unit-<id>.json, source "
+                 "structured_light): checked with two frames and kept when it holds")
       ->check(CLI::ExistingFile);
   app.add_option("--grid-step-px", grid_step_px,
                  "self-calibration: projector grid spacing of the correspondences, px")
@@ -146,6 +154,24 @@ static int Run(int argc, char** argv) {
     caps.projector_height_px = calibration->projector.height_px;
     caps.camera_width_px = calibration->camera.width_px;
     caps.camera_height_px = calibration->camera.height_px;
+  }
+  std::optional<UnitCalibration> saved;
+  if (!saved_path.empty()) {
+    Expected<UnitCalibration> loaded = LoadUnitCalibration(saved_path);
+    if (!loaded.ok()) return usage("--saved-calibration: " + loaded.status().ToString());
+    if (loaded->unit_id != kInvalidNodeId && loaded->unit_id != options.id) {
+      return usage("--saved-calibration: " + saved_path + " is unit " +
+                   std::to_string(loaded->unit_id) + "'s, this node is " +
+                   std::to_string(options.id));
+    }
+    if (loaded->source != kSourceStructuredLight || !loaded->table_from_projector) {
+      return usage("--saved-calibration: " + saved_path +
+                   " is not a site calibration (source structured_light with "
+                   "table_from_projector)");
+    }
+    if (factory_path.empty()) return usage("--saved-calibration needs --factory");
+    loaded->unit_id = options.id;
+    saved = *loaded;
   }
   std::shared_ptr<const Scene> model;
   if (!model_path.empty()) {
@@ -256,6 +282,8 @@ static int Run(int argc, char** argv) {
                                     {"yaml", exported->yaml_path},
                                     {"report", report_path},
                                     {"mpcdi", mpcdi_path},
+                                    {"round", outcome.round},
+                                    {"verified", outcome.verified},
                                     {"compute_s", outcome.compute_s},
                                     {"messages_sent", outcome.messages_sent},
                                     {"messages_received", outcome.messages_received},
@@ -265,7 +293,17 @@ static int Run(int argc, char** argv) {
         [id = options.id](const std::string& reason) {
           WriteJsonLine(std::cout, {{"calibration_failed", id}, {"reason", reason}});
         });
+    runtime.set_calibration_state(saved ? wire::CALIBRATION_STATE_SAVED
+                                        : wire::CALIBRATION_STATE_NONE);
+    if (saved) {
+      self_calibration->SetSavedCalibration(
+          *saved, [](const nlohmann::json& line) { WriteJsonLine(std::cout, line); });
+    }
     runtime.AddService(self_calibration.get());
+  }
+  if (saved && !self_calibration) {
+    return usage(
+        "--saved-calibration needs self-calibration: a projector, a camera, no --true-pose");
   }
   Status started = runtime.Start();
   if (!started.ok()) {

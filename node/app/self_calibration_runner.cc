@@ -46,18 +46,42 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
   }
   if (members.empty() || members.front() != node.id()) return;  // not the runner
   if (node.member_list_age() < options_.settle) return;
+  // Units that hold a saved calibration check it first (no round while one does); a unit whose
+  // saved calibration held needs no round.
+  auto state_of = [&node](NodeId m) {
+    if (m == node.id()) return node.calibration_state();
+    auto peer = node.peers().find(m);
+    return peer == node.peers().end() ? wire::CALIBRATION_STATE_UNSPECIFIED
+                                      : peer->second.calibration_state;
+  };
+  bool checking = false, all_hold = true;
+  for (NodeId m : members) {
+    const wire::CalibrationState state = state_of(m);
+    checking |=
+        state == wire::CALIBRATION_STATE_SAVED || state == wire::CALIBRATION_STATE_VERIFYING;
+    all_hold &= state == wire::CALIBRATION_STATE_VERIFIED;
+  }
+  if (checking) return;
   // A round already ran: a new one only when units joined that it did not include (a node
-  // that started late, or after the round). Units that left cause none.
+  // that started late, or after the round) and that do not hold a checked calibration. Units
+  // that left cause none.
   if (runner_ || calibrated_) {
     if (!runner_) return;  // calibrated by another runner: that runner decides
     bool grew = false;
     for (NodeId m : members) {
-      grew |=
-          std::find(runner_->members.begin(), runner_->members.end(), m) == runner_->members.end();
+      grew |= std::find(runner_->members.begin(), runner_->members.end(), m) ==
+                  runner_->members.end() &&
+              state_of(m) != wire::CALIBRATION_STATE_VERIFIED;
     }
     if (!grew) return;
     ST_LOG(kInfo) << "self-calibration: units joined after the last round; calibrating again";
     runner_.reset();
+  } else if (all_hold) {
+    if (!logged_all_hold_) {
+      ST_LOG(kInfo) << "self-calibration: every unit's saved calibration held its check; no round";
+      logged_all_hold_ = true;
+    }
+    return;
   }
   for (NodeId m : members) {
     if (m == node.id()) continue;

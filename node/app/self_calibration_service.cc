@@ -74,6 +74,114 @@ void SelfCalibrationService::SetCamera(std::unique_ptr<CameraInput> camera) {
   camera_ = std::move(camera);
 }
 
+void SelfCalibrationService::SetSavedCalibration(UnitCalibration saved,
+                                                 OnVerification on_verification) {
+  saved_ = std::move(saved);
+  on_verification_ = std::move(on_verification);
+}
+
+void SelfCalibrationService::MaybeVerify(NodeRuntime& node) {
+  if (!saved_ || verify_started_ || !camera_ || !projector_ || !node.registered()) return;
+  if (round_ != 0) {  // a round reached this unit first: it calibrates with the others
+    verify_started_ = true;
+    node.set_calibration_state(wire::CALIBRATION_STATE_NONE);
+    ST_LOG(kWarning) << "self-calibration: a round started before the saved calibration was "
+                        "checked; calibrating with the others";
+    return;
+  }
+  const std::optional<wire::MemberList>& list = node.member_list();
+  if (!list) return;
+  // One unit checks at a time (its dots would land in its neighbours' captures): lowest id first.
+  for (const wire::Member& m : list->members()) {
+    if (m.node_id() >= node.id() || !m.capabilities().has_projector()) continue;
+    auto peer = node.peers().find(m.node_id());
+    if (peer == node.peers().end() || peer->second.heartbeats_received == 0) return;
+    const wire::CalibrationState state = peer->second.calibration_state;
+    if (state == wire::CALIBRATION_STATE_SAVED || state == wire::CALIBRATION_STATE_VERIFYING) {
+      return;
+    }
+  }
+  verify_started_ = true;
+  node.set_calibration_state(wire::CALIBRATION_STATE_VERIFYING);
+  struct Checked {
+    Expected<CalibrationCheckReport> report = CalibrationCheckReport{};
+    int dots_planned = 0;
+    double cpu_s = 0.0;
+  };
+  const UnitCalibration saved = *saved_;
+  ProjectorOutput* projector = projector_;
+  CameraInput* camera = camera_.get();
+  std::shared_ptr<const Scene> model = model_;
+  const CalibrationCheckOptions check = options_.check;
+  node.workers().Run<Checked>(
+      [saved, projector, camera, model, check] {
+        Checked out;
+        const double t0 = ThreadCpuSeconds();
+        Expected<CalibrationCheckPlan> plan = PlanCalibrationCheck(saved, model.get(), check);
+        auto fail = [&](const Status& s) {
+          out.report = s;
+          out.cpu_s = ThreadCpuSeconds() - t0;
+          return out;
+        };
+        if (!plan.ok()) return fail(plan.status());
+        out.dots_planned = static_cast<int>(plan->dots.size());
+        const cv::Mat black = cv::Mat::zeros(projector->size(), CV_8UC1);
+        const int bits = camera->bit_depth();
+        cv::Mat images[2];
+        for (int i = 0; i < 2; ++i) {
+          Expected<ShownFrame> shown = projector->Show(i == 0 ? black : plan->dots_frame);
+          if (!shown.ok()) return fail(shown.status());
+          Expected<CapturedFrame> frame = camera->Capture(Seconds(0));
+          if (!frame.ok()) return fail(frame.status());
+          images[i] = To8Bit(frame->image, bits).clone();
+        }
+        Expected<ShownFrame> dark = projector->Show(black);
+        if (!dark.ok()) return fail(dark.status());
+        out.report = EvaluateCalibrationCheck(*plan, images[0], images[1], check);
+        out.cpu_s = ThreadCpuSeconds() - t0;
+        return out;
+      },
+      [this, &node](Checked c) {
+        compute_s_ += c.cpu_s;
+        constexpr int kFrames = 2;  // the black reference and the dots
+        nlohmann::json line{
+            {"verification", node.id()},
+            {"frames", kFrames},
+            {"device_time_s", kFrames * (options_.frame_period_s + options_.capture_latency_s)},
+            {"compute_s", c.cpu_s}};
+        const bool holds = c.report.ok() && c.report->holds;
+        line["holds"] = holds;
+        if (c.report.ok()) {
+          line["dots"] = c.report->dots;
+          line["found"] = c.report->found;
+          line["median_px"] = c.report->median_px;
+          line["p90_px"] = c.report->p90_px;
+          line["wall_dots"] = c.report->wall_dots;
+          line["wall_median_px"] = c.report->wall_median_px;
+          line["threshold_px"] = options_.check.threshold_px;
+          if (!holds) line["reason"] = c.report->reason;
+        } else {
+          line["reason"] = c.report.status().message();
+        }
+        if (on_verification_) on_verification_(line);
+        if (!holds) {
+          ST_LOG(kWarning) << "self-calibration: the saved calibration does not hold ("
+                           << line.value("reason", std::string()) << "); calibrating again";
+          node.set_calibration_state(wire::CALIBRATION_STATE_NONE);
+          return;
+        }
+        ST_LOG(kInfo) << "self-calibration: the saved calibration holds (p90 " << c.report->p90_px
+                      << " px over " << c.report->found << " dots); no round";
+        node.set_calibration_state(wire::CALIBRATION_STATE_VERIFIED);
+        SelfCalibrationOutcome outcome;
+        outcome.calibration = *saved_;
+        outcome.report = nlohmann::json::object();
+        outcome.compute_s = compute_s_;
+        outcome.verified = true;
+        if (on_calibrated_) on_calibrated_(outcome);
+      });
+}
+
 bool SelfCalibrationService::ServesPeer(wire::Envelope::BodyCase body) const {
   switch (body) {
     case wire::Envelope::kCalibrationStep:
@@ -448,7 +556,9 @@ void SelfCalibrationService::HandleResult(const wire::CalibrationResult& result,
   outcome.bytes_sent = bytes_sent_;
   outcome.bytes_received = bytes_received_;
   outcome.site_mpcdi = site_mpcdi_;
+  outcome.round = result.round();
   calibrated_ = true;
+  node.set_calibration_state(wire::CALIBRATION_STATE_CALIBRATED);
   ST_LOG(kInfo) << "self-calibration: calibrated (projector rms " << c.projector_rms_px
                 << " px, compute " << compute_s_ << " s)";
   if (on_calibrated_) on_calibrated_(outcome);
@@ -456,6 +566,7 @@ void SelfCalibrationService::HandleResult(const wire::CalibrationResult& result,
 
 Status SelfCalibrationService::OnStep(NodeRuntime& node) {
   RunDeferred(node);
+  MaybeVerify(node);
   MaybeStartRound(node);
   RunnerStep(node);
   return OkStatus();

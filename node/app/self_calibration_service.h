@@ -36,6 +36,7 @@
 #include "common/io/mpcdi.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/scene.h"
+#include "node/calibration/calibration_check.h"
 #include "node/calibration/cluster_solver.h"
 #include "node/calibration/structured_light_plan.h"
 #include "node/devices/camera_input.h"
@@ -65,6 +66,7 @@ struct SelfCalibrationOptions {
   int mask_margin_px = 6;
   int min_overlap_pixels = 50;
   ClusterSolveOptions solve;
+  CalibrationCheckOptions check;  // the restart check of a saved calibration
 };
 
 // What a node holds once a round ends, and the figures the lab reports.
@@ -77,6 +79,8 @@ struct SelfCalibrationOutcome {
   // The runner only: the site as MPCDI (common/io/mpcdi_builder.h; the warp cast on the found
   // model, or on the table plane when there is none), ready for WriteMpcdi.
   std::shared_ptr<const MpcdiSite> site_mpcdi;
+  uint64_t round = 0;     // the round that calibrated it; 0 for a saved calibration that held
+  bool verified = false;  // a saved calibration that held its check (no round)
 };
 
 class SelfCalibrationService : public NodeService {
@@ -93,6 +97,14 @@ class SelfCalibrationService : public NodeService {
 
   // The camera, once opened (on a worker at start).
   void SetCamera(std::unique_ptr<CameraInput> camera);
+
+  // A calibration saved by an earlier run (this unit's, with its table pose): checked with two
+  // frames (calibration_check.h) once the camera is open and no lower-id unit is checking its
+  // own; when it holds, it is the unit's calibration (on_calibrated with verified = true) and
+  // the unit needs no round. `on_verification` gets the check's figures either way. Before the
+  // runtime starts; the caller sets the runtime's calibration state to SAVED.
+  using OnVerification = std::function<void(const nlohmann::json&)>;
+  void SetSavedCalibration(UnitCalibration saved, OnVerification on_verification);
 
   const char* name() const override { return "self-calibration"; }
   bool ServesPeer(wire::Envelope::BodyCase body) const override;
@@ -114,6 +126,8 @@ class SelfCalibrationService : public NodeService {
   void RunLocal(const wire::CalibrationStep& step, NodeId from, NodeRuntime& node);
   void HandleResult(const wire::CalibrationResult& result, NodeRuntime& node);
   const std::vector<cv::Mat>* PatternFrames(const wire::PatternPlan& plan);
+
+  void MaybeVerify(NodeRuntime& node);
 
   // Runner side (self_calibration_runner.cc).
   void MaybeStartRound(NodeRuntime& node);
@@ -149,6 +163,10 @@ class SelfCalibrationService : public NodeService {
   double compute_s_ = 0.0;
   uint64_t messages_sent_ = 0, messages_received_ = 0, bytes_sent_ = 0, bytes_received_ = 0;
   std::shared_ptr<const MpcdiSite> site_mpcdi_;  // the runner's, of the last round solved
+  std::optional<UnitCalibration> saved_;
+  OnVerification on_verification_;
+  bool verify_started_ = false;
+  bool logged_all_hold_ = false;
 
   std::unique_ptr<Runner> runner_;
 };

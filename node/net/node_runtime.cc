@@ -207,6 +207,7 @@ void NodeRuntime::SendTimers(Clock::time_point now) {
     for (auto& [id, peer] : peers_) {
       wire::Envelope hb;
       hb.mutable_heartbeat()->set_incarnation(incarnation_);
+      hb.mutable_heartbeat()->set_calibration_state(calibration_state_);
       (void)peer.to_peer->Send(std::move(hb));  // a full queue means the peer is down
     }
     // A coordinator that went silent may have restarted: register again.
@@ -369,6 +370,7 @@ void NodeRuntime::HandlePeerMessage(net::Incoming in) {
     if (it != peers_.end()) {
       it->second.last_heard = Clock::now();
       ++it->second.heartbeats_received;
+      it->second.calibration_state = e.heartbeat().calibration_state();
     }
     return;
   }

@@ -76,6 +76,7 @@ struct PeerInfo {
   std::unique_ptr<net::Channel> to_peer;  // our DEALER to its ROUTER
   Clock::time_point last_heard{};         // last heartbeat it sent us
   uint64_t heartbeats_received = 0;
+  wire::CalibrationState calibration_state = wire::CALIBRATION_STATE_UNSPECIFIED;  // its last
 };
 
 class NodeRuntime {
@@ -111,6 +112,9 @@ class NodeRuntime {
   // The coordinator's steady clock now, as this node estimates it (offset 0 until known).
   int64_t CoordinatorNowNs() const;
   const std::map<NodeId, PeerInfo>& peers() const { return peers_; }
+  // What this node tells its peers in every heartbeat (proto CalibrationState).
+  void set_calibration_state(wire::CalibrationState state) { calibration_state_ = state; }
+  wire::CalibrationState calibration_state() const { return calibration_state_; }
   // The coordinator's last member list (nullopt before the first), and how long ago its
   // version last changed.
   const std::optional<wire::MemberList>& member_list() const { return last_member_list_; }
@@ -151,6 +155,7 @@ class NodeRuntime {
   WorkerPool workers_;
   ClockOffsetEstimator clock_;
   bool registered_ = false;
+  wire::CalibrationState calibration_state_ = wire::CALIBRATION_STATE_UNSPECIFIED;
   bool peer_links_capped_ = false;
   uint64_t registrations_ = 0;
   uint64_t member_list_version_ = 0;

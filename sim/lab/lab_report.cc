@@ -160,6 +160,8 @@ json LabReportJson(const LabResult& r) {
     calibration["self_calibration_report"] = rr;
   }
   if (sc.contains("mpcdi")) calibration["mpcdi"] = sc["mpcdi"];
+  if (sc.contains("verification")) calibration["verification"] = sc["verification"];
+  if (sc.contains("round_ran")) calibration["round_ran"] = sc["round_ran"];
   if (sc.contains("compute_time_s")) {
     calibration["compute_time_s"] = sc["compute_time_s"];
     calibration["messages_per_node"] = sc.value("messages_per_node", 0.0);
@@ -255,6 +257,22 @@ std::string LabReportMarkdown(const LabResult& r) {
   if (!r.unit_failures.empty()) {
     md << "## Units that could not calibrate\n\n| unit | cause |\n| --- | --- |\n";
     for (const auto& [id, why] : r.unit_failures) md << "| " << id << " | " << why << " |\n";
+    md << "\n";
+  }
+  if (r.self_calibration.contains("verification")) {
+    md << "## Restart: the saved calibrations checked\n\n"
+       << (r.self_calibration.value("round_ran", false)
+               ? "A saved calibration did not hold: the site calibrated again.\n\n"
+               : "Every saved calibration held: no calibration round.\n\n")
+       << "| unit | holds | frames | projection (s) | dots found | p90 (px) | walls: median (px) | "
+          "why not |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n";
+    for (const auto& [id, v] : r.self_calibration["verification"].items()) {
+      md << "| " << id << " | " << (v.value("holds", false) ? "yes" : "**no**") << " | "
+         << v.value("frames", 0) << " | " << Fixed(v.value("device_time_s", 0.0), 3) << " | "
+         << v.value("found", 0) << " of " << v.value("dots", 0) << " | "
+         << Fixed(v.value("p90_px", 0.0), 3) << " | " << Fixed(v.value("wall_median_px", 0.0), 3)
+         << " (" << v.value("wall_dots", 0) << ") | " << v.value("reason", std::string()) << " |\n";
+    }
     md << "\n";
   }
   if (r.self_calibration.contains("runner_report")) {

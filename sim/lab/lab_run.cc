@@ -205,6 +205,14 @@ class LabRun {
         argv.insert(argv.end(), {"--true-pose", inputs_.true_pose_paths.at(unit.id)});
       } else {
         argv.insert(argv.end(), {"--model", inputs_.model_path});
+        if (!options_.saved_calibration.empty()) {
+          const std::filesystem::path saved =
+              std::filesystem::path(options_.saved_calibration) / ("unit-" + id + ".json");
+          if (std::filesystem::exists(saved)) {
+            argv.insert(argv.end(), {"--saved-calibration", saved.string()});
+            given_saved_.insert(unit.id);
+          }
+        }
       }
       ChildProcess* node = StartChild("node-" + id, "node", argv);
       if (!node) return false;
@@ -224,10 +232,20 @@ class LabRun {
     const int n = result_.num_units;
     Phase("calibration held", n);
     // A node that reports it could not calibrate is done too: the report names it and why.
+    // With saved calibrations: when one does not hold (or a unit has none) a round runs, and
+    // every unit's result must then come from it (a unit whose saved one held reports twice).
+    auto done = [&] {
+      if (static_cast<int>(calibrated_.size() + calibration_failed_.size()) < n) return false;
+      bool round_needed = static_cast<int>(given_saved_.size()) < n;
+      for (const auto& [id, line] : verification_) round_needed |= !line.value("holds", false);
+      if (!round_needed) return true;
+      for (const auto& [id, line] : calibrated_) {
+        if (line.value("verified", false)) return false;
+      }
+      return true;
+    };
     return Wait(
-        "calibration held",
-        [&] { return static_cast<int>(calibrated_.size() + calibration_failed_.size()) >= n; },
-        ToMs(options_.calibration_timeout_s),
+        "calibration held", done, ToMs(options_.calibration_timeout_s),
         "not every sandtable-node reported a calibration "
         "{\"calibrated\":N,\"source\":..,\"json\":..,\"yaml\":..}",
         nullptr, [&] { return static_cast<int>(calibrated_.size()); },
@@ -429,6 +447,14 @@ class LabRun {
       per_unit[std::to_string(id)] = u;
     }
     sc["per_unit"] = per_unit;
+    if (!verification_.empty()) {
+      json checks = json::object();
+      for (const auto& [id, line] : verification_) checks[std::to_string(id)] = line;
+      sc["verification"] = checks;
+    }
+    bool round_ran = false;
+    for (const auto& [id, line] : calibrated_) round_ran |= line.value("round", 0) != 0;
+    sc["round_ran"] = round_ran;
     sc["compute_time_s"] = slowest;
     if (!calibrated_.empty()) {
       sc["messages_per_node"] = messages / calibrated_.size();
@@ -529,6 +555,9 @@ class LabRun {
         if (progress_phase_ == "calibration held") {
           progress_.Update(static_cast<int>(calibrated_.size() + calibration_failed_.size()));
         }
+      } else if (child.spec().role == "node" && line.contains("verification") &&
+                 line["verification"].is_number_unsigned()) {
+        verification_[line["verification"].get<NodeId>()] = line;
       } else if (child.spec().role == "node" && line.contains("calibrated") &&
                  line["calibrated"].is_number_unsigned() && line.contains("json") &&
                  line["json"].is_string()) {
@@ -627,6 +656,8 @@ class LabRun {
   std::set<NodeId> nodes_ready_;
   std::map<NodeId, json> calibrated_;
   std::map<NodeId, std::string> calibration_failed_;
+  std::set<NodeId> given_saved_;         // nodes started with --saved-calibration
+  std::map<NodeId, json> verification_;  // their check's line
   bool units_have_model_ = false;
 };
 

@@ -56,6 +56,10 @@ struct LabRunOptions {
   // The model handed to the nodes: "" = the scene at a seeded unknown placement (up to 5 cm
   // and 10 degrees about z); a glTF FILE = exactly that file (true placement: as written).
   std::string model;
+  // A directory holding the unit-<id>.json an earlier run exported (its DIR/calibration): each
+  // node gets its file as --saved-calibration, checks it and skips the round when it holds.
+  // Use the same --seed and --model as that run (the model's placement is part of it).
+  std::string saved_calibration;
   std::string command_line;  // for the report
   Status Check() const;
 };

@@ -15,6 +15,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "sim/site/site_json.h"
+#include "sim/site/site_presets.h"
 #include "tests/coordinator/membership/child_process.h"
 
 namespace sandtable::sim {
@@ -38,11 +40,14 @@ class LabRunTest : public ::testing::Test {
   }
   void TearDown() override { std::filesystem::remove_all(dir_); }
 
-  std::vector<std::string> LabArgs(std::vector<std::string> extra) {
-    std::vector<std::string> args = {SANDTABLE_LAB_BIN, "run",       "--site",        "sandtable-3",
-                                     "--scene",         "sandtable", "--out",         dir_.string(),
-                                     "--samples",       "6000",      "--image-width", "200",
-                                     "--progress",      "plain"};
+  std::vector<std::string> LabArgs(std::vector<std::string> extra,
+                                   const std::string& site = "sandtable-3",
+                                   const std::filesystem::path& out = {}) {
+    std::vector<std::string> args = {
+        SANDTABLE_LAB_BIN, "run",       "--site",        site,
+        "--scene",         "sandtable", "--out",         (out.empty() ? dir_ : out).string(),
+        "--samples",       "6000",      "--image-width", "200",
+        "--progress",      "plain"};
     args.insert(args.end(), extra.begin(), extra.end());
     return args;
   }
@@ -91,7 +96,10 @@ constexpr double kAcceptanceRms_px = 0.25;
 constexpr double kAcceptanceMax_mm = 1.5;
 constexpr double kAcceptanceModelOffset_mm = 0.3;
 constexpr double kAcceptanceModelOffset_deg = 0.05;
+constexpr double kAcceptanceVerifyTime_s = 0.2;  // modeled projection of the restart check
 
+// Also the restart: the saved calibrations checked and kept, then one unit moved and the site
+// calibrated again.
 TEST_F(LabRunTest, Sandtable3SelfCalibratesAndFindsTheModel) {
   ChildProcess lab(LabArgs({}));
   ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
@@ -142,6 +150,50 @@ TEST_F(LabRunTest, Sandtable3SelfCalibratesAndFindsTheModel) {
   EXPECT_TRUE(std::filesystem::exists(dir_ / "model.gltf"));
   EXPECT_TRUE(std::filesystem::exists(dir_ / "calibration" / "self_calibration_report.json"));
   EXPECT_TRUE(AllProcessesGone(ReadJson("processes.json")));
+
+  // Restart with the saved calibrations: each checked in two frames, no round, the same figures.
+  const std::string saved = (dir_ / "calibration").string();
+  {
+    ChildProcess restart(LabArgs({"--saved-calibration", saved}, "sandtable-3", dir_ / "restart"));
+    ASSERT_TRUE(ReadUntil(&restart, [](const json& j) { return j.value("lab", "") == "done"; }));
+    ASSERT_EQ(restart.Wait(), 0) << "see " << dir_ / "restart" / "report.md";
+    const json again = ReadJson("restart/report.json");
+    ASSERT_FALSE(again.is_discarded());
+    const json& c = again["calibration"];
+    EXPECT_FALSE(c["round_ran"].get<bool>());
+    ASSERT_EQ(c["verification"].size(), 3u);
+    for (const auto& [id, v] : c["verification"].items()) {
+      EXPECT_TRUE(v["holds"].get<bool>()) << id << ": " << v.dump();
+      EXPECT_LE(v["device_time_s"].get<double>(), kAcceptanceVerifyTime_s) << id;
+    }
+    EXPECT_LT(c["rms_mm"].get<double>(), kAcceptanceRms_mm);
+    EXPECT_FALSE(again["registration"].contains("changes"));  // no round, no new scan
+  }
+  // The same after unit 1 was bumped (1 cm along the table, 0.3 degrees about the vertical):
+  // its check fails, the site calibrates again and meets the figures.
+  {
+    Expected<Site> site = MakeSitePreset("sandtable-3");
+    ASSERT_TRUE(site.ok());
+    Rigid3d& pose = site->units[1].projector.table_from_projector;
+    pose =
+        Rigid3d(Eigen::AngleAxisd(0.3 * M_PI / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
+                Eigen::Vector3d(0.01, 0.0, 0.0)) *
+        pose;
+    const std::filesystem::path moved_site = dir_ / "site-moved.json";
+    ASSERT_TRUE(WriteSiteFile(*site, moved_site.string()).ok());
+    ChildProcess moved(
+        LabArgs({"--saved-calibration", saved}, moved_site.string(), dir_ / "moved"));
+    ASSERT_TRUE(ReadUntil(&moved, [](const json& j) { return j.value("lab", "") == "done"; }));
+    ASSERT_EQ(moved.Wait(), 0) << "see " << dir_ / "moved" / "report.md";
+    const json after = ReadJson("moved/report.json");
+    ASSERT_FALSE(after.is_discarded());
+    const json& c = after["calibration"];
+    EXPECT_TRUE(c["round_ran"].get<bool>());
+    EXPECT_FALSE(c["verification"]["1"]["holds"].get<bool>()) << c["verification"].dump();
+    EXPECT_TRUE(c["verification"]["0"]["holds"].get<bool>()) << c["verification"].dump();
+    EXPECT_LT(c["rms_mm"].get<double>(), kAcceptanceRms_mm);
+    EXPECT_LT(c["max_mm"].get<double>(), kAcceptanceMax_mm);
+  }
 }
 
 TEST_F(LabRunTest, Sandtable3WritesTheReportAndLeavesNoProcess) {
