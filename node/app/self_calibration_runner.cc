@@ -604,7 +604,8 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
                          {"rms_mm", s.model->rms_m * 1e3},
                          {"inliers", s.model->inliers},
                          {"points", s.model->points},
-                         {"coarse_score", s.model->coarse_score}};
+                         {"coarse_score", s.model->coarse_score},
+                         {"by_outline", s.model->by_outline}};
       if (s.changes) {
         report["model"]["changes"] = ModelChangesToJson(*s.changes);
         LogModelChanges(*s.changes);

@@ -145,6 +145,7 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
         final_fit->coarse_score = found->coarse_score;
         final_fit->candidates_tried = found->candidates_tried;
         final_fit->structure_fraction = found->structure_fraction;
+        final_fit->by_outline = found->by_outline;
         final_fit->scale = scale;
         out.model = *final_fit;
       } else {

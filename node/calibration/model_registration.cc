@@ -9,6 +9,7 @@
 #include <Eigen/Geometry>
 #include <nanoflann.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 namespace sandtable::node {
 namespace {
@@ -16,6 +17,15 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 // The smallest pairing gate of the ICP's last iterations (m): a few times the scan's noise.
 constexpr double kTightGate_m = 0.0015;
+constexpr double kIcpDamping = 1e-6;
+// A scan (or model) with less than this fraction of its points above structure_height_m is flat.
+constexpr double kFlatFraction = 0.005;
+// The flat path: cells of the outline masks, and the least part of the model's top the scan
+// must cover for its outline to place the model.
+constexpr double kOutlineCell_m = 0.004;
+constexpr double kMinOutlineCoverage = 0.9;
+// Principal axes whose second moments differ by less than this ratio leave the yaw open.
+constexpr double kMinAxisRatio = 1.05;
 
 // model_from_table as s R p + t.
 struct Similarity {
@@ -253,6 +263,10 @@ static IcpOutcome RunIcp(const ModelMatcher::Tree& tree, const ModelSurface& sur
     out.rms_m = inliers ? std::sqrt(sum_sq / inliers) : std::numeric_limits<double>::infinity();
     if (inliers < 10) break;
     if (!scale_free) a(6, 6) = 1.0;
+    // Damping: a direction the points do not determine (x, y, yaw and scale on a flat scan)
+    // stays where it is instead of taking a step of noise over nothing (a scan of a flat table
+    // sent the scale to -1e163 without it).
+    a.diagonal().array() += kIcpDamping * inliers;
     const Eigen::Matrix<double, 7, 1> d = a.ldlt().solve(b);
     if (!d.allFinite()) break;
     const Eigen::Vector3d w = d.head<3>();
@@ -290,6 +304,150 @@ Expected<ModelRegistration> ModelMatcher::Refine(std::span<const Eigen::Vector3d
   return FromIcp(icp, static_cast<int>(points.size()));
 }
 
+namespace {
+
+// Area moments of a mask: centroid and the angle of its major axis.
+struct Moments {
+  double area_m2 = 0;
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  double axis_rad = 0;
+  double axis_ratio = 1;  // major / minor second moment
+};
+
+Moments MaskMoments(const cv::Mat& mask, double min_x, double min_y, double cell) {
+  Moments m;
+  double n = 0, sx = 0, sy = 0, sxx = 0, syy = 0, sxy = 0;
+  for (int j = 0; j < mask.rows; ++j) {
+    const uint8_t* row = mask.ptr<uint8_t>(j);
+    for (int i = 0; i < mask.cols; ++i) {
+      if (!row[i]) continue;
+      const double x = min_x + (i + 0.5) * cell, y = min_y + (j + 0.5) * cell;
+      n += 1;
+      sx += x;
+      sy += y;
+      sxx += x * x;
+      syy += y * y;
+      sxy += x * y;
+    }
+  }
+  if (n == 0) return m;
+  m.area_m2 = n * cell * cell;
+  m.centre = {sx / n, sy / n};
+  Eigen::Matrix2d c;
+  c << sxx / n - m.centre.x() * m.centre.x(), sxy / n - m.centre.x() * m.centre.y(),
+      sxy / n - m.centre.x() * m.centre.y(), syy / n - m.centre.y() * m.centre.y();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(c);
+  const Eigen::Vector2d major = eig.eigenvectors().col(1);
+  m.axis_rad = std::atan2(major.y(), major.x());
+  m.axis_ratio = eig.eigenvalues()(0) > 0 ? eig.eigenvalues()(1) / eig.eigenvalues()(0) : 1e9;
+  return m;
+}
+
+// Points (x, y) into a mask of `cell`, gaps up to `close_m` closed.
+cv::Mat PointMask(const std::vector<Eigen::Vector2d>& xy, double min_x, double min_y, int w, int h,
+                  double cell, double close_m) {
+  cv::Mat mask(h, w, CV_8U, cv::Scalar(0));
+  for (const Eigen::Vector2d& p : xy) {
+    const int i = static_cast<int>((p.x() - min_x) / cell);
+    const int j = static_cast<int>((p.y() - min_y) / cell);
+    if (i >= 0 && j >= 0 && i < w && j < h) mask.at<uint8_t>(j, i) = 255;
+  }
+  const int r = std::max(1, static_cast<int>(std::ceil(close_m / cell)));
+  const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1));
+  cv::morphologyEx(mask, mask, cv::MORPH_CLOSE, disc);
+  return mask;
+}
+
+}  // namespace
+
+Expected<ModelRegistration> ModelMatcher::RegisterByOutline(
+    std::span<const Eigen::Vector3d> scan) const {
+  // The model's top: its samples facing up (the table top sampled 3x coarser: closed like the
+  // scan's points).
+  std::vector<Eigen::Vector2d> model_xy, scan_xy;
+  for (size_t i = 0; i < surface_.points_m.size(); ++i) {
+    if (surface_.normals[i].z() > 0.9) model_xy.push_back(surface_.points_m[i].head<2>());
+  }
+  for (const Eigen::Vector3d& p : scan) scan_xy.push_back(p.head<2>());
+  // The scan's spacing: median distance to the nearest of a few hundred points' neighbours.
+  std::vector<double> nearest;
+  const size_t stride = std::max<size_t>(1, scan_xy.size() / 300);
+  for (size_t i = 0; i < scan_xy.size(); i += stride) {
+    double best = std::numeric_limits<double>::infinity();
+    for (size_t j = 0; j < scan_xy.size(); ++j) {
+      if (j != i) best = std::min(best, (scan_xy[i] - scan_xy[j]).squaredNorm());
+    }
+    nearest.push_back(std::sqrt(best));
+  }
+  std::nth_element(nearest.begin(),
+                   nearest.begin() + static_cast<std::ptrdiff_t>(nearest.size() / 2),
+                   nearest.end());
+  const double spacing = nearest[nearest.size() / 2];
+  const double model_spacing = 3.0 * options_.sample_spacing_m;
+  auto moments_of = [&](const std::vector<Eigen::Vector2d>& xy, double close_m) {
+    Eigen::AlignedBox2d box;
+    for (const Eigen::Vector2d& p : xy) box.extend(p);
+    const double margin = 2 * close_m + kOutlineCell_m;
+    const double min_x = box.min().x() - margin, min_y = box.min().y() - margin;
+    const int w = static_cast<int>(std::ceil((box.sizes().x() + 2 * margin) / kOutlineCell_m));
+    const int h = static_cast<int>(std::ceil((box.sizes().y() + 2 * margin) / kOutlineCell_m));
+    return MaskMoments(PointMask(xy, min_x, min_y, w, h, kOutlineCell_m, close_m), min_x, min_y,
+                       kOutlineCell_m);
+  };
+  const Moments model = moments_of(model_xy, 1.5 * model_spacing);
+  const Moments seen = moments_of(scan_xy, 1.5 * spacing);
+  const double coverage = model.area_m2 > 0 ? seen.area_m2 / model.area_m2 : 0.0;
+  if (coverage < kMinOutlineCoverage) {
+    return DegenerateError("model registration: the model is flat and the scan covers " +
+                           std::to_string(static_cast<int>(coverage * 100)) +
+                           " % of its top: its outline cannot place it (at least " +
+                           std::to_string(static_cast<int>(kMinOutlineCoverage * 100)) + " %)");
+  }
+  if (model.axis_ratio < kMinAxisRatio || seen.axis_ratio < kMinAxisRatio) {
+    return DegenerateError(
+        "model registration: the model is flat and its outline has no long axis (a disc or a "
+        "square): its turn about the vertical cannot be found");
+  }
+  // model = R (scan) + t with R turning the scan's axis onto the model's; of the two
+  // directions of an axis, the one that puts the scan's points on the model's top.
+  ModelRegistration best;
+  double best_inside = -1;
+  for (int flip = 0; flip < 2; ++flip) {
+    const double yaw = model.axis_rad - seen.axis_rad + flip * kPi;
+    const Eigen::Matrix3d r = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    const Eigen::Vector2d t2 = model.centre - r.topLeftCorner<2, 2>() * seen.centre;
+    const Eigen::Vector3d t(t2.x(), t2.y(), 0.0);
+    int inside = 0;
+    double sum_sq = 0;
+    const size_t step = std::max<size_t>(1, scan.size() / 2000);
+    int tried = 0;
+    for (size_t i = 0; i < scan.size(); i += step) {
+      const Eigen::Vector3d p = r * scan[i] + t;
+      double d2 = 0;
+      const size_t k = tree_->Nearest(p, &d2);
+      ++tried;
+      if (d2 > model_spacing * model_spacing) continue;
+      ++inside;
+      const double dz = surface_.normals[k].dot(p - surface_.points_m[k]);
+      sum_sq += dz * dz;
+    }
+    if (inside > best_inside) {
+      best_inside = inside;
+      const Eigen::Matrix3d rt = r.transpose();
+      best.table_from_model = Rigid3d(rt, -rt * t);
+      best.rms_m = inside ? std::sqrt(sum_sq / inside) : 0.0;
+      best.inliers = inside;
+      best.points = tried;
+    }
+  }
+  best.scale = 1.0;  // a plane says nothing of the scale
+  best.coarse_score = coverage;
+  best.candidates_tried = 2;
+  best.structure_fraction = 0.0;
+  best.by_outline = true;
+  return best;
+}
+
 Expected<ModelRegistration> ModelMatcher::Register(std::span<const Eigen::Vector3d> scan) const {
   ST_RETURN_IF_ERROR(options_.Check());
   const int n = static_cast<int>(scan.size());
@@ -301,6 +459,19 @@ Expected<ModelRegistration> ModelMatcher::Register(std::span<const Eigen::Vector
   if (surface_.points_m.empty()) return DegenerateError("model registration: the model is empty");
   int structure = 0;
   for (const Eigen::Vector3d& p : scan) structure += p.z() > options_.structure_height_m;
+  int model_structure = 0;
+  for (const Eigen::Vector3d& p : surface_.points_m) {
+    model_structure += p.z() > options_.structure_height_m;
+  }
+  const bool flat_scan = structure < kFlatFraction * n;
+  const bool flat_model =
+      model_structure < kFlatFraction * static_cast<double>(surface_.points_m.size());
+  if (flat_scan && !flat_model) {
+    return DegenerateError("model registration: the scan shows nothing above " +
+                           std::to_string(options_.structure_height_m * 1e3) +
+                           " mm but the model has buildings: nothing to place them by");
+  }
+  if (flat_scan && flat_model) return RegisterByOutline(scan);
   const Grid model_grid = HeightGrid(surface_.points_m, Eigen::Matrix3d::Identity(),
                                      options_.coarse_cell_m, options_.structure_height_m);
   // FFT of the model map, padded for every scan map (sizes bounded by the two extents).

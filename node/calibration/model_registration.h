@@ -18,9 +18,15 @@
 //      scale is only as good as the units' mount baselines), then rigid. The candidate with the
 //      lowest trimmed rms wins.
 // Output: table_from_model (rigid), scale (scan length / model length), rms, inlier counts.
-// Errors: DEGENERATE when the scan has fewer than min_points points or shows no structure and
-// the model has some (nothing to register x, y and yaw on), NOT_FOUND when no candidate reaches
-// min_inlier_fraction of the scan within icp_max_distance_m ("the model does not match").
+// Flat scan and flat model (under 0.5 % of the points above structure_height_m each): placed by
+// outlines instead (RegisterByOutline): the scan's points and the model's top become masks
+// (4 mm cells, gaps closed), whose area centroids and major axes give x, y and yaw; scale 1.
+// Errors: DEGENERATE when the scan has fewer than min_points points, shows no structure and
+// the model has some (nothing to register x, y and yaw on), or, flat, covers under 90 % of the
+// model's top or has no long axis (a disc: its yaw is open); NOT_FOUND when no candidate
+// reaches min_inlier_fraction of the scan within icp_max_distance_m ("the model does not
+// match"). The ICP is damped (1e-6 x pairs on its normal equations): directions the points do
+// not determine stay put.
 // Cost: O(yaw steps x G log G) for G grid cells, plus O(iterations x N log M) for ICP.
 #pragma once
 
@@ -59,6 +65,9 @@ struct ModelRegistration {
   double coarse_score = 0.0;    // fraction of the best correlation's possible agreement
   int candidates_tried = 0;
   double structure_fraction = 0.0;  // scan points above structure_height_m
+  // Flat scan and flat model: placed by the outline of the scanned top against the model's
+  // (area centroid and major axis), scale 1; x, y and yaw then come from the table's edges only.
+  bool by_outline = false;
 };
 
 // The model's surface sampled for ICP: points and unit normals in the model frame.
@@ -79,6 +88,9 @@ class ModelMatcher {
   ModelMatcher& operator=(const ModelMatcher&) = delete;
 
   Expected<ModelRegistration> Register(std::span<const Eigen::Vector3d> scan_in_table_m) const;
+  // The flat case of Register (see ModelRegistration::by_outline).
+  Expected<ModelRegistration> RegisterByOutline(
+      std::span<const Eigen::Vector3d> scan_in_table_m) const;
   Expected<ModelRegistration> Refine(std::span<const Eigen::Vector3d> scan_in_table_m,
                                      const Rigid3d& table_from_model, bool scale_free) const;
   // The model's surface plane near a point (model frame): the nearest sample within

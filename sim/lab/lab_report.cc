@@ -115,6 +115,7 @@ json LabReportJson(const LabResult& r) {
   }
   out["processes"] = processes;
   json calibration = {{"source", r.calibration_source}};
+  if (r.measured_with_true_placement) calibration["placement"] = "true (the nodes found none)";
   if (r.registration) {
     const RegistrationReport& reg = *r.registration;
     calibration.update(ErrorsJson(reg.site));
@@ -243,6 +244,11 @@ std::string LabReportMarkdown(const LabResult& r) {
        << reg.num_lit_points << " lit points of " << reg.num_candidates << " sampled ("
        << reg.num_table_points << " on the table, " << reg.num_building_points << " on buildings); "
        << reg.site.unmeasured << " (point, projector) pairs unmeasurable.\n\n"
+       << (r.measured_with_true_placement
+               ? "**The nodes found no placement of the model** (see the notes under "
+                 "Self-calibration): these figures use the TRUE placement expressed in their "
+                 "table frame, i.e. what the calibration gives once the model is placed.\n\n"
+               : "")
        << "| scope | pairs | rms (mm) | p99 (mm) | max (mm) | rms (px) |\n"
        << "| --- | --- | --- | --- | --- | --- |\n";
     md << StatsRow("site", reg.site.all) << StatsRow("site: table", reg.site.table)

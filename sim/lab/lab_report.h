@@ -75,6 +75,9 @@ struct LabResult {
   nlohmann::json self_calibration = nlohmann::json::object();
   std::map<NodeId, std::string> unit_failures;
   bool model_offset_measured = false;
+  // The nodes found no placement of the model: the registration was measured with the true one
+  // expressed in their table frame (calibration.placement "true").
+  bool measured_with_true_placement = false;
   double model_offset_mm = 0.0, model_offset_deg = 0.0;
 };
 

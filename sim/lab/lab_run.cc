@@ -318,44 +318,61 @@ class LabRun {
       double scale_mm = 0;
       std::string error;
       std::optional<ModelPlacementError> placement;
+      bool true_placement = false;  // measured with the true model placement (none was found)
     };
     // The model's placement against the truth, when the nodes found it (structured light).
     const bool model_placement = !TruePoseMode() && units_have_model_;
     const Eigen::Vector3d model_centre = inputs_.model_from_table * scene_.Bounds().center();
     const RegistrationMetricOptions metric_options = result_.metric_options;
     const int width = options_.image_width_px;
-    std::future<Work> future = std::async(
-        std::launch::async,
-        [this, estimates, metric_options, width, model_placement, model_centre]() -> Work {
-          Work work;
-          Expected<std::unique_ptr<World>> world = World::Create(inputs_.site, scene_);
-          if (!world.ok()) {
-            work.error = world.status().ToString();
-            return work;
-          }
-          Expected<RegistrationReport> report =
-              MeasureRegistration(**world, estimates, metric_options);
-          if (!report.ok()) {
-            work.error = report.status().ToString();
-            return work;
-          }
-          work.report = std::move(*report);
-          if (model_placement) {
-            Expected<ModelPlacementError> placement = MeasureModelPlacement(
-                **world, estimates, metric_options.true_table_from_model, model_centre);
-            if (placement.ok()) work.placement = *placement;
-          }
-          if (Expected<cv::Mat> top = TopViewWhite(world->get(), width); top.ok()) {
-            work.top = *top;
-          }
-          work.scale_mm = std::max(1e-3, work.report->site.all.p99_mm);
-          if (Expected<cv::Mat> heat =
-                  RegistrationHeatmap(**world, estimates, metric_options, width, work.scale_mm);
-              heat.ok()) {
-            work.heatmap = *heat;
-          }
-          return work;
-        });
+    std::future<Work> future =
+        std::async(std::launch::async,
+                   [this, estimates, metric_options, width, model_placement, model_centre,
+                    no_placement = !TruePoseMode() && !units_have_model_]() mutable -> Work {
+                     Work work;
+                     Expected<std::unique_ptr<World>> world = World::Create(inputs_.site, scene_);
+                     if (!world.ok()) {
+                       work.error = world.status().ToString();
+                       return work;
+                     }
+                     if (no_placement) {
+                       // The nodes found no placement of the model (a flat scene whose outline they
+                       // do not see whole): the calibration is measured with the TRUE placement
+                       // expressed in their table frame (related to the true one through table
+                       // pixels), and the report says so (calibration.placement).
+                       Expected<ModelPlacementError> frames = MeasureModelPlacement(
+                           **world, estimates, metric_options.true_table_from_model, model_centre);
+                       if (frames.ok()) {
+                         for (EstimatedRegistration& e : estimates) {
+                           e.table_from_model = frames->true_table_from_estimated_table.Inverse() *
+                                                metric_options.true_table_from_model;
+                         }
+                         work.true_placement = true;
+                       }
+                     }
+                     Expected<RegistrationReport> report =
+                         MeasureRegistration(**world, estimates, metric_options);
+                     if (!report.ok()) {
+                       work.error = report.status().ToString();
+                       return work;
+                     }
+                     work.report = std::move(*report);
+                     if (model_placement) {
+                       Expected<ModelPlacementError> placement = MeasureModelPlacement(
+                           **world, estimates, metric_options.true_table_from_model, model_centre);
+                       if (placement.ok()) work.placement = *placement;
+                     }
+                     if (Expected<cv::Mat> top = TopViewWhite(world->get(), width); top.ok()) {
+                       work.top = *top;
+                     }
+                     work.scale_mm = std::max(1e-3, work.report->site.all.p99_mm);
+                     if (Expected<cv::Mat> heat = RegistrationHeatmap(
+                             **world, estimates, metric_options, width, work.scale_mm);
+                         heat.ok()) {
+                       work.heatmap = *heat;
+                     }
+                     return work;
+                   });
     const auto ready = [&] {
       return future.wait_for(std::chrono::seconds(0)) == std::future_status::ready;
     };
@@ -367,6 +384,7 @@ class LabRun {
     Work work = future.get();
     if (!work.error.empty()) return FailedWith("metrics", "registration metric: " + work.error);
     result_.registration = std::move(work.report);
+    result_.measured_with_true_placement = work.true_placement;
     if (work.placement) {
       result_.model_offset_measured = true;
       result_.model_offset_mm = work.placement->offset_mm;

@@ -14,6 +14,9 @@ namespace {
 
 constexpr double kPlacementTolerance_mm = 0.3;
 constexpr double kAngleTolerance_deg = 0.05;
+// A flat table placed by its outline: the outline's mask quantisation (4 mm cells, 12 mm points).
+constexpr double kOutlinePlacement_mm = 1.0;
+constexpr double kOutlineAngle_deg = 0.1;
 constexpr double kPi = 3.14159265358979323846;
 
 Scene SandtableScene(uint64_t seed) {
@@ -89,6 +92,37 @@ TEST(ModelRegistration, RefusesAModelThatIsNotOnTheTable) {
   Expected<ModelRegistration> found = RegisterModel(scene, buildings, options);
   EXPECT_FALSE(found.ok());
   EXPECT_EQ(found.status().code(), StatusCode::kNotFound) << found.status().ToString();
+}
+
+// A flat table seen whole: placed by its outline (the rectangle's centroid and long axis), scale
+// 1, the scan's points on the model's top. Seen in part, or a flat scan of a model with
+// buildings: refused, not placed by accident (before, the free scale of the ICP diverged).
+TEST(ModelRegistration, PlacesAFlatModelByItsOutlineOrRefuses) {
+  ProceduralSceneOptions flat_options;
+  flat_options.preset = ScenePreset::kFlat;
+  const Scene flat = MakeProceduralScene(flat_options)->scene;
+  const Rigid3d table_from_model(
+      Eigen::AngleAxisd(4.0 * kPi / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
+      Eigen::Vector3d(0.03, -0.04, 0.0));
+  // The flat preset's table top is sampled 3x coarser than the 4 mm of Scan(): a 12 mm grid,
+  // like the pipeline's.
+  const std::vector<Eigen::Vector3d> whole =
+      Scan(flat, table_from_model, Eigen::Vector2d::Zero(), 5.0, 0.0003, 5);
+  Expected<ModelRegistration> found = RegisterModel(flat, whole);
+  ASSERT_TRUE(found.ok()) << found.status().ToString();
+  EXPECT_TRUE(found->by_outline);
+  EXPECT_EQ(found->scale, 1.0);
+  const Rigid3d error = table_from_model.Inverse() * found->table_from_model;
+  EXPECT_LT(error.translation.norm() * 1e3, kOutlinePlacement_mm);
+  EXPECT_LT(Eigen::AngleAxisd(error.rotation).angle() * 180.0 / kPi, kOutlineAngle_deg);
+
+  const std::vector<Eigen::Vector3d> part =
+      Scan(flat, table_from_model, Eigen::Vector2d(0.3, 0.0), 0.5, 0.0003, 6);
+  Expected<ModelRegistration> partial = RegisterModel(flat, part);
+  EXPECT_EQ(partial.status().code(), StatusCode::kDegenerate) << partial.status().ToString();
+
+  Expected<ModelRegistration> buildings = RegisterModel(SandtableScene(1), whole);
+  EXPECT_EQ(buildings.status().code(), StatusCode::kDegenerate) << buildings.status().ToString();
 }
 
 }  // namespace
