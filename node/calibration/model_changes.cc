@@ -9,10 +9,10 @@
 #include <numeric>
 
 #include <Eigen/Dense>
-#include <nanoflann.hpp>
 
 #include "common/base/thread_cpu_time.h"
 #include "node/calibration/model_registration.h"
+#include "node/calibration/point_tree.h"
 
 namespace sandtable::node {
 namespace {
@@ -110,29 +110,12 @@ Footprints RasterFootprints(const Scene& model, const std::vector<ModelPart>& pa
 struct PartSurface {
   std::vector<Eigen::Vector3d> points;
   std::vector<Eigen::Vector3d> normals;
-  struct Adaptor {
-    const std::vector<Eigen::Vector3d>* points;
-    size_t kdtree_get_point_count() const { return points->size(); }
-    double kdtree_get_pt(size_t i, size_t d) const { return (*points)[i][static_cast<int>(d)]; }
-    template <class Box>
-    bool kdtree_get_bbox(Box&) const {
-      return false;
-    }
-  };
-  using Index = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, Adaptor>,
-                                                    Adaptor, 3, size_t>;
-  Adaptor adaptor{&points};
-  std::unique_ptr<Index> index;
-  void Build() {
-    adaptor.points = &points;
-    index = std::make_unique<Index>(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-    index->buildIndex();
-  }
+  std::unique_ptr<PointTree> tree;
+  void Build() { tree = std::make_unique<PointTree>(&points); }
   // Nearest sample; false when there is none within gate.
   bool Nearest(const Eigen::Vector3d& q, double gate, size_t* k) const {
-    if (points.empty()) return false;
     double d2 = 0;
-    index->knnSearch(q.data(), 1, k, &d2);
+    *k = tree->Nearest(q, &d2);
     return d2 <= gate * gate;
   }
 };

@@ -7,7 +7,6 @@
 
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
-#include <nanoflann.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -86,28 +85,6 @@ struct Candidate {
 
 }  // namespace
 
-struct ModelMatcher::Tree {
-  struct Adaptor {
-    const std::vector<Eigen::Vector3d>* points;
-    size_t kdtree_get_point_count() const { return points->size(); }
-    double kdtree_get_pt(size_t i, size_t d) const { return (*points)[i][static_cast<int>(d)]; }
-    template <class Box>
-    bool kdtree_get_bbox(Box&) const {
-      return false;
-    }
-  };
-  using Index = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, Adaptor>,
-                                                    Adaptor, 3, size_t>;
-  Adaptor adaptor;
-  std::unique_ptr<Index> index;
-  size_t Nearest(const Eigen::Vector3d& q, double* distance_sq) const {
-    size_t i = 0;
-    *distance_sq = std::numeric_limits<double>::infinity();
-    index->knnSearch(q.data(), 1, &i, distance_sq);
-    return i;
-  }
-};
-
 Status ModelRegistrationOptions::Check() const {
   if (!(structure_height_m > 0) || !(coarse_cell_m > 0) || !(coarse_yaw_step_deg > 0) ||
       !(sample_spacing_m > 0) || !(icp_max_distance_m > 0)) {
@@ -156,12 +133,7 @@ ModelSurface SampleModelSurface(const Scene& model, double spacing_m) {
 ModelMatcher::ModelMatcher(const Scene& model, const ModelRegistrationOptions& options)
     : options_(options),
       surface_(SampleModelSurface(model, options.sample_spacing_m)),
-      tree_(std::make_unique<Tree>()) {
-  tree_->adaptor.points = &surface_.points_m;
-  tree_->index = std::make_unique<Tree::Index>(3, tree_->adaptor,
-                                               nanoflann::KDTreeSingleIndexAdaptorParams(16));
-  tree_->index->buildIndex();
-}
+      tree_(std::make_unique<PointTree>(&surface_.points_m)) {}
 
 ModelMatcher::~ModelMatcher() = default;
 
@@ -172,7 +144,7 @@ bool ModelMatcher::SurfacePlaneNear(const Eigen::Vector3d& point_in_model_m, dou
   if (surface_.points_m.size() < kK) return false;
   size_t index[kK];
   double d2[kK];
-  const size_t found = tree_->index->knnSearch(point_in_model_m.data(), kK, index, d2);
+  const size_t found = tree_->Nearest(point_in_model_m, kK, index, d2);
   if (found < kK || d2[0] > max_distance_m * max_distance_m) return false;
   const Eigen::Vector3d& n0 = surface_.normals[index[0]];
   for (size_t i = 1; i < found; ++i) {
@@ -217,7 +189,7 @@ ModelRegistration FromIcp(const IcpOutcome& icp, int points_fitted) {
 
 }  // namespace
 
-static IcpOutcome RunIcp(const ModelMatcher::Tree& tree, const ModelSurface& surface,
+static IcpOutcome RunIcp(const PointTree& tree, const ModelSurface& surface,
                          std::span<const Eigen::Vector3d> scan, Similarity x, bool scale_free,
                          int iterations, double final_distance_m) {
   IcpOutcome out;

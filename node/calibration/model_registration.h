@@ -40,6 +40,7 @@
 #include "common/base/status.h"
 #include "common/geometry/rigid3.h"
 #include "common/scene/scene.h"
+#include "node/calibration/point_tree.h"
 
 namespace sandtable::node {
 
@@ -100,12 +101,10 @@ class ModelMatcher {
                         Eigen::Vector3d* point_on_plane_m, Eigen::Vector3d* normal) const;
   const ModelSurface& surface() const { return surface_; }
 
-  struct Tree;  // the k-d tree (nanoflann), defined in the .cc
-
  private:
   ModelRegistrationOptions options_;
   ModelSurface surface_;
-  std::unique_ptr<Tree> tree_;
+  std::unique_ptr<PointTree> tree_;
 };
 
 Expected<ModelRegistration> RegisterModel(const Scene& model,
