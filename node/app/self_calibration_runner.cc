@@ -612,6 +612,9 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
       }
     } else {
       report["model"] = {{"found", false}};
+      if (s.changes) {  // found, then rejected: what the placement showed
+        report["model"]["changes"] = ModelChangesToJson(*s.changes);
+      }
     }
     report["ok"] = true;
   } else {

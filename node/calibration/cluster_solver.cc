@@ -7,6 +7,10 @@
 
 namespace sandtable::node {
 namespace {
+// The change report judges a model only when it saw at least this many of its buildings.
+constexpr int kMinJudgedBuildings = 3;
+}  // namespace
+namespace {
 
 struct TableFit {
   Rigid3d table_from_world;
@@ -78,6 +82,35 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
   if (matcher) {
     Expected<ModelRegistration> found = matcher->Register(out.points_in_table_m);
     stage_done("model");
+    // What the found placement shows, building by building (in the model frame, so before the
+    // scale is applied: the scan divided by the found scale). A placement that leaves most of
+    // the buildings it saw somewhere else, or missing, is the table matching the table: the
+    // model is not what stands there, and neither its placement nor its scale is used.
+    if (found.ok()) {
+      std::vector<Eigen::Vector3d> in_model_scale = out.points_in_table_m;
+      if (found->scale > 0) {
+        for (Eigen::Vector3d& p : in_model_scale) p /= found->scale;
+      }
+      Expected<ModelChangeReport> changes =
+          DetectModelChanges(*model, in_model_scale, found->table_from_model, options.changes);
+      stage_done("changes");
+      if (changes.ok()) {
+        out.changes = std::move(*changes);
+        const int observed = out.changes->present + out.changes->moved + out.changes->missing;
+        if (observed >= kMinJudgedBuildings && 2 * out.changes->present < observed) {
+          found = NotFoundError(
+              "model registration: the model does not match the scanned surface (of " +
+              std::to_string(observed) + " buildings seen, " +
+              std::to_string(out.changes->present) + " stand where the best placement puts them, " +
+              std::to_string(out.changes->moved) + " elsewhere, " +
+              std::to_string(out.changes->missing) + " missing; " +
+              std::to_string(out.changes->extras.size()) + " structures not in the model)");
+          out.model_rejected = true;
+        }
+      } else {
+        out.notes.push_back("change report: " + changes.status().message());
+      }
+    }
     if (!found.ok()) {
       out.notes.push_back(found.status().message());
     } else {
@@ -151,14 +184,6 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
       } else {
         out.notes.push_back(final_fit.status().message());
         out.model = *found;
-      }
-      Expected<ModelChangeReport> changes = DetectModelChanges(
-          *model, out.points_in_table_m, out.model->table_from_model, options.changes);
-      stage_done("changes");
-      if (changes.ok()) {
-        out.changes = std::move(*changes);
-      } else {
-        out.notes.push_back("change report: " + changes.status().message());
       }
     }
   }

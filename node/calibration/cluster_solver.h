@@ -9,7 +9,9 @@
 // model was given and found), the change report per building of the model
 // (model_changes.h), and the report of every step.
 // Errors: DEGENERATE when the bundle or the table plane cannot be estimated; a model that is
-// not found is not an error: the solution carries no table_from_model and the note says why.
+// not found is not an error: the solution carries no table_from_model and the note says why
+// (also when the best placement puts fewer than half of the buildings it saw where they stand:
+// the table alone matched).
 #pragma once
 
 #include <map>
@@ -61,7 +63,10 @@ struct ClusterSolution {
   TableFrameReport frame;
   std::optional<ModelRegistration> model;
   std::optional<ModelChangeReport> changes;  // per building of the model, once it is found
-  double scale_correction = 1.0;             // lengths multiplied by this after the model was found
+  // The best placement put fewer than half of the buildings it saw where they stand: not the
+  // model on this table (model is then empty; the changes of that placement and a note stay).
+  bool model_rejected = false;
+  double scale_correction = 1.0;  // lengths multiplied by this after the model was found
   std::vector<Eigen::Vector3d> points_in_table_m;
   std::vector<std::string> notes;
   double time_s = 0.0;  // thread CPU time of the whole solve
