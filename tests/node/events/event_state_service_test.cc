@@ -145,8 +145,16 @@ TEST_F(EventStateServiceTest, TimelineClockGivesTheCoordinatorsMediaTime) {
   c->set_playing(true);
   c->set_sample_time_ns(sample_ns);
   c->set_duration_s(100.0);
-  ASSERT_TRUE(coordinator_->Publish(std::move(clock)).ok());
-  ASSERT_TRUE(StepUntil([&] { return events_.timeline().has_value(); }));
+  // Published again every 100 ms until the node has it, as the coordinator's timeline does
+  // (publish_rate_hz): a SUB whose subscription has not reached the PUB yet misses a message
+  // published once (ZeroMQ's slow joiner; this test failed so on a loaded machine).
+  bool received = false;
+  const auto until = std::chrono::steady_clock::now() + kDeadline;
+  while (!received && std::chrono::steady_clock::now() < until) {
+    ASSERT_TRUE(coordinator_->Publish(wire::Envelope(clock)).ok());
+    received = StepUntil([&] { return events_.timeline().has_value(); }, milliseconds(100));
+  }
+  ASSERT_TRUE(received);
   const int64_t later_ns = sample_ns + 500'000'000;  // 0.5 s later on the coordinator clock
   // The node's steady time for that instant is the coordinator's minus the offset; on one
   // host both are the same steady clock, so the estimated offset is ~0.
