@@ -9,6 +9,9 @@ namespace sandtable::node {
 namespace {
 // The change report judges a model only when it saw at least this many of its buildings.
 constexpr int kMinJudgedBuildings = 3;
+// A placement that puts this share of the buildings it saw where they stand is taken without
+// judging the next candidates.
+constexpr double kConvincingPresent = 0.8;
 }  // namespace
 namespace {
 
@@ -80,22 +83,43 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
   std::optional<ModelMatcher> matcher;
   if (model) matcher.emplace(*model, options.model);
   if (matcher) {
-    Expected<ModelRegistration> found = matcher->Register(out.points_in_table_m);
+    Expected<std::vector<ModelRegistration>> candidates =
+        matcher->RegisterCandidates(out.points_in_table_m, options.model_candidates);
     stage_done("model");
-    // What the found placement shows, building by building (in the model frame, so before the
-    // scale is applied: the scan divided by the found scale). A placement that leaves most of
-    // the buildings it saw somewhere else, or missing, is the table matching the table: the
-    // model is not what stands there, and neither its placement nor its scale is used.
+    Expected<ModelRegistration> found = candidates.ok()
+                                            ? Expected<ModelRegistration>(candidates->front())
+                                            : Expected<ModelRegistration>(candidates.status());
+    // What each candidate placement shows, building by building (in the model frame, so before
+    // its scale is applied: the scan divided by it). Of placements that fit about as well (a
+    // city's regular blocks), the one that puts the most buildings where they stand is taken
+    // (judged in order, stopping at one that puts 80 % of them where they stand).
+    // If even that one leaves most of the buildings it saw elsewhere or missing, the table
+    // matched the table: the model is not what stands there, and neither its placement nor its
+    // scale is used.
     if (found.ok()) {
-      std::vector<Eigen::Vector3d> in_model_scale = out.points_in_table_m;
-      if (found->scale > 0) {
-        for (Eigen::Vector3d& p : in_model_scale) p /= found->scale;
+      int most_present = -1;
+      for (const ModelRegistration& candidate : *candidates) {
+        std::vector<Eigen::Vector3d> in_model_scale = out.points_in_table_m;
+        if (candidate.scale > 0) {
+          for (Eigen::Vector3d& p : in_model_scale) p /= candidate.scale;
+        }
+        Expected<ModelChangeReport> changes =
+            DetectModelChanges(*model, in_model_scale, candidate.table_from_model, options.changes);
+        if (!changes.ok()) {
+          out.notes.push_back("change report: " + changes.status().message());
+          break;
+        }
+        const int observed = changes->present + changes->moved + changes->missing;
+        const bool convincing = changes->present >= kConvincingPresent * observed;
+        if (changes->present > most_present) {
+          most_present = changes->present;
+          found = candidate;
+          out.changes = std::move(*changes);
+        }
+        if (convincing) break;  // the next candidates only cost time
       }
-      Expected<ModelChangeReport> changes =
-          DetectModelChanges(*model, in_model_scale, found->table_from_model, options.changes);
       stage_done("changes");
-      if (changes.ok()) {
-        out.changes = std::move(*changes);
+      if (out.changes) {
         const int observed = out.changes->present + out.changes->moved + out.changes->missing;
         if (observed >= kMinJudgedBuildings && 2 * out.changes->present < observed) {
           found = NotFoundError(
@@ -107,8 +131,6 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
               std::to_string(out.changes->extras.size()) + " structures not in the model)");
           out.model_rejected = true;
         }
-      } else {
-        out.notes.push_back("change report: " + changes.status().message());
       }
     }
     if (!found.ok()) {

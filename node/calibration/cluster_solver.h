@@ -36,6 +36,8 @@ struct ClusterSolveOptions {
   PlaneFitOptions plane;  // inlier threshold 3 mm by default here (set in the constructor)
   ModelRegistrationOptions model;
   ModelChangeOptions changes;  // what differs from the model, once it is found
+  // Placements of the model judged by the change report (ModelMatcher::RegisterCandidates).
+  int model_candidates = 3;
   bool scale_from_model = true;
   // A model scale further than this from 1 is not applied (the model is then probably not
   // the scanned scene, or not in metres): noted, and the mounts' scale is kept.

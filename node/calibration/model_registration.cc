@@ -25,6 +25,9 @@ constexpr double kOutlineCell_m = 0.004;
 constexpr double kMinOutlineCoverage = 0.9;
 // Principal axes whose second moments differ by less than this ratio leave the yaw open.
 constexpr double kMinAxisRatio = 1.05;
+// Placements kept for the caller to choose from: those whose ICP pairs reach this fraction of
+// the best one's (a city's regular blocks fit the table equally well at several places).
+constexpr double kCandidateInlierRatio = 0.9;
 
 // model_from_table as s R p + t.
 struct Similarity {
@@ -420,8 +423,10 @@ Expected<ModelRegistration> ModelMatcher::RegisterByOutline(
   return best;
 }
 
-Expected<ModelRegistration> ModelMatcher::Register(std::span<const Eigen::Vector3d> scan) const {
+Expected<std::vector<ModelRegistration>> ModelMatcher::RegisterCandidates(
+    std::span<const Eigen::Vector3d> scan, int max_candidates) const {
   ST_RETURN_IF_ERROR(options_.Check());
+  if (max_candidates < 1) return InvalidArgumentError("model registration: max_candidates < 1");
   const int n = static_cast<int>(scan.size());
   if (n < options_.min_points) {
     return DegenerateError("model registration: " + std::to_string(n) +
@@ -443,7 +448,11 @@ Expected<ModelRegistration> ModelMatcher::Register(std::span<const Eigen::Vector
                            std::to_string(options_.structure_height_m * 1e3) +
                            " mm but the model has buildings: nothing to place them by");
   }
-  if (flat_scan && flat_model) return RegisterByOutline(scan);
+  if (flat_scan && flat_model) {
+    Expected<ModelRegistration> outline = RegisterByOutline(scan);
+    if (!outline.ok()) return outline.status();
+    return std::vector<ModelRegistration>{*outline};
+  }
   const Grid model_grid = HeightGrid(surface_.points_m, Eigen::Matrix3d::Identity(),
                                      options_.coarse_cell_m, options_.structure_height_m);
   // FFT of the model map, padded for every scan map (sizes bounded by the two extents).
@@ -501,37 +510,46 @@ Expected<ModelRegistration> ModelMatcher::Register(std::span<const Eigen::Vector
   std::vector<Eigen::Vector3d> subsample;
   const int stride = std::max(1, n / 2000);
   for (int i = 0; i < n; i += stride) subsample.push_back(scan[i]);
-  std::optional<IcpOutcome> best;
-  double best_score = 0;
-  int tried = 0;
+  std::vector<std::pair<double, IcpOutcome>> scored;
   for (const Candidate& c : chosen) {
-    ++tried;
     IcpOutcome icp = RunIcp(*tree_, surface_, subsample, c.model_from_table, false,
                             std::max(1, options_.icp_iterations / 2), options_.icp_max_distance_m);
     // Higher inlier fraction first, then lower rms.
     const double score = icp.inliers / static_cast<double>(subsample.size()) -
                          icp.rms_m / options_.icp_max_distance_m * 0.01;
-    if (!best || score > best_score) {
-      best = icp;
-      best_score = score;
-    }
+    scored.emplace_back(score, icp);
   }
-  if (!best ||
-      best->inliers < options_.min_inlier_fraction * static_cast<double>(subsample.size())) {
+  std::stable_sort(scored.begin(), scored.end(),
+                   [](const auto& a, const auto& b) { return a.first > b.first; });
+  if (scored.empty() || scored.front().second.inliers <
+                            options_.min_inlier_fraction * static_cast<double>(subsample.size())) {
     return NotFoundError(
         "model registration: the model does not match the scanned surface (best candidate: " +
-        std::to_string(best ? best->inliers : 0) + " of " + std::to_string(subsample.size()) +
-        " points within " + std::to_string(options_.icp_max_distance_m * 1e3) + " mm)");
+        std::to_string(scored.empty() ? 0 : scored.front().second.inliers) + " of " +
+        std::to_string(subsample.size()) + " points within " +
+        std::to_string(options_.icp_max_distance_m * 1e3) + " mm)");
   }
   const std::vector<Eigen::Vector3d> points = Subsample(scan, kMaxIcpPoints);
-  IcpOutcome fine =
-      RunIcp(*tree_, surface_, points, best->model_from_table, options_.estimate_scale,
-             options_.icp_iterations, options_.icp_max_distance_m);
-  ModelRegistration out = FromIcp(fine, static_cast<int>(points.size()));
-  out.coarse_score = chosen.empty() ? 0.0 : chosen.front().score;
-  out.candidates_tried = tried;
-  out.structure_fraction = static_cast<double>(structure) / n;
+  std::vector<ModelRegistration> out;
+  for (const auto& [score, icp] : scored) {
+    if (static_cast<int>(out.size()) >= max_candidates) break;
+    if (!out.empty() && icp.inliers < kCandidateInlierRatio * scored.front().second.inliers) break;
+    IcpOutcome fine =
+        RunIcp(*tree_, surface_, points, icp.model_from_table, options_.estimate_scale,
+               options_.icp_iterations, options_.icp_max_distance_m);
+    ModelRegistration r = FromIcp(fine, static_cast<int>(points.size()));
+    r.coarse_score = chosen.front().score;
+    r.candidates_tried = static_cast<int>(chosen.size());
+    r.structure_fraction = static_cast<double>(structure) / n;
+    out.push_back(r);
+  }
   return out;
+}
+
+Expected<ModelRegistration> ModelMatcher::Register(std::span<const Eigen::Vector3d> scan) const {
+  Expected<std::vector<ModelRegistration>> candidates = RegisterCandidates(scan, 1);
+  if (!candidates.ok()) return candidates.status();
+  return candidates->front();
 }
 
 Expected<ModelRegistration> RegisterModel(const Scene& model,

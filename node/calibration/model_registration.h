@@ -89,6 +89,11 @@ class ModelMatcher {
   ModelMatcher& operator=(const ModelMatcher&) = delete;
 
   Expected<ModelRegistration> Register(std::span<const Eigen::Vector3d> scan_in_table_m) const;
+  // Register's best placements, best first: up to max_candidates whose ICP pairs reach 90 % of
+  // the best one's, each refined on the full subsample (the caller may judge them otherwise:
+  // cluster_solver.h picks the one that puts the most buildings where they stand).
+  Expected<std::vector<ModelRegistration>> RegisterCandidates(
+      std::span<const Eigen::Vector3d> scan_in_table_m, int max_candidates) const;
   // The flat case of Register (see ModelRegistration::by_outline).
   Expected<ModelRegistration> RegisterByOutline(
       std::span<const Eigen::Vector3d> scan_in_table_m) const;
