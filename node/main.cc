@@ -22,12 +22,10 @@
 #include <string>
 #include <vector>
 
-#include "common/base/file_io.h"
 #include "common/base/log.h"
 #include "common/base/main_guard.h"
 #include "common/base/ready_line.h"
 #include "common/cli/command_line.h"
-#include "common/io/mpcdi.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/gltf_loader.h"
 #include "node/app/calibration_service.h"
@@ -253,42 +251,12 @@ static int Run(int argc, char** argv) {
         [&, id = options.id](const node::SelfCalibrationOutcome& outcome) {
           calibration = outcome.calibration;
           if (export_dir.empty()) return;
-          Expected<node::ExportedCalibration> exported =
-              node::ExportCalibration(outcome.calibration, export_dir);
-          if (!exported.ok()) {
-            ST_LOG(kError) << "cannot export the calibration: " << exported.status().ToString();
+          Expected<nlohmann::json> line = node::ExportSelfCalibration(outcome, id, export_dir);
+          if (!line.ok()) {
+            ST_LOG(kError) << "cannot export the calibration: " << line.status().ToString();
             return;
           }
-          std::string report_path;
-          if (outcome.report.value("runner", kInvalidNodeId) == id) {
-            report_path = export_dir + "/self_calibration_report.json";
-            if (Status written = WriteFileAtomically(report_path, outcome.report.dump(2) + "\n");
-                !written.ok()) {
-              ST_LOG(kError) << "cannot write the report: " << written.ToString();
-              report_path.clear();
-            }
-          }
-          std::string mpcdi_path;
-          if (outcome.site_mpcdi) {
-            mpcdi_path = export_dir + "/site.mpcdi";
-            if (Status written = WriteMpcdi(mpcdi_path, *outcome.site_mpcdi); !written.ok()) {
-              ST_LOG(kError) << "cannot write the MPCDI export: " << written.ToString();
-              mpcdi_path.clear();
-            }
-          }
-          WriteJsonLine(std::cout, {{"calibrated", id},
-                                    {"source", outcome.calibration.source},
-                                    {"json", exported->json_path},
-                                    {"yaml", exported->yaml_path},
-                                    {"report", report_path},
-                                    {"mpcdi", mpcdi_path},
-                                    {"round", outcome.round},
-                                    {"verified", outcome.verified},
-                                    {"compute_s", outcome.compute_s},
-                                    {"messages_sent", outcome.messages_sent},
-                                    {"messages_received", outcome.messages_received},
-                                    {"bytes_sent", outcome.bytes_sent},
-                                    {"bytes_received", outcome.bytes_received}});
+          WriteJsonLine(std::cout, *line);
         },
         [id = options.id](const std::string& reason) {
           WriteJsonLine(std::cout, {{"calibration_failed", id}, {"reason", reason}});

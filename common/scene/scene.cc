@@ -115,4 +115,12 @@ void Scene::Append(const Scene& other) {
   textures.insert(textures.end(), other.textures.begin(), other.textures.end());
 }
 
+Scene MovedScene(const Scene& scene, const Rigid3d& target_from_scene) {
+  Scene moved = scene;
+  for (Eigen::Vector3f& v : moved.positions_in_table_m) {
+    v = (target_from_scene * v.cast<double>()).cast<float>();
+  }
+  return moved;
+}
+
 }  // namespace sandtable

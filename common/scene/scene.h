@@ -16,6 +16,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "common/geometry/rigid3.h"
+
 namespace sandtable {
 
 // The range of every vertex a scene may hold, table frame: finite and |x|, |y|, |z| <= this
@@ -68,6 +70,11 @@ struct Scene {
   // scene's materials, as for the procedural building blocks).
   void Append(const Scene& other);
 };
+
+// The scene moved rigidly: every vertex x becomes target_from_scene * x (a rigid map keeps the
+// windings, so normals follow). For a model placed on the table: MovedScene(model,
+// table_from_model).
+Scene MovedScene(const Scene& scene, const Rigid3d& target_from_scene);
 
 // sRGB transfer function, 8-bit code -> linear [0, 1].
 double SrgbToLinear(double encoded);

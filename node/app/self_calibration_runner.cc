@@ -441,10 +441,7 @@ void LogModelChanges(const ModelChangeReport& c) {
 Expected<MpcdiSite> SiteAsMpcdi(const ClusterSolution& solution, const Scene* model) {
   auto scene = std::make_shared<Scene>();
   if (model && solution.model) {
-    *scene = *model;
-    for (Eigen::Vector3f& v : scene->positions_in_table_m) {
-      v = (solution.model->table_from_model * v.cast<double>()).cast<float>();
-    }
+    *scene = MovedScene(*model, solution.model->table_from_model);
   } else {
     scene->Append(MakeRectangleMesh(Eigen::Vector2d(20.0, 20.0), 0));
   }

@@ -1,7 +1,9 @@
 #include "node/app/self_calibration_service.h"
 
+#include "common/base/file_io.h"
 #include "common/base/log.h"
 #include "common/base/thread_cpu_time.h"
+#include "node/app/calibration_service.h"
 #include "node/app/self_calibration_runner.h"
 #include "node/calibration/cluster_initializer.h"
 #include "proto/convert.h"
@@ -57,6 +59,42 @@ void GridPointsToWire(const std::vector<ProjectorGridPoint>& points, wire::Corre
   }
 }
 
+Expected<nlohmann::json> ExportSelfCalibration(const SelfCalibrationOutcome& outcome, NodeId id,
+                                               const std::string& export_dir) {
+  Expected<ExportedCalibration> exported = ExportCalibration(outcome.calibration, export_dir);
+  if (!exported.ok()) return exported.status();
+  std::string report_path;
+  if (outcome.report.value("runner", kInvalidNodeId) == id) {
+    report_path = export_dir + "/self_calibration_report.json";
+    if (Status written = WriteFileAtomically(report_path, outcome.report.dump(2) + "\n");
+        !written.ok()) {
+      ST_LOG(kError) << "cannot write the report: " << written.ToString();
+      report_path.clear();
+    }
+  }
+  std::string mpcdi_path;
+  if (outcome.site_mpcdi) {
+    mpcdi_path = export_dir + "/site.mpcdi";
+    if (Status written = WriteMpcdi(mpcdi_path, *outcome.site_mpcdi); !written.ok()) {
+      ST_LOG(kError) << "cannot write the MPCDI export: " << written.ToString();
+      mpcdi_path.clear();
+    }
+  }
+  return nlohmann::json{{"calibrated", id},
+                        {"source", outcome.calibration.source},
+                        {"json", exported->json_path},
+                        {"yaml", exported->yaml_path},
+                        {"report", report_path},
+                        {"mpcdi", mpcdi_path},
+                        {"round", outcome.round},
+                        {"verified", outcome.verified},
+                        {"compute_s", outcome.compute_s},
+                        {"messages_sent", outcome.messages_sent},
+                        {"messages_received", outcome.messages_received},
+                        {"bytes_sent", outcome.bytes_sent},
+                        {"bytes_received", outcome.bytes_received}};
+}
+
 SelfCalibrationService::SelfCalibrationService(UnitCalibration factory, ProjectorOutput* projector,
                                                std::shared_ptr<const Scene> model,
                                                SelfCalibrationOptions options,
@@ -69,6 +107,18 @@ SelfCalibrationService::SelfCalibrationService(UnitCalibration factory, Projecto
       on_failed_(std::move(on_failed)) {}
 
 SelfCalibrationService::~SelfCalibrationService() = default;
+
+SelfCalibrationOutcome SelfCalibrationService::Outcome(const UnitCalibration& calibration) const {
+  SelfCalibrationOutcome outcome;
+  outcome.calibration = calibration;
+  outcome.report = nlohmann::json::object();
+  outcome.compute_s = compute_s_;
+  outcome.messages_sent = messages_sent_;
+  outcome.messages_received = messages_received_;
+  outcome.bytes_sent = bytes_sent_;
+  outcome.bytes_received = bytes_received_;
+  return outcome;
+}
 
 void SelfCalibrationService::SetCamera(std::unique_ptr<CameraInput> camera) {
   camera_ = std::move(camera);
@@ -173,10 +223,7 @@ void SelfCalibrationService::MaybeVerify(NodeRuntime& node) {
         ST_LOG(kInfo) << "self-calibration: the saved calibration holds (p90 " << c.report->p90_px
                       << " px over " << c.report->found << " dots); no round";
         node.set_calibration_state(wire::CALIBRATION_STATE_VERIFIED);
-        SelfCalibrationOutcome outcome;
-        outcome.calibration = *saved_;
-        outcome.report = nlohmann::json::object();
-        outcome.compute_s = compute_s_;
+        SelfCalibrationOutcome outcome = Outcome(*saved_);
         outcome.verified = true;
         if (on_calibrated_) on_calibrated_(outcome);
       });
@@ -546,15 +593,9 @@ void SelfCalibrationService::HandleResult(const wire::CalibrationResult& result,
     Expected<Rigid3d> table_from_model = proto::FromWire(result.table_from_model());
     if (table_from_model.ok()) c.table_from_model = *table_from_model;
   }
-  SelfCalibrationOutcome outcome;
-  outcome.calibration = c;
+  SelfCalibrationOutcome outcome = Outcome(c);
   outcome.report = nlohmann::json::parse(result.report_json(), nullptr, false);
   if (outcome.report.is_discarded()) outcome.report = nlohmann::json::object();
-  outcome.compute_s = compute_s_;
-  outcome.messages_sent = messages_sent_;
-  outcome.messages_received = messages_received_;
-  outcome.bytes_sent = bytes_sent_;
-  outcome.bytes_received = bytes_received_;
   outcome.site_mpcdi = site_mpcdi_;
   outcome.round = result.round();
   calibrated_ = true;

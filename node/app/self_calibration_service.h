@@ -83,6 +83,13 @@ struct SelfCalibrationOutcome {
   bool verified = false;  // a saved calibration that held its check (no round)
 };
 
+// Writes what a node holds after a round (or a check that held) into `export_dir`:
+// unit-<id>.json and .yaml (ExportCalibration), and on the runner self_calibration_report.json
+// and site.mpcdi; returns the node's `calibrated` line (docs/lab.md). A report or MPCDI file that
+// cannot be written is logged and left out of the line; the unit files are the error.
+Expected<nlohmann::json> ExportSelfCalibration(const SelfCalibrationOutcome& outcome, NodeId id,
+                                               const std::string& export_dir);
+
 class SelfCalibrationService : public NodeService {
  public:
   using OnCalibrated = std::function<void(const SelfCalibrationOutcome&)>;
@@ -128,6 +135,8 @@ class SelfCalibrationService : public NodeService {
   const std::vector<cv::Mat>* PatternFrames(const wire::PatternPlan& plan);
 
   void MaybeVerify(NodeRuntime& node);
+  // An outcome holding `calibration` with this node's compute and traffic so far.
+  SelfCalibrationOutcome Outcome(const UnitCalibration& calibration) const;
 
   // Runner side (self_calibration_runner.cc).
   void MaybeStartRound(NodeRuntime& node);

@@ -56,11 +56,7 @@ Expected<CalibrationCheckPlan> PlanCalibrationCheck(const UnitCalibration& calib
   auto surface = std::make_shared<Scene>(
       MakeRectangleMesh(Eigen::Vector2d(kTableSquare_m, kTableSquare_m), 0));
   if (model && calibration.table_from_model) {
-    Scene placed = *model;
-    for (Eigen::Vector3f& v : placed.positions_in_table_m) {
-      v = (*calibration.table_from_model * v.cast<double>()).cast<float>();
-    }
-    surface->Append(placed);
+    surface->Append(MovedScene(*model, *calibration.table_from_model));
   }
   Expected<std::unique_ptr<RayCaster>> caster =
       RayCaster::Create(std::shared_ptr<const Scene>(surface), "threads=1");

@@ -98,7 +98,16 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
     // scale is used.
     if (found.ok()) {
       int most_present = -1;
-      for (const ModelRegistration& candidate : *candidates) {
+      for (ModelRegistration candidate : *candidates) {
+        if (candidate.coarse_only) {
+          Expected<ModelRegistration> refined = matcher->Refine(
+              out.points_in_table_m, candidate.table_from_model, options.model.estimate_scale);
+          if (!refined.ok()) continue;
+          refined->coarse_score = candidate.coarse_score;
+          refined->candidates_tried = candidate.candidates_tried;
+          refined->structure_fraction = candidate.structure_fraction;
+          candidate = *refined;
+        }
         std::vector<Eigen::Vector3d> in_model_scale = out.points_in_table_m;
         if (candidate.scale > 0) {
           for (Eigen::Vector3d& p : in_model_scale) p /= candidate.scale;
@@ -129,7 +138,6 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
               std::to_string(out.changes->moved) + " elsewhere, " +
               std::to_string(out.changes->missing) + " missing; " +
               std::to_string(out.changes->extras.size()) + " structures not in the model)");
-          out.model_rejected = true;
         }
       }
     }

@@ -67,10 +67,7 @@ struct ClusterSolution {
   TableFrameReport frame;
   std::optional<ModelRegistration> model;
   std::optional<ModelChangeReport> changes;  // per building of the model, once it is found
-  // The best placement put fewer than half of the buildings it saw where they stand: not the
-  // model on this table (model is then empty; the changes of that placement and a note stay).
-  bool model_rejected = false;
-  double scale_correction = 1.0;  // lengths multiplied by this after the model was found
+  double scale_correction = 1.0;             // lengths multiplied by this after the model was found
   std::vector<Eigen::Vector3d> points_in_table_m;
   std::vector<std::string> notes;
   double time_s = 0.0;  // thread CPU time of the whole solve

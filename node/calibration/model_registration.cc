@@ -534,10 +534,18 @@ Expected<std::vector<ModelRegistration>> ModelMatcher::RegisterCandidates(
   for (const auto& [score, icp] : scored) {
     if (static_cast<int>(out.size()) >= max_candidates) break;
     if (!out.empty() && icp.inliers < kCandidateInlierRatio * scored.front().second.inliers) break;
-    IcpOutcome fine =
-        RunIcp(*tree_, surface_, points, icp.model_from_table, options_.estimate_scale,
-               options_.icp_iterations, options_.icp_max_distance_m);
-    ModelRegistration r = FromIcp(fine, static_cast<int>(points.size()));
+    // The best one refined on the full subsample (scale free as the options say); the others as
+    // the coarse ICP left them, for the caller to Refine() only if it gets to them.
+    ModelRegistration r;
+    if (out.empty()) {
+      const IcpOutcome fine =
+          RunIcp(*tree_, surface_, points, icp.model_from_table, options_.estimate_scale,
+                 options_.icp_iterations, options_.icp_max_distance_m);
+      r = FromIcp(fine, static_cast<int>(points.size()));
+    } else {
+      r = FromIcp(icp, static_cast<int>(subsample.size()));
+      r.coarse_only = true;
+    }
     r.coarse_score = chosen.front().score;
     r.candidates_tried = static_cast<int>(chosen.size());
     r.structure_fraction = static_cast<double>(structure) / n;

@@ -69,6 +69,9 @@ struct ModelRegistration {
   // Flat scan and flat model: placed by the outline of the scanned top against the model's
   // (area centroid and major axis), scale 1; x, y and yaw then come from the table's edges only.
   bool by_outline = false;
+  // A RegisterCandidates() candidate after the first: the coarse rigid ICP on ~2 000 points
+  // only; Refine() it (scale free as the options' estimate_scale) before use.
+  bool coarse_only = false;
 };
 
 // The model's surface sampled for ICP: points and unit normals in the model frame.
@@ -90,8 +93,9 @@ class ModelMatcher {
 
   Expected<ModelRegistration> Register(std::span<const Eigen::Vector3d> scan_in_table_m) const;
   // Register's best placements, best first: up to max_candidates whose ICP pairs reach 90 % of
-  // the best one's, each refined on the full subsample (the caller may judge them otherwise:
-  // cluster_solver.h picks the one that puts the most buildings where they stand).
+  // the best one's; the first refined as Register's, the others coarse_only (the caller judges
+  // them otherwise, refining one only when it gets to it: cluster_solver.h takes the one that
+  // puts the most buildings where they stand).
   Expected<std::vector<ModelRegistration>> RegisterCandidates(
       std::span<const Eigen::Vector3d> scan_in_table_m, int max_candidates) const;
   // The flat case of Register (see ModelRegistration::by_outline).

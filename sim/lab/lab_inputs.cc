@@ -95,12 +95,9 @@ Expected<LabInputs> PrepareLabInputs(const std::string& site_arg, const std::str
     inputs.model_from_table =
         Rigid3d(Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
                 Eigen::Vector3d(x, y, 0.0));
-    Scene moved = *scene;
-    for (Eigen::Vector3f& v : moved.positions_in_table_m) {
-      v = (inputs.model_from_table * v.cast<double>()).cast<float>();
-    }
     inputs.model_path = (dir / "model.gltf").string();
-    ST_RETURN_IF_ERROR(WriteGltfScene(moved, inputs.model_path));
+    ST_RETURN_IF_ERROR(
+        WriteGltfScene(MovedScene(*scene, inputs.model_from_table), inputs.model_path));
   }
 
   for (const UnitSpec& unit : inputs.site.units) {

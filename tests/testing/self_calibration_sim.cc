@@ -130,10 +130,7 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
     if (geometry.ok()) local[id] = *geometry;
   }
   // The model as the nodes get it: the scene moved by model_from_table.
-  Scene model = options.model ? *options.model : scene;
-  for (Eigen::Vector3f& v : model.positions_in_table_m) {
-    v = (options.model_from_table * v.cast<double>()).cast<float>();
-  }
+  const Scene model = MovedScene(options.model ? *options.model : scene, options.model_from_table);
   const NodeId root = observations.units.begin()->first;
   Expected<node::ClusterSolution> solution = node::SolveCluster(
       root, observations, local, options.use_model ? &model : nullptr, options.solve);
