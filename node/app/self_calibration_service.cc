@@ -141,15 +141,17 @@ void SelfCalibrationService::MaybeVerify(NodeRuntime& node) {
   }
   const std::optional<wire::MemberList>& list = node.member_list();
   if (!list) return;
-  // One unit checks at a time (its dots would land in its neighbours' captures): lowest id first.
+  // One unit checks at a time (its dots would land in its neighbours' captures): on a member
+  // list that has settled (a unit that registers late must not be missed), every member heard
+  // from, none checking now, and of those still to check the lowest id first.
+  if (node.member_list_age() < options_.settle) return;
   for (const wire::Member& m : list->members()) {
-    if (m.node_id() >= node.id() || !m.capabilities().has_projector()) continue;
+    if (m.node_id() == node.id() || !m.capabilities().has_projector()) continue;
     auto peer = node.peers().find(m.node_id());
     if (peer == node.peers().end() || peer->second.heartbeats_received == 0) return;
     const wire::CalibrationState state = peer->second.calibration_state;
-    if (state == wire::CALIBRATION_STATE_SAVED || state == wire::CALIBRATION_STATE_VERIFYING) {
-      return;
-    }
+    if (state == wire::CALIBRATION_STATE_VERIFYING) return;
+    if (state == wire::CALIBRATION_STATE_SAVED && m.node_id() < node.id()) return;
   }
   verify_started_ = true;
   node.set_calibration_state(wire::CALIBRATION_STATE_VERIFYING);
