@@ -5,6 +5,7 @@
 //   sandtable-node --id N --coordinator REQUESTS,EVENTS [--world ENDPOINT] [--factory FILE]
 //                  [--true-pose FILE] [--export-dir DIR] [--projector SPEC] [--camera SPEC]
 //                  [--model FILE] [--saved-calibration FILE] [--grid-step-px N]
+//                  [--calibration-path auto|full]
 //                  [--bind ENDPOINT] [--curve-keys FILE] [--heartbeat-ms N] [--workers N]
 //   (--world E is short for --projector world:E --camera world:E; node/devices/device_factory.h)
 //   sandtable-node calibrate-unit --poses DIR -o unit.json ...   (the unit's factory calibration)
@@ -60,6 +61,7 @@ static int Run(int argc, char** argv) {
   std::string saved_path;
   std::string projector_spec, camera_spec, model_path;
   int grid_step_px = 16;
+  std::string calibration_path = "auto";
   int heartbeat_ms = 100;
   app.add_option("--id", id, "this unit's node id (below 4294967280)")
       ->check(cli::Integer<uint32_t>(0, kFirstReservedSenderId - 1));
@@ -100,6 +102,10 @@ static int Run(int argc, char** argv) {
                  "a calibration this unit saved in an earlier run (unit-<id>.json, source "
                  "structured_light): checked with two frames and kept when it holds")
       ->check(CLI::ExistingFile);
+  app.add_option("--calibration-path", calibration_path,
+                 "self-calibration: auto (the planar path when every footprint is planar) or "
+                 "full")
+      ->check(CLI::IsMember({"auto", "full"}));
   app.add_option("--grid-step-px", grid_step_px,
                  "self-calibration: projector grid spacing of the correspondences, px")
       ->check(cli::Integer(4, 256));
@@ -246,6 +252,8 @@ static int Run(int argc, char** argv) {
   if (calibration && true_pose_path.empty() && projector && !camera_spec.empty()) {
     node::SelfCalibrationOptions sc;
     sc.grid_step_px = grid_step_px;
+    sc.path = calibration_path == "full" ? node::SelfCalibrationOptions::Path::kFull
+                                         : node::SelfCalibrationOptions::Path::kAuto;
     self_calibration = std::make_unique<node::SelfCalibrationService>(
         *calibration, projector.get(), model, sc,
         [&, id = options.id](const node::SelfCalibrationOutcome& outcome) {

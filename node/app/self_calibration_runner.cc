@@ -489,6 +489,32 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
       r.left_out[m] = "unit " + std::to_string(m) + ": sent no calibration input";
     }
   }
+  // The path: planar when every unit's probe found its footprint planar (and the site asks
+  // for no full path), else full.
+  int planar_units = 0, probed = 0;
+  std::string not_planar;
+  for (const auto& [id, input] : r.inputs) {
+    if (!r.Active(id) || !observations.units.count(id)) continue;
+    const wire::PlanarityProbe& probe = input.planarity();
+    ++probed;
+    if (probe.ok() && probe.planar()) {
+      ++planar_units;
+    } else if (not_planar.empty()) {
+      not_planar = "unit " + std::to_string(id) + ": " +
+                   (probe.ok() ? "max height " + std::to_string(probe.max_height_mm()) + " mm, " +
+                                     std::to_string(probe.points_over_threshold()) +
+                                     " points over " + std::to_string(probe.threshold_mm()) + " mm"
+                               : "no probe (" + probe.message() + ")");
+    }
+  }
+  const bool planar =
+      options_.path == SelfCalibrationOptions::Path::kAuto && probed > 0 && planar_units == probed;
+  r.path = planar ? "planar" : "full";
+  r.path_reason = options_.path == SelfCalibrationOptions::Path::kFull
+                      ? "the full path was asked for"
+                  : planar ? "every unit's footprint is planar"
+                           : "relief in a footprint (" + not_planar + ")";
+  ST_LOG(kInfo) << "self-calibration: " << r.path << " path: " << r.path_reason;
   const NodeId root = observations.units.count(r.self) || observations.units.empty()
                           ? r.self
                           : observations.units.begin()->first;
@@ -497,16 +523,26 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
     Status status = OkStatus();
     double cpu_s = 0.0;
     std::shared_ptr<const MpcdiSite> mpcdi;
+    bool fell_back = false;
   };
   std::shared_ptr<const Scene> model = model_;
   const ClusterSolveOptions solve_options = options_.solve;
+  const PlanarSolveOptions planar_options = options_.planar;
   node.workers().Run<Solved>(
-      [observations = std::move(observations), local = std::move(local), root, model,
-       solve_options] {
+      [observations = std::move(observations), local = std::move(local), root, model, solve_options,
+       planar_options, planar] {
         Solved s;
         const double t0 = ThreadCpuSeconds();
         Expected<ClusterSolution> solved =
-            SolveCluster(root, observations, local, model.get(), solve_options);
+            planar ? SolvePlanarCluster(root, observations, model.get(), planar_options)
+                   : SolveCluster(root, observations, local, model.get(), solve_options);
+        if (planar && !solved.ok()) {
+          // The full path still has every correspondence.
+          const std::string why = solved.status().message();
+          solved = SolveCluster(root, observations, local, model.get(), solve_options);
+          if (solved.ok()) solved->notes.push_back("planar path failed (" + why + "); full path");
+          s.fell_back = true;
+        }
         if (solved.ok()) {
           s.solution = std::move(*solved);
           Expected<MpcdiSite> site = SiteAsMpcdi(*s.solution, model.get());
@@ -523,6 +559,7 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
       },
       [this, &node](Solved s) {
         site_mpcdi_ = s.mpcdi;
+        if (s.fell_back) runner_->path = "full";
         FinishRound(s.solution ? &*s.solution : nullptr, s.status, s.cpu_s, node);
       });
 }
@@ -545,6 +582,8 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
       {"site_frames", r.prepass_frames + r.site_frames},
       {"device_time_s", (r.prepass_frames + r.site_frames) * period},
       {"colours", ColourCount(r.colours)},
+      {"path", r.path},
+      {"path_reason", r.path_reason},
       {"solve_compute_s", solve_cpu_s},
       {"wall_s",
        std::chrono::duration<double>(std::chrono::steady_clock::now() - r.round_started).count()}};
@@ -564,6 +603,19 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
         {"compute_s", r.compute_s[p]}};
   }
   report["projectors"] = per_projector;
+  nlohmann::json planarity = nlohmann::json::object();
+  for (const auto& [id, input] : r.inputs) {
+    const wire::PlanarityProbe& p = input.planarity();
+    planarity[std::to_string(id)] =
+        p.ok() ? nlohmann::json{{"planar", p.planar()},
+                                {"max_height_mm", p.max_height_mm()},
+                                {"surface_rms_mm", p.surface_rms_mm()},
+                                {"points", p.points()},
+                                {"points_over_threshold", p.points_over_threshold()},
+                                {"threshold_mm", p.threshold_mm()}}
+               : nlohmann::json{{"planar", false}, {"error", p.message()}};
+  }
+  report["planarity"] = planarity;
   nlohmann::json left = nlohmann::json::object();
   for (const auto& [id, why] : r.left_out) left[std::to_string(id)] = why;
   report["left_out"] = left;

@@ -63,6 +63,8 @@ struct SelfCalibrationService::Runner {
   // Inputs and the solve.
   std::map<NodeId, wire::CalibrationInput> inputs;
   std::map<NodeId, double> compute_s;  // per node, from the step answers
+  std::string path;  // "planar" or "full" (docs/calibration.md, "Planar sites")
+  std::string path_reason;
   bool solving = false;
   bool finished = false;
   std::vector<std::string> notes;

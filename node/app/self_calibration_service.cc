@@ -522,19 +522,44 @@ void SelfCalibrationService::RunLocal(const wire::CalibrationStep& step, NodeId 
   UnitModel self{node.id(), factory_.camera, factory_.projector, factory_.projector_from_camera};
   struct Local {
     Expected<LocalGeometry> geometry = LocalGeometry{};
+    Expected<PlanarityProbe> probe = PlanarityProbe{};
     double cpu_s = 0.0;
   };
+  const PlanarityOptions planarity = options_.planar.planarity;
   node.workers().Run<Local>(
-      [self, cameras, by_camera] {
+      [self, cameras, by_camera, planarity] {
         Local l;
         const double t0 = ThreadCpuSeconds();
         l.geometry = EstimateLocalGeometry(self, cameras, BuildTracks(self.unit, by_camera));
+        // Its own footprint's planarity, from its own camera's points of its projector.
+        auto own = by_camera.find(self.unit);
+        l.probe = own == by_camera.end() ? Expected<PlanarityProbe>(NotFoundError(
+                                               "unit " + std::to_string(self.unit) +
+                                               ": its camera decoded none of its projector"))
+                                         : ProbePlanarity(self, own->second, planarity);
         l.cpu_s = ThreadCpuSeconds() - t0;
         return l;
       },
       [this, e = std::move(e), step, from, &node](Local l) mutable {
         compute_s_ += l.cpu_s;
         wire::CalibrationInput* in = e.mutable_calibration_input();
+        wire::PlanarityProbe* probe = in->mutable_planarity();
+        probe->set_ok(l.probe.ok());
+        probe->set_threshold_mm(options_.planar.planarity.threshold_mm);
+        if (l.probe.ok()) {
+          probe->set_planar(l.probe->planar);
+          probe->set_max_height_mm(l.probe->max_height_mm);
+          probe->set_surface_rms_mm(l.probe->surface_rms_mm);
+          probe->set_points(static_cast<uint32_t>(l.probe->points));
+          probe->set_points_over_threshold(static_cast<uint32_t>(l.probe->points_over_threshold));
+          ST_LOG(kInfo) << "self-calibration: footprint "
+                        << (l.probe->planar ? "planar" : "not planar") << " (max height "
+                        << l.probe->max_height_mm << " mm over its surface, "
+                        << l.probe->points_over_threshold << " of " << l.probe->points
+                        << " points over " << options_.planar.planarity.threshold_mm << " mm)";
+        } else {
+          probe->set_message(l.probe.status().message());
+        }
         if (!l.geometry.ok()) {
           // The correspondences still go to the runner: other units' relative poses may reach
           // this one.

@@ -38,6 +38,7 @@
 #include "common/scene/scene.h"
 #include "node/calibration/calibration_check.h"
 #include "node/calibration/cluster_solver.h"
+#include "node/calibration/planar_solver.h"
 #include "node/calibration/structured_light_plan.h"
 #include "node/devices/camera_input.h"
 #include "node/devices/projector_output.h"
@@ -67,6 +68,12 @@ struct SelfCalibrationOptions {
   int min_overlap_pixels = 50;
   ClusterSolveOptions solve;
   CalibrationCheckOptions check;  // the restart check of a saved calibration
+  // Which solve (docs/calibration.md, "Planar sites"): kAuto takes the planar path when every
+  // unit's planarity probe finds its footprint planar, else the full path; kFull always the
+  // full path (for comparison).
+  enum class Path { kAuto, kFull };
+  Path path = Path::kAuto;
+  PlanarSolveOptions planar;
 };
 
 // What a node holds once a round ends, and the figures the lab reports.

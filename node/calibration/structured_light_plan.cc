@@ -75,6 +75,36 @@ Expected<std::vector<ProjectorGridPoint>> DecodeToProjectorGrid(
   return points;
 }
 
+Expected<std::vector<ProjectorGridPoint>> DecodeToProjectorCells(
+    const std::vector<cv::Mat>& captures_8bit, const PatternOptions& patterns,
+    ProjectorCellReport* report, const cv::Mat* mask) {
+  if (patterns.phase_steps != 0 || patterns.gray_lsb_skip < 1) {
+    return InvalidArgumentError(
+        "cell decode: the plan must be Gray code only (phase_steps 0) with at least one skipped "
+        "bit");
+  }
+  DecoderOptions decoder = CalibrationDecoderOptions();
+  decoder.gray_subpixel = false;  // whole cells: their centroids are the measurement
+  Expected<Decoding> decoding = DecodeStructuredLight(captures_8bit, patterns, decoder);
+  if (!decoding.ok()) return decoding.status();
+  if (mask && !mask->empty() && mask->size() == decoding->valid.size() && mask->type() == CV_8UC1) {
+    cv::Mat keep;
+    cv::bitwise_and(decoding->valid, *mask, keep);
+    decoding->valid = keep;
+  }
+  ProjectorCellOptions cells;
+  cells.projector_width_px = patterns.projector_width_px;
+  cells.projector_height_px = patterns.projector_height_px;
+  cells.cell_px = 1 << patterns.gray_lsb_skip;
+  return SampleProjectorCells(*decoding, cells, report);
+}
+
+PatternOptions GrayPrefix(const PatternOptions& full) {
+  PatternOptions gray = full;
+  gray.phase_steps = 0;
+  return gray;
+}
+
 std::vector<Track> BuildTracks(NodeId projector_unit,
                                const std::map<NodeId, std::vector<ProjectorGridPoint>>& by_camera) {
   std::map<std::pair<float, float>, size_t> index;

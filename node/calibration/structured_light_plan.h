@@ -20,6 +20,7 @@
 #include "common/base/status.h"
 #include "common/structured_light/decoder.h"
 #include "common/structured_light/pattern_sequence.h"
+#include "common/structured_light/projector_cells.h"
 #include "common/structured_light/projector_grid.h"
 #include "node/calibration/cluster_problem.h"
 
@@ -55,6 +56,19 @@ Expected<std::vector<ProjectorGridPoint>> DecodeToProjectorGrid(
     const std::vector<cv::Mat>& captures_8bit, const PatternOptions& patterns,
     const ProjectorGridOptions& grid, CameraDecodeReport* report = nullptr,
     const cv::Mat* mask = nullptr);
+
+// The planar path's decode (docs/calibration.md, "Planar sites"): the Gray frames of
+// `patterns` only (its phase_steps must be 0: the prefix of a full plan's sequence), decoded to
+// whole cells (no sub-pixel edges), one correspondence per cell centre (projector_cells.h).
+// Errors: INVALID_ARGUMENT when patterns has phase steps or no skipped bit (a cell of one
+// pixel has no interior to average), and the decoder's.
+Expected<std::vector<ProjectorGridPoint>> DecodeToProjectorCells(
+    const std::vector<cv::Mat>& captures_8bit, const PatternOptions& patterns,
+    ProjectorCellReport* report = nullptr, const cv::Mat* mask = nullptr);
+
+// The plan of the Gray frames alone of a full plan: the same frames, in the same order, up to
+// the first phase frame (pattern_sequence.h, kSandtable order).
+PatternOptions GrayPrefix(const PatternOptions& full);
 
 // The lit mask of a pre-pass capture: white - black > threshold (8-bit levels).
 cv::Mat LitMask(const cv::Mat& white_8bit, const cv::Mat& black_8bit, int threshold);

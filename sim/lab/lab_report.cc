@@ -147,6 +147,9 @@ json LabReportJson(const LabResult& r) {
     calibration["capture_latency_s"] = rr.value("capture_latency_s", 0.0);
     calibration["site_frames"] = rr.value("site_frames", 0);
     calibration["colours"] = rr.value("colours", 0);
+    calibration["path"] = rr.value("path", std::string());
+    calibration["path_reason"] = rr.value("path_reason", std::string());
+    if (rr.contains("planarity")) calibration["planarity"] = rr["planarity"];
     json frames = json::object(), time = json::object();
     if (rr.contains("projectors") && rr["projectors"].is_object()) {
       for (const auto& [id, p] : rr["projectors"].items()) {
@@ -292,7 +295,21 @@ std::string LabReportMarkdown(const LabResult& r) {
        << Fixed(r.self_calibration.value("compute_time_s", 0.0), 2) << " s (one core); "
        << Fixed(r.self_calibration.value("messages_per_node", 0.0), 0) << " messages and "
        << Fixed(r.self_calibration.value("bytes_per_node", 0.0) / 1024.0, 0)
-       << " KiB per node.\n\n";
+       << " KiB per node.\n\n"
+       << "Path: **" << rr.value("path", std::string("?")) << "** ("
+       << rr.value("path_reason", std::string()) << ").\n\n";
+    if (rr.contains("planarity") && rr["planarity"].is_object()) {
+      md << "| unit | footprint planar | max height over its surface (mm) | surface rms (mm) | "
+            "points over the threshold |\n| --- | --- | --- | --- | --- |\n";
+      for (const auto& [id, p] : rr["planarity"].items()) {
+        md << "| " << id << " | " << (p.value("planar", false) ? "yes" : "no") << " | "
+           << Fixed(p.value("max_height_mm", 0.0), 2) << " | "
+           << Fixed(p.value("surface_rms_mm", 0.0), 2) << " | "
+           << p.value("points_over_threshold", 0) << " of " << p.value("points", 0) << " (over "
+           << Fixed(p.value("threshold_mm", 0.0), 1) << " mm) |\n";
+      }
+      md << "\n";
+    }
     md << "| projector | colour | cameras | frames | projection (s) | Gray bits skipped | phase "
           "steps x period (px) | compute (s) |\n| --- | --- | --- | --- | --- | --- | --- | --- "
           "|\n";

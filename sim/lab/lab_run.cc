@@ -205,6 +205,7 @@ class LabRun {
         argv.insert(argv.end(), {"--true-pose", inputs_.true_pose_paths.at(unit.id)});
       } else {
         argv.insert(argv.end(), {"--model", inputs_.model_path});
+        argv.insert(argv.end(), {"--calibration-path", options_.calibration_path});
         if (!options_.saved_calibration.empty()) {
           const std::filesystem::path saved =
               std::filesystem::path(options_.saved_calibration) / ("unit-" + id + ".json");

@@ -60,6 +60,9 @@ struct LabRunOptions {
   // node gets its file as --saved-calibration, checks it and skips the round when it holds.
   // Use the same --seed and --model as that run (the model's placement is part of it).
   std::string saved_calibration;
+  // Self-calibration path of the nodes: "auto" (planar when every footprint is planar) or
+  // "full" (docs/calibration.md, "Planar sites").
+  std::string calibration_path = "auto";
   std::string command_line;  // for the report
   Status Check() const;
 };

@@ -5,7 +5,7 @@
 //                     [--hold-s S] [--bin-dir DIR] [--samples N] [--start-timeout-s S]
 //                     [--calibration-timeout-s S] [--image-width W] [--progress auto|bar|plain]
 //                     [--calibration structured-light|true-pose] [--model FILE.gltf]
-//                     [--saved-calibration DIR]
+//                     [--saved-calibration DIR] [--calibration-path auto|full]
 //
 // Exit codes: 0 ok, 1 the run failed (report written), 2 usage, 130 interrupted (SIGINT or
 // SIGTERM: the site is torn down and the report says so).
@@ -74,6 +74,10 @@ static int Run(int argc, char** argv) {
                   "DIR/calibration of an earlier run (same seed and model): the nodes check "
                   "their saved calibrations and skip the round when they hold")
       ->check(CLI::ExistingDirectory);
+  run->add_option("--calibration-path", options.calibration_path,
+                  "self-calibration: auto (the planar path when every footprint is planar) or "
+                  "full (for comparison)")
+      ->check(CLI::IsMember({"auto", "full"}));
   run->add_option("--image-width", options.image_width_px, "Width of the report's pictures (px)")
       ->check(cli::Integer<int>(16, 8192));
   run->add_flag("--curve", options.curve,

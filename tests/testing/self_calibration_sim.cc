@@ -58,8 +58,10 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
     const double ratio = result.projector_px_per_camera_px.count(p.id)
                              ? result.projector_px_per_camera_px[p.id]
                              : 2.0;
-    const PatternOptions patterns = node::PlanPatterns(
+    const PatternOptions full = node::PlanPatterns(
         p.projector.model.width_px, p.projector.model.height_px, ratio * 1.4, options.plan);
+    const bool cells = options.planar_path && options.planar_gray_cells;
+    const PatternOptions patterns = cells ? node::GrayPrefix(full) : full;
     Expected<std::vector<cv::Mat>> frames = GeneratePatterns(patterns);
     if (!frames.ok()) return frames.status();
     result.frames_per_projector[p.id] = static_cast<int>(frames->size());
@@ -80,7 +82,8 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
     for (auto& [c, images] : captures) {
       const double t0 = ThreadCpuSeconds();
       Expected<std::vector<ProjectorGridPoint>> points =
-          node::DecodeToProjectorGrid(images, patterns, grid);
+          cells ? node::DecodeToProjectorCells(images, patterns)
+                : node::DecodeToProjectorGrid(images, patterns, grid);
       result.decode_cpu_s += ThreadCpuSeconds() - t0;
       if (!points.ok()) return points.status();
       by_camera[c] = std::move(*points);
@@ -117,23 +120,28 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
     result.tracks += static_cast<int>(tracks.size());
     observations.tracks.insert(observations.tracks.end(), tracks.begin(), tracks.end());
   }
-  // Local geometry per node.
-  std::map<NodeId, CameraModel> cameras;
-  for (const auto& [id, unit] : observations.units) cameras[id] = unit.camera;
-  std::map<NodeId, node::LocalGeometry> local;
-  for (const auto& [id, unit] : observations.units) {
-    std::vector<node::Track> own;
-    for (const node::Track& t : observations.tracks) {
-      if (t.projector_unit == id) own.push_back(t);
-    }
-    Expected<node::LocalGeometry> geometry = node::EstimateLocalGeometry(unit, cameras, own);
-    if (geometry.ok()) local[id] = *geometry;
-  }
-  // The model as the nodes get it: the scene moved by model_from_table.
   const Scene model = MovedScene(options.model ? *options.model : scene, options.model_from_table);
   const NodeId root = observations.units.begin()->first;
-  Expected<node::ClusterSolution> solution = node::SolveCluster(
-      root, observations, local, options.use_model ? &model : nullptr, options.solve);
+  Expected<node::ClusterSolution> solution = node::ClusterSolution{};
+  if (options.planar_path) {
+    solution = node::SolvePlanarCluster(root, observations, options.use_model ? &model : nullptr,
+                                        options.planar);
+  } else {
+    // Local geometry per node.
+    std::map<NodeId, CameraModel> cameras;
+    for (const auto& [id, unit] : observations.units) cameras[id] = unit.camera;
+    std::map<NodeId, node::LocalGeometry> local;
+    for (const auto& [id, unit] : observations.units) {
+      std::vector<node::Track> own;
+      for (const node::Track& t : observations.tracks) {
+        if (t.projector_unit == id) own.push_back(t);
+      }
+      Expected<node::LocalGeometry> geometry = node::EstimateLocalGeometry(unit, cameras, own);
+      if (geometry.ok()) local[id] = *geometry;
+    }
+    solution = node::SolveCluster(root, observations, local, options.use_model ? &model : nullptr,
+                                  options.solve);
+  }
   if (!solution.ok()) return solution.status();
   result.solution = std::move(*solution);
   // Metric.
@@ -145,6 +153,20 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
     e.table_from_projector = *c.table_from_projector;
     e.table_from_model = c.table_from_model.value_or(options.model_from_table.Inverse());
     estimates.push_back(e);
+  }
+  if (!result.solution.model) {
+    // No placement found (a flat scene whose outline the cameras do not see whole): measured
+    // with the TRUE placement expressed in the nodes' table frame, as the lab does.
+    Expected<sim::ModelPlacementError> frames =
+        sim::MeasureModelPlacement(world, estimates, options.model_from_table.Inverse(),
+                                   options.model_from_table * scene.Bounds().center());
+    if (frames.ok()) {
+      for (sim::EstimatedRegistration& e : estimates) {
+        e.table_from_model =
+            frames->true_table_from_estimated_table.Inverse() * options.model_from_table.Inverse();
+      }
+      result.measured_with_true_placement = true;
+    }
   }
   sim::RegistrationMetricOptions metric;
   metric.num_samples = options.metric_samples;

@@ -11,6 +11,7 @@
 #include "common/base/status.h"
 #include "common/scene/scene.h"
 #include "node/calibration/cluster_solver.h"
+#include "node/calibration/planar_solver.h"
 #include "node/calibration/structured_light_plan.h"
 #include "sim/lab/registration_metric.h"
 #include "sim/site/factory_calibration.h"
@@ -33,6 +34,11 @@ struct SimCalibrationOptions {
   // (else a scene that differs from the physical one: the change report's test).
   const Scene* model = nullptr;
   int metric_samples = 20000;
+  // The planar path (node/calibration/planar_solver.h): the Gray frames of each plan only,
+  // decoded to cells, solved by SolvePlanarCluster.
+  bool planar_path = false;
+  bool planar_gray_cells = false;  // with the planar path: Gray frames only, decoded to cells
+  node::PlanarSolveOptions planar;
 };
 
 struct SimCalibrationResult {
@@ -47,6 +53,7 @@ struct SimCalibrationResult {
   // The metric with the TRUE model placement (expressed in the nodes' table frame) in place
   // of the found one: the calibration's own share of the error.
   sim::RegistrationReport metric_true_model;
+  bool measured_with_true_placement = false;  // the nodes found no placement
 };
 
 Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Scene& scene,

@@ -1,0 +1,573 @@
+#include "node/calibration/planar_solver.h"
+
+#include <algorithm>
+#include <cmath>
+#include <deque>
+#include <limits>
+#include <set>
+
+#include <Eigen/Dense>
+
+#include "common/base/thread_cpu_time.h"
+#include "common/estimation/resection.h"
+#include "common/estimation/table_frame.h"
+#include "common/estimation/triangulation.h"
+
+namespace sandtable::node {
+namespace {
+
+// A camera's 2D frame on its plane: origin below the camera, x along the camera's x axis
+// projected on the plane, y = normal x x (normal towards the camera: right-handed, z up).
+struct PlaneFrame {
+  PlanarityProbe probe;
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+  Eigen::Matrix<double, 3, 2> axes = Eigen::Matrix<double, 3, 2>::Zero();
+};
+
+PlaneFrame MakePlaneFrame(const PlanarityProbe& probe) {
+  PlaneFrame f;
+  f.probe = probe;
+  const Eigen::Vector3d n = probe.plane_in_camera.normal;
+  f.origin = probe.plane_in_camera.Project(Eigen::Vector3d::Zero());
+  Eigen::Vector3d x = Eigen::Vector3d::UnitX() - n.x() * n;
+  if (x.norm() < 1e-3) x = Eigen::Vector3d::UnitY() - n.y() * n;
+  x.normalize();
+  f.axes.col(0) = x;
+  f.axes.col(1) = n.cross(x);
+  return f;
+}
+
+// Where a camera pixel's ray meets the camera's plane, in its 2D frame.
+std::optional<Eigen::Vector2d> OnPlane(const CameraModel& camera, const PlaneFrame& frame,
+                                       const Eigen::Vector2d& pixel) {
+  Expected<Eigen::Vector3d> ray = camera.Unproject(pixel);
+  if (!ray.ok()) return std::nullopt;
+  const Plane& plane = frame.probe.plane_in_camera;
+  const double along = plane.normal.dot(*ray);
+  if (std::abs(along) < 1e-9) return std::nullopt;
+  const double t = -plane.offset_m / along;
+  if (!(t > 0.0) || !std::isfinite(t)) return std::nullopt;
+  return Eigen::Vector2d(frame.axes.transpose() * (t * *ray - frame.origin));
+}
+
+// S(x) = [a -b; b a] x + t, as M(x) q with q = (a, b, tx, ty).
+Eigen::Matrix<double, 2, 4> SimilarityRows(const Eigen::Vector2d& x) {
+  Eigen::Matrix<double, 2, 4> m;
+  m << x.x(), -x.y(), 1.0, 0.0, x.y(), x.x(), 0.0, 1.0;
+  return m;
+}
+
+std::vector<ProjectorGridPoint> OwnCells(NodeId unit, const std::vector<Track>& tracks) {
+  std::vector<ProjectorGridPoint> cells;
+  for (const Track& t : tracks) {
+    if (t.projector_unit != unit) continue;
+    for (const CameraObservation& o : t.cameras) {
+      if (o.camera_unit != unit) continue;
+      ProjectorGridPoint p;
+      p.projector_px = t.projector_px.cast<float>();
+      p.camera_px = o.camera_px.cast<float>();
+      cells.push_back(p);
+    }
+  }
+  return cells;
+}
+
+}  // namespace
+
+Status PlanarityOptions::Check() const {
+  if (!(threshold_mm > 0.0) || !(plane_inlier_mm > 0.0)) {
+    return InvalidArgumentError("planarity: thresholds must be > 0");
+  }
+  if (outliers_allowed < 0 || !(outlier_fraction >= 0.0 && outlier_fraction < 1.0)) {
+    return InvalidArgumentError("planarity: outliers_allowed >= 0, outlier_fraction in [0, 1)");
+  }
+  if (min_points < 3) return InvalidArgumentError("planarity: min_points must be >= 3");
+  if (surface_degree < 0 || surface_degree > 6) {
+    return InvalidArgumentError("planarity: surface_degree must be in [0, 6]");
+  }
+  return OkStatus();
+}
+
+Expected<PlanarityProbe> ProbePlanarity(const UnitModel& self,
+                                        const std::vector<ProjectorGridPoint>& own_cells,
+                                        const PlanarityOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
+  TriangulationOptions triangulation;
+  triangulation.min_angle_deg = 0.5;
+  std::vector<Eigen::Vector3d> points;
+  points.reserve(own_cells.size());
+  for (const ProjectorGridPoint& c : own_cells) {
+    TriangulationView views[2];
+    views[0].camera = self.camera;
+    views[0].camera_from_world = Rigid3d::Identity();
+    views[0].observed_px = c.camera_px.cast<double>();
+    views[1].camera = self.projector;
+    views[1].camera_from_world = self.projector_from_camera;
+    views[1].observed_px = c.projector_px.cast<double>();
+    Expected<TriangulationReport> point = TriangulatePoint(views, triangulation);
+    if (point.ok() && point->rms_px < 10.0) points.push_back(point->point_in_world);
+  }
+  if (static_cast<int>(points.size()) < options.min_points) {
+    return DegenerateError("unit " + std::to_string(self.unit) + ": its camera triangulated " +
+                           std::to_string(points.size()) + " of its projector's " +
+                           std::to_string(own_cells.size()) + " cells (at least " +
+                           std::to_string(options.min_points) + " needed for its plane)");
+  }
+  PlaneFitOptions fit;
+  fit.inlier_threshold_m = options.plane_inlier_mm * 1e-3;
+  fit.min_inlier_ratio = 0.3;
+  Expected<PlaneFitReport> plane = FitPlaneRansac(points, fit);
+  if (!plane.ok()) {
+    return DegenerateError("unit " + std::to_string(self.unit) +
+                           ": no plane in its footprint: " + plane.status().message());
+  }
+  PlanarityProbe probe;
+  probe.points = static_cast<int>(points.size());
+  probe.plane_in_camera = plane->plane.OrientedToward(Eigen::Vector3d::Zero());
+  probe.plane_rms_mm = plane->rms_m * 1e3;
+  probe.inlier_ratio = plane->inlier_ratio;
+  // Heights over the plane, then over a smooth surface fitted to them (the factory models
+  // bend a triangulated plane by up to ~20 mm, smoothly; relief stands off it in steps).
+  const PlaneFrame frame = MakePlaneFrame(probe);
+  const int n = static_cast<int>(points.size());
+  std::vector<Eigen::Vector2d> at(n);
+  std::vector<double> height(n);
+  double extent = 1e-9;
+  for (int i = 0; i < n; ++i) {
+    at[i] = frame.axes.transpose() * (points[i] - frame.origin);
+    height[i] = probe.plane_in_camera.SignedDistance_m(points[i]) * 1e3;
+    extent = std::max(extent, at[i].cwiseAbs().maxCoeff());
+  }
+  const int degree = options.surface_degree;
+  const int terms = (degree + 1) * (degree + 2) / 2;
+  auto basis = [&](const Eigen::Vector2d& x, double* row) {
+    const double u = x.x() / extent, v = x.y() / extent;
+    int k = 0;
+    for (int d = 0; d <= degree; ++d) {
+      for (int a = d; a >= 0; --a) row[k++] = std::pow(u, a) * std::pow(v, d - a);
+    }
+  };
+  Eigen::VectorXd coefficients = Eigen::VectorXd::Zero(terms);
+  std::vector<double> residual(height);
+  double keep_mm = std::numeric_limits<double>::infinity();
+  Eigen::VectorXd row(terms);
+  for (int pass = 0; pass < 6; ++pass) {
+    Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(terms, terms);
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(terms);
+    int used = 0;
+    for (int i = 0; i < n; ++i) {
+      if (std::abs(residual[i]) > keep_mm) continue;
+      basis(at[i], row.data());
+      normal.selfadjointView<Eigen::Lower>().rankUpdate(row);
+      rhs += height[i] * row;
+      ++used;
+    }
+    if (used < terms * 3) break;
+    coefficients = normal.selfadjointView<Eigen::Lower>().ldlt().solve(rhs);
+    std::vector<double> magnitudes;
+    for (int i = 0; i < n; ++i) {
+      basis(at[i], row.data());
+      residual[i] = height[i] - row.dot(coefficients);
+      magnitudes.push_back(std::abs(residual[i]));
+    }
+    auto mid = magnitudes.begin() + static_cast<std::ptrdiff_t>(magnitudes.size() / 2);
+    std::nth_element(magnitudes.begin(), mid, magnitudes.end());
+    keep_mm = std::max(options.plane_inlier_mm / 2, 3.0 * 1.4826 * *mid);
+  }
+  std::vector<double> heights;
+  heights.reserve(points.size());
+  double sum_sq = 0.0;
+  for (int i = 0; i < n; ++i) {
+    const double h = std::abs(residual[i]);
+    heights.push_back(h);
+    if (h <= keep_mm) sum_sq += h * h;
+    probe.points_over_threshold += h > options.threshold_mm ? 1 : 0;
+  }
+  probe.surface_rms_mm = std::sqrt(sum_sq / n);
+  const int allowed =
+      std::max(options.outliers_allowed,
+               static_cast<int>(std::floor(options.outlier_fraction * probe.points)));
+  const size_t k = std::min(heights.size() - 1, static_cast<size_t>(allowed));
+  std::nth_element(heights.begin(), heights.begin() + static_cast<std::ptrdiff_t>(k), heights.end(),
+                   std::greater<double>());
+  probe.max_height_mm = heights[k];
+  probe.planar = probe.points_over_threshold <= allowed;
+  return probe;
+}
+
+Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservations& observations,
+                                             const Scene* model,
+                                             const PlanarSolveOptions& options) {
+  const double cpu_start = ThreadCpuSeconds();
+  double stage_start = cpu_start;
+  ClusterSolution out;
+  auto stage_done = [&](const std::string& name) {
+    const double now = ThreadCpuSeconds();
+    out.stage_time_s[name] += now - stage_start;
+    stage_start = now;
+  };
+  // 1. Each camera's plane.
+  std::map<NodeId, PlaneFrame> frames;
+  for (const auto& [id, unit] : observations.units) {
+    Expected<PlanarityProbe> probe =
+        ProbePlanarity(unit, OwnCells(id, observations.tracks), options.planarity);
+    if (!probe.ok()) {
+      out.notes.push_back(probe.status().message() + "; its camera is not used");
+      continue;
+    }
+    if (!probe->planar) {
+      out.notes.push_back("unit " + std::to_string(id) + ": " +
+                          std::to_string(probe->points_over_threshold) + " of " +
+                          std::to_string(probe->points) + " points stand over " +
+                          std::to_string(options.planarity.threshold_mm) +
+                          " mm from its surface (rms " + std::to_string(probe->surface_rms_mm) +
+                          " mm, max " + std::to_string(probe->max_height_mm) + " mm): not planar");
+    }
+    frames[id] = MakePlaneFrame(*probe);
+    out.max_height_mm = std::max(out.max_height_mm, probe->max_height_mm);
+  }
+  if (frames.empty()) return DegenerateError("planar solve: no camera's plane could be fitted");
+  if (!frames.count(root)) root = frames.begin()->first;
+  stage_done("planes");
+
+  // 2. Every observation on its camera's plane; cameras tied by the cells they share.
+  struct OnPlaneObservation {
+    NodeId camera;
+    Eigen::Vector2d x;
+  };
+  std::vector<std::vector<OnPlaneObservation>> seen(observations.tracks.size());
+  std::map<std::pair<NodeId, NodeId>, int> shared;
+  for (size_t t = 0; t < observations.tracks.size(); ++t) {
+    for (const CameraObservation& o : observations.tracks[t].cameras) {
+      auto frame = frames.find(o.camera_unit);
+      if (frame == frames.end()) continue;
+      std::optional<Eigen::Vector2d> x =
+          OnPlane(observations.units.at(o.camera_unit).camera, frame->second, o.camera_px);
+      if (x) seen[t].push_back({o.camera_unit, *x});
+    }
+    for (size_t i = 0; i < seen[t].size(); ++i) {
+      for (size_t j = i + 1; j < seen[t].size(); ++j) {
+        const NodeId a = std::min(seen[t][i].camera, seen[t][j].camera);
+        const NodeId b = std::max(seen[t][i].camera, seen[t][j].camera);
+        if (a != b) ++shared[{a, b}];
+      }
+    }
+  }
+  std::set<NodeId> connected{root};
+  std::deque<NodeId> queue{root};
+  while (!queue.empty()) {
+    const NodeId a = queue.front();
+    queue.pop_front();
+    for (const auto& [pair, count] : shared) {
+      if (count < options.min_shared_cells) continue;
+      const NodeId other = pair.first == a ? pair.second : pair.second == a ? pair.first : a;
+      if (other == a || connected.count(other)) continue;
+      connected.insert(other);
+      queue.push_back(other);
+    }
+  }
+  for (const auto& [id, frame] : frames) {
+    if (!connected.count(id)) {
+      out.notes.push_back("camera " + std::to_string(id) +
+                          ": shares too few cells with the "
+                          "cluster's cameras to join its frame; not used");
+    }
+  }
+  std::map<NodeId, int> index;  // unknown block of each connected camera but the root
+  for (NodeId id : connected) {
+    if (id != root) {
+      const int k = static_cast<int>(index.size());
+      index[id] = k;
+    }
+  }
+  const int n = 4 * static_cast<int>(index.size());
+  std::map<NodeId, Eigen::Vector4d> similarity;
+  similarity[root] = Eigen::Vector4d(1, 0, 0, 0);
+  for (const auto& [id, k] : index) similarity[id] = Eigen::Vector4d(1, 0, 0, 0);
+  std::set<std::pair<size_t, size_t>> dropped;  // (track, pair index)
+  int pairs_used = 0;
+  double pair_rms_mm = 0.0;
+  for (int pass = 0; pass < 3 && n > 0; ++pass) {
+    Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(n, n);
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n);
+    for (size_t t = 0; t < seen.size(); ++t) {
+      size_t pair = 0;
+      for (size_t i = 0; i < seen[t].size(); ++i) {
+        for (size_t j = i + 1; j < seen[t].size(); ++j, ++pair) {
+          const OnPlaneObservation& o1 = seen[t][i];
+          const OnPlaneObservation& o2 = seen[t][j];
+          if (o1.camera == o2.camera || !connected.count(o1.camera) ||
+              !connected.count(o2.camera) || dropped.count({t, pair}))
+            continue;
+          // r = M1 q1 - M2 q2; the root's q is the constant (1, 0, 0, 0).
+          Eigen::Matrix<double, 2, 8> jac = Eigen::Matrix<double, 2, 8>::Zero();
+          Eigen::Vector2d constant = Eigen::Vector2d::Zero();
+          int blocks[2] = {-1, -1};
+          const Eigen::Matrix<double, 2, 4> m1 = SimilarityRows(o1.x), m2 = -SimilarityRows(o2.x);
+          if (o1.camera == root) {
+            constant += m1 * Eigen::Vector4d(1, 0, 0, 0);
+          } else {
+            jac.leftCols<4>() = m1;
+            blocks[0] = 4 * index[o1.camera];
+          }
+          if (o2.camera == root) {
+            constant += m2 * Eigen::Vector4d(1, 0, 0, 0);
+          } else {
+            jac.rightCols<4>() = m2;
+            blocks[1] = 4 * index[o2.camera];
+          }
+          for (int a = 0; a < 2; ++a) {
+            if (blocks[a] < 0) continue;
+            const auto ja = jac.middleCols<4>(4 * a);
+            rhs.segment<4>(blocks[a]) -= ja.transpose() * constant;
+            for (int b = 0; b < 2; ++b) {
+              if (blocks[b] < 0) continue;
+              normal.block<4, 4>(blocks[a], blocks[b]) += ja.transpose() * jac.middleCols<4>(4 * b);
+            }
+          }
+        }
+      }
+    }
+    Eigen::LDLT<Eigen::MatrixXd> ldlt(normal);
+    const Eigen::VectorXd q = ldlt.solve(rhs);
+    if (ldlt.info() != Eigen::Success || !q.allFinite()) {
+      return DegenerateError("planar solve: the cameras' frames could not be tied");
+    }
+    for (const auto& [id, k] : index) similarity[id] = q.segment<4>(4 * k);
+    // Residuals of the pairs; drop those past 3x the rms (at least 2 mm) and solve again.
+    std::vector<std::pair<std::pair<size_t, size_t>, double>> residuals;
+    double sum_sq = 0.0;
+    for (size_t t = 0; t < seen.size(); ++t) {
+      size_t pair = 0;
+      for (size_t i = 0; i < seen[t].size(); ++i) {
+        for (size_t j = i + 1; j < seen[t].size(); ++j, ++pair) {
+          const OnPlaneObservation& o1 = seen[t][i];
+          const OnPlaneObservation& o2 = seen[t][j];
+          if (o1.camera == o2.camera || !connected.count(o1.camera) ||
+              !connected.count(o2.camera) || dropped.count({t, pair}))
+            continue;
+          const double r = (SimilarityRows(o1.x) * similarity[o1.camera] -
+                            SimilarityRows(o2.x) * similarity[o2.camera])
+                               .norm();
+          residuals.push_back({{t, pair}, r});
+          sum_sq += r * r;
+        }
+      }
+    }
+    pairs_used = static_cast<int>(residuals.size());
+    pair_rms_mm = residuals.empty() ? 0.0 : std::sqrt(sum_sq / residuals.size()) * 1e3;
+    const double limit = std::max(3.0 * pair_rms_mm, 2.0) * 1e-3;
+    bool any = false;
+    for (const auto& [key, r] : residuals) {
+      if (r > limit) {
+        dropped.insert(key);
+        any = true;
+      }
+    }
+    if (!any) break;
+  }
+  // The site's scale: the geometric mean of the cameras' own.
+  double log_scale = 0.0;
+  for (const auto& [id, q] : similarity) log_scale += std::log(q.head<2>().norm());
+  const double scale = std::exp(log_scale / static_cast<double>(similarity.size()));
+  for (auto& [id, q] : similarity) q /= scale;
+  stage_done("frames");
+
+  // 3. Site positions (the mean over the cameras that saw a cell), the table frame.
+  std::vector<std::optional<Eigen::Vector3d>> in_site(observations.tracks.size());
+  std::vector<Eigen::Vector3d> all_in_site;
+  for (size_t t = 0; t < seen.size(); ++t) {
+    Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+    int count = 0;
+    for (const OnPlaneObservation& o : seen[t]) {
+      auto s = similarity.find(o.camera);
+      if (s == similarity.end()) continue;
+      sum += SimilarityRows(o.x) * s->second;
+      ++count;
+    }
+    if (count == 0) continue;
+    in_site[t] = Eigen::Vector3d(sum.x() / count, sum.y() / count, 0.0);
+    all_in_site.push_back(*in_site[t]);
+  }
+  Plane site_plane;  // z = 0, normal +z
+  Expected<TableFrameReport> frame =
+      BuildTableFrame(site_plane, all_in_site, Eigen::Vector3d(0, 0, 1));
+  if (!frame.ok()) return DegenerateError("planar solve: table frame: " + frame.status().message());
+  const Rigid3d table_from_site = frame->table_from_source;
+  out.frame = *frame;
+  out.table_from_world = table_from_site;
+  out.table_points = static_cast<int>(all_in_site.size());
+  for (const Eigen::Vector3d& p : all_in_site) out.points_in_table_m.push_back(table_from_site * p);
+  double plane_rms_sq = 0.0;
+  for (const auto& [id, f] : frames) plane_rms_sq += f.probe.plane_rms_mm * f.probe.plane_rms_mm;
+  out.table_plane_rms_mm = std::sqrt(plane_rms_sq / static_cast<double>(frames.size()));
+  out.planar = true;
+  for (const auto& [id, f] : frames) out.planar &= f.probe.planar;
+
+  // 4. Each projector's pose from its cells on the table.
+  std::map<NodeId, std::pair<std::vector<Eigen::Vector3d>, std::vector<Eigen::Vector2d>>> cells;
+  for (size_t t = 0; t < observations.tracks.size(); ++t) {
+    if (!in_site[t]) continue;
+    auto& [points, pixels] = cells[observations.tracks[t].projector_unit];
+    points.push_back(table_from_site * *in_site[t]);
+    pixels.push_back(observations.tracks[t].projector_px);
+  }
+  std::map<NodeId, Rigid3d> projector_from_table;
+  out.bundle.termination = "planar";
+  for (const auto& [id, unit] : observations.units) {
+    auto c = cells.find(id);
+    if (c == cells.end() || c->second.first.size() < 8) {
+      out.notes.push_back("unit " + std::to_string(id) +
+                          ": no camera of the cluster's frame saw enough of its projector; left "
+                          "out");
+      continue;
+    }
+    ResectionOptions resection;
+    resection.fix_intrinsics = true;
+    resection.fix_distortion = true;
+    resection.initial_camera = unit.projector;
+    resection.loss = ResectionLoss::kHuber;
+    resection.loss_scale_px = options.resection_loss_scale_px;
+    resection.estimate_uncertainty = false;
+    Expected<ResectionResult> pose =
+        EstimateResection(c->second.first, c->second.second, unit.projector.width_px,
+                          unit.projector.height_px, resection);
+    if (!pose.ok()) {
+      out.notes.push_back("unit " + std::to_string(id) +
+                          ": projector pose on the plane: " + pose.status().message());
+      continue;
+    }
+    projector_from_table[id] = pose->camera_from_world;
+    UnitBundleReport& report = out.bundle.units[id];
+    report.projector_observations = static_cast<int>(c->second.first.size());
+    report.projector_rms_px = pose->report.final_rms_px;
+    report.free_parameters = {"projector pose (intrinsics and distortion: factory)",
+                              "camera plane frame (2D similarity)"};
+    out.bundle.iterations += pose->report.iterations;
+  }
+  if (projector_from_table.empty()) return DegenerateError("planar solve: no projector was posed");
+  out.bundle.tracks_used = static_cast<int>(all_in_site.size());
+  out.bundle.observations_dropped = static_cast<int>(dropped.size());
+  out.bundle.final_rms_px = 0.0;
+  // Camera residuals: the cells' table positions through each camera posed by its mount.
+  for (const auto& [id, pose] : projector_from_table) {
+    auto frame_it = frames.find(id);
+    if (frame_it == frames.end()) continue;
+    const UnitModel& unit = observations.units.at(id);
+    const Rigid3d camera_from_table = unit.projector_from_camera.Inverse() * pose;
+    double sum_sq = 0.0;
+    int count = 0;
+    for (size_t t = 0; t < observations.tracks.size(); ++t) {
+      if (!in_site[t]) continue;
+      for (const CameraObservation& o : observations.tracks[t].cameras) {
+        if (o.camera_unit != id) continue;
+        std::optional<Eigen::Vector2d> px =
+            unit.camera.Project(camera_from_table * (table_from_site * *in_site[t]));
+        if (!px) continue;
+        sum_sq += (*px - o.camera_px).squaredNorm();
+        ++count;
+      }
+    }
+    UnitBundleReport& report = out.bundle.units[id];
+    report.camera_observations = count;
+    report.camera_rms_px = count ? std::sqrt(sum_sq / count) : 0.0;
+  }
+  double all_sq = 0.0;
+  int all_n = 0;
+  for (const auto& [id, r] : out.bundle.units) {
+    all_sq += r.projector_rms_px * r.projector_rms_px * r.projector_observations;
+    all_n += r.projector_observations;
+  }
+  out.bundle.final_rms_px = all_n ? std::sqrt(all_sq / all_n) : 0.0;
+  out.notes.push_back(
+      "planar path: " + std::to_string(connected.size()) + " camera frames tied by " +
+      std::to_string(pairs_used) + " shared cells (rms " + std::to_string(pair_rms_mm) + " mm, " +
+      std::to_string(dropped.size()) + " dropped), site scale from the cameras' mean (root's x " +
+      std::to_string(1.0 / scale) + ")");
+  stage_done("poses");
+
+  // 5. The joint refinement with every cell on the plane z = 0 of the table frame.
+  std::map<NodeId, UnitModel> units = observations.units;
+  if (options.refine) {
+    BundleResult previous;
+    previous.units = observations.units;
+    previous.projector_from_world = projector_from_table;
+    BundleWarmStart warm;
+    warm.previous = &previous;
+    warm.surface_sigma_m = options.surface_sigma_m;
+    for (size_t t = 0; t < observations.tracks.size(); ++t) {
+      if (!in_site[t] || !projector_from_table.count(observations.tracks[t].projector_unit))
+        continue;
+      warm.surface.push_back({static_cast<int>(previous.points_in_world.size()),
+                              Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ()});
+      previous.points_in_world.push_back(table_from_site * *in_site[t]);
+      previous.point_track.push_back(static_cast<int>(t));
+    }
+    Expected<BundleResult> refined =
+        AdjustCluster(observations, projector_from_table, root, options.bundle, &warm);
+    stage_done("bundle");
+    if (!refined.ok()) {
+      out.notes.push_back("planar refinement: " + refined.status().message() +
+                          "; the plane-induced poses are kept");
+    } else {
+      Expected<TableFrameReport> again =
+          BuildTableFrame(site_plane, refined->points_in_world, Eigen::Vector3d(0, 0, 1));
+      if (!again.ok()) {
+        return DegenerateError("planar solve: table frame: " + again.status().message());
+      }
+      const Rigid3d table_from_world = again->table_from_source;
+      out.frame = *again;
+      out.table_from_world = table_from_world * out.table_from_world;
+      out.points_in_table_m.clear();
+      for (const Eigen::Vector3d& p : refined->points_in_world)
+        out.points_in_table_m.push_back(table_from_world * p);
+      out.table_points = static_cast<int>(out.points_in_table_m.size());
+      units = refined->units;
+      for (auto& [id, pose] : projector_from_table) {
+        if (refined->projector_from_world.count(id))
+          pose = refined->projector_from_world.at(id) * table_from_world.Inverse();
+      }
+      out.bundle = refined->report;
+      out.bundle.termination = "planar, refined: " + refined->report.termination;
+    }
+  }
+
+  // 6. The model.
+  if (model) {
+    ModelMatcher matcher(*model, options.model);
+    Expected<std::vector<ModelRegistration>> candidates =
+        matcher.RegisterCandidates(out.points_in_table_m, 1);
+    if (!candidates.ok()) {
+      out.notes.push_back(candidates.status().message());
+    } else {
+      out.model = candidates->front();
+      Expected<ModelChangeReport> changes = DetectModelChanges(
+          *model, out.points_in_table_m, out.model->table_from_model, options.changes);
+      if (changes.ok()) {
+        out.changes = std::move(*changes);
+      } else {
+        out.notes.push_back("change report: " + changes.status().message());
+      }
+    }
+    stage_done("model");
+  }
+  for (const auto& [id, pose] : projector_from_table) {
+    const UnitModel& unit = units.at(id);
+    UnitCalibration c;
+    c.unit_id = id;
+    c.source = kSourceStructuredLight;
+    c.camera = unit.camera;
+    c.projector = unit.projector;
+    c.projector_from_camera = unit.projector_from_camera;
+    c.table_from_projector = pose.Inverse();
+    if (out.model) c.table_from_model = out.model->table_from_model;
+    c.projector_rms_px = out.bundle.units[id].projector_rms_px;
+    c.camera_rms_px = out.bundle.units[id].camera_rms_px;
+    out.calibrations[id] = c;
+  }
+  out.time_s = ThreadCpuSeconds() - cpu_start;
+  out.bundle.solve_time_s = out.time_s;
+  return out;
+}
+
+}  // namespace sandtable::node
