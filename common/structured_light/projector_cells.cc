@@ -46,46 +46,44 @@ Expected<std::vector<ProjectorGridPoint>> SampleProjectorCells(const Decoding& d
     if (i < 0 || j < 0 || i >= nx || j >= ny) return -1;
     return j * nx + i;
   };
-  std::vector<CellSums> first(static_cast<size_t>(nx) * ny);
-  for (int y = 0; y < rows; ++y) {
-    const uint8_t* valid = decoding.valid.ptr<uint8_t>(y);
-    const cv::Vec2f* uv = decoding.projector_px.ptr<cv::Vec2f>(y);
-    for (int x = 0; x < cols; ++x) {
-      if (!valid[x]) continue;
-      const int k = cell_of(uv[x]);
-      if (k < 0) continue;
-      ++local.decoded_pixels;
-      CellSums& s = first[static_cast<size_t>(k)];
-      s.x += x;
-      s.y += y;
-      ++s.count;
+  // visit(x, y, cell) for every decoded camera pixel inside a cell.
+  auto for_each_decoded = [&](const auto& visit) {
+    for (int y = 0; y < rows; ++y) {
+      const uint8_t* valid = decoding.valid.ptr<uint8_t>(y);
+      const cv::Vec2f* uv = decoding.projector_px.ptr<cv::Vec2f>(y);
+      for (int x = 0; x < cols; ++x) {
+        if (!valid[x]) continue;
+        const int k = cell_of(uv[x]);
+        if (k >= 0) visit(x, y, static_cast<size_t>(k));
+      }
     }
-  }
+  };
+  std::vector<CellSums> first(static_cast<size_t>(nx) * ny);
+  for_each_decoded([&](int x, int y, size_t k) {
+    ++local.decoded_pixels;
+    CellSums& s = first[k];
+    s.x += x;
+    s.y += y;
+    ++s.count;
+  });
   // Second pass: pixels near their cell's first centroid only.
   std::vector<CellSums> sums(first.size());
-  for (int y = 0; y < rows; ++y) {
-    const uint8_t* valid = decoding.valid.ptr<uint8_t>(y);
-    const cv::Vec2f* uv = decoding.projector_px.ptr<cv::Vec2f>(y);
-    for (int x = 0; x < cols; ++x) {
-      if (!valid[x]) continue;
-      const int k = cell_of(uv[x]);
-      if (k < 0) continue;
-      const CellSums& f = first[static_cast<size_t>(k)];
-      const double cx = f.x / f.count, cy = f.y / f.count;
-      const double limit = 1.5 * std::sqrt(static_cast<double>(f.count)) + 1.0;
-      const double dx = x - cx, dy = y - cy;
-      if (dx * dx + dy * dy > limit * limit) {
-        ++local.stray_pixels;
-        continue;
-      }
-      CellSums& s = sums[static_cast<size_t>(k)];
-      s.x += x;
-      s.y += y;
-      s.xx += static_cast<double>(x) * x;
-      s.yy += static_cast<double>(y) * y;
-      ++s.count;
+  for_each_decoded([&](int x, int y, size_t k) {
+    const CellSums& f = first[k];
+    const double cx = f.x / f.count, cy = f.y / f.count;
+    const double limit = 1.5 * std::sqrt(static_cast<double>(f.count)) + 1.0;
+    const double dx = x - cx, dy = y - cy;
+    if (dx * dx + dy * dy > limit * limit) {
+      ++local.stray_pixels;
+      return;
     }
-  }
+    CellSums& s = sums[k];
+    s.x += x;
+    s.y += y;
+    s.xx += static_cast<double>(x) * x;
+    s.yy += static_cast<double>(y) * y;
+    ++s.count;
+  });
   std::vector<ProjectorGridPoint> out;
   std::vector<int> neighbour_counts;
   for (int j = 0; j < ny; ++j) {

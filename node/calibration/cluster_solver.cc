@@ -42,6 +42,25 @@ Expected<TableFit> FitTable(const std::vector<Eigen::Vector3d>& points_in_world,
 
 }  // namespace
 
+UnitCalibration SolvedUnitCalibration(NodeId id, const UnitModel& unit,
+                                      const Rigid3d& table_from_projector,
+                                      const ClusterSolution& solution) {
+  UnitCalibration c;
+  c.unit_id = id;
+  c.source = kSourceStructuredLight;
+  c.camera = unit.camera;
+  c.projector = unit.projector;
+  c.projector_from_camera = unit.projector_from_camera;
+  c.table_from_projector = table_from_projector;
+  if (solution.model) c.table_from_model = solution.model->table_from_model;
+  const auto report = solution.bundle.units.find(id);
+  if (report != solution.bundle.units.end()) {
+    c.camera_rms_px = report->second.camera_rms_px;
+    c.projector_rms_px = report->second.projector_rms_px;
+  }
+  return c;
+}
+
 Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& observations,
                                        const std::map<NodeId, LocalGeometry>& local,
                                        const Scene* model, const ClusterSolveOptions& options) {
@@ -232,20 +251,8 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
   out.planar = out.max_height_mm < options.planar_threshold_mm;
 
   for (const auto& [id, unit] : units) {
-    UnitCalibration c;
-    c.unit_id = id;
-    c.source = kSourceStructuredLight;
-    c.camera = unit.camera;
-    c.projector = unit.projector;
-    c.projector_from_camera = unit.projector_from_camera;
-    c.table_from_projector = out.table_from_world * projector_from_world.at(id).Inverse();
-    if (out.model) c.table_from_model = out.model->table_from_model;
-    const auto report = out.bundle.units.find(id);
-    if (report != out.bundle.units.end()) {
-      c.camera_rms_px = report->second.camera_rms_px;
-      c.projector_rms_px = report->second.projector_rms_px;
-    }
-    out.calibrations[id] = c;
+    out.calibrations[id] = SolvedUnitCalibration(
+        id, unit, out.table_from_world * projector_from_world.at(id).Inverse(), out);
   }
   out.time_s = ThreadCpuSeconds() - cpu_start;
   return out;

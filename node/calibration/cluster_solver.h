@@ -75,6 +75,12 @@ struct ClusterSolution {
   std::map<std::string, double> stage_time_s;
 };
 
+// A unit's calibration from a solve: its (refined) models, its pose on the table, the model's
+// placement when the solution found one, its residuals from the solution's bundle report.
+UnitCalibration SolvedUnitCalibration(NodeId id, const UnitModel& unit,
+                                      const Rigid3d& table_from_projector,
+                                      const ClusterSolution& solution);
+
 Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& observations,
                                        const std::map<NodeId, LocalGeometry>& local,
                                        const Scene* model, const ClusterSolveOptions& options = {});

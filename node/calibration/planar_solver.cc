@@ -287,9 +287,9 @@ Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservati
   std::set<std::pair<size_t, size_t>> dropped;  // (track, pair index)
   int pairs_used = 0;
   double pair_rms_mm = 0.0;
-  for (int pass = 0; pass < 3 && n > 0; ++pass) {
-    Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(n, n);
-    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n);
+  // Every pair of observations of one point by two connected cameras, not dropped:
+  // visit(key, first, second).
+  auto for_each_pair = [&](const auto& visit) {
     for (size_t t = 0; t < seen.size(); ++t) {
       size_t pair = 0;
       for (size_t i = 0; i < seen[t].size(); ++i) {
@@ -299,35 +299,43 @@ Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservati
           if (o1.camera == o2.camera || !connected.count(o1.camera) ||
               !connected.count(o2.camera) || dropped.count({t, pair}))
             continue;
-          // r = M1 q1 - M2 q2; the root's q is the constant (1, 0, 0, 0).
-          Eigen::Matrix<double, 2, 8> jac = Eigen::Matrix<double, 2, 8>::Zero();
-          Eigen::Vector2d constant = Eigen::Vector2d::Zero();
-          int blocks[2] = {-1, -1};
-          const Eigen::Matrix<double, 2, 4> m1 = SimilarityRows(o1.x), m2 = -SimilarityRows(o2.x);
-          if (o1.camera == root) {
-            constant += m1 * Eigen::Vector4d(1, 0, 0, 0);
-          } else {
-            jac.leftCols<4>() = m1;
-            blocks[0] = 4 * index[o1.camera];
-          }
-          if (o2.camera == root) {
-            constant += m2 * Eigen::Vector4d(1, 0, 0, 0);
-          } else {
-            jac.rightCols<4>() = m2;
-            blocks[1] = 4 * index[o2.camera];
-          }
-          for (int a = 0; a < 2; ++a) {
-            if (blocks[a] < 0) continue;
-            const auto ja = jac.middleCols<4>(4 * a);
-            rhs.segment<4>(blocks[a]) -= ja.transpose() * constant;
-            for (int b = 0; b < 2; ++b) {
-              if (blocks[b] < 0) continue;
-              normal.block<4, 4>(blocks[a], blocks[b]) += ja.transpose() * jac.middleCols<4>(4 * b);
-            }
-          }
+          visit(std::make_pair(t, pair), o1, o2);
         }
       }
     }
+  };
+  for (int pass = 0; pass < 3 && n > 0; ++pass) {
+    Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(n, n);
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n);
+    for_each_pair([&](const std::pair<size_t, size_t>&, const OnPlaneObservation& o1,
+                      const OnPlaneObservation& o2) {
+      // r = M1 q1 - M2 q2; the root's q is the constant (1, 0, 0, 0).
+      Eigen::Matrix<double, 2, 8> jac = Eigen::Matrix<double, 2, 8>::Zero();
+      Eigen::Vector2d constant = Eigen::Vector2d::Zero();
+      int blocks[2] = {-1, -1};
+      const Eigen::Matrix<double, 2, 4> m1 = SimilarityRows(o1.x), m2 = -SimilarityRows(o2.x);
+      if (o1.camera == root) {
+        constant += m1 * Eigen::Vector4d(1, 0, 0, 0);
+      } else {
+        jac.leftCols<4>() = m1;
+        blocks[0] = 4 * index[o1.camera];
+      }
+      if (o2.camera == root) {
+        constant += m2 * Eigen::Vector4d(1, 0, 0, 0);
+      } else {
+        jac.rightCols<4>() = m2;
+        blocks[1] = 4 * index[o2.camera];
+      }
+      for (int a = 0; a < 2; ++a) {
+        if (blocks[a] < 0) continue;
+        const auto ja = jac.middleCols<4>(4 * a);
+        rhs.segment<4>(blocks[a]) -= ja.transpose() * constant;
+        for (int b = 0; b < 2; ++b) {
+          if (blocks[b] < 0) continue;
+          normal.block<4, 4>(blocks[a], blocks[b]) += ja.transpose() * jac.middleCols<4>(4 * b);
+        }
+      }
+    });
     Eigen::LDLT<Eigen::MatrixXd> ldlt(normal);
     const Eigen::VectorXd q = ldlt.solve(rhs);
     if (ldlt.info() != Eigen::Success || !q.allFinite()) {
@@ -337,23 +345,14 @@ Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservati
     // Residuals of the pairs; drop those past 3x the rms (at least 2 mm) and solve again.
     std::vector<std::pair<std::pair<size_t, size_t>, double>> residuals;
     double sum_sq = 0.0;
-    for (size_t t = 0; t < seen.size(); ++t) {
-      size_t pair = 0;
-      for (size_t i = 0; i < seen[t].size(); ++i) {
-        for (size_t j = i + 1; j < seen[t].size(); ++j, ++pair) {
-          const OnPlaneObservation& o1 = seen[t][i];
-          const OnPlaneObservation& o2 = seen[t][j];
-          if (o1.camera == o2.camera || !connected.count(o1.camera) ||
-              !connected.count(o2.camera) || dropped.count({t, pair}))
-            continue;
-          const double r = (SimilarityRows(o1.x) * similarity[o1.camera] -
-                            SimilarityRows(o2.x) * similarity[o2.camera])
-                               .norm();
-          residuals.push_back({{t, pair}, r});
-          sum_sq += r * r;
-        }
-      }
-    }
+    for_each_pair([&](const std::pair<size_t, size_t>& key, const OnPlaneObservation& o1,
+                      const OnPlaneObservation& o2) {
+      const double r = (SimilarityRows(o1.x) * similarity[o1.camera] -
+                        SimilarityRows(o2.x) * similarity[o2.camera])
+                           .norm();
+      residuals.push_back({key, r});
+      sum_sq += r * r;
+    });
     pairs_used = static_cast<int>(residuals.size());
     pair_rms_mm = residuals.empty() ? 0.0 : std::sqrt(sum_sq / residuals.size()) * 1e3;
     const double limit = std::max(3.0 * pair_rms_mm, 2.0) * 1e-3;
@@ -552,18 +551,7 @@ Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservati
     stage_done("model");
   }
   for (const auto& [id, pose] : projector_from_table) {
-    const UnitModel& unit = units.at(id);
-    UnitCalibration c;
-    c.unit_id = id;
-    c.source = kSourceStructuredLight;
-    c.camera = unit.camera;
-    c.projector = unit.projector;
-    c.projector_from_camera = unit.projector_from_camera;
-    c.table_from_projector = pose.Inverse();
-    if (out.model) c.table_from_model = out.model->table_from_model;
-    c.projector_rms_px = out.bundle.units[id].projector_rms_px;
-    c.camera_rms_px = out.bundle.units[id].camera_rms_px;
-    out.calibrations[id] = c;
+    out.calibrations[id] = SolvedUnitCalibration(id, units.at(id), pose.Inverse(), out);
   }
   out.time_s = ThreadCpuSeconds() - cpu_start;
   out.bundle.solve_time_s = out.time_s;
