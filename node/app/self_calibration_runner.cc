@@ -11,6 +11,7 @@
 #include "common/io/mpcdi_builder.h"
 #include "common/scene/procedural_scene.h"
 #include "node/app/self_calibration_runner.h"
+#include "node/calibration/join_solver.h"
 #include "node/calibration/schedule.h"
 #include "proto/convert.h"
 #include "proto/envelope_stamper.h"
@@ -44,7 +45,11 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
     sizes[m.node_id()] = {static_cast<int>(c.projector_width_px()),
                           static_cast<int>(c.projector_height_px())};
   }
-  if (members.empty() || members.front() != node.id()) return;  // not the runner
+  if (members.empty()) return;
+  // The runner: the lowest id; for a unit joining a calibrated site, the runner of the round
+  // that calibrated it (it holds the site's solution; the joining unit is held against it).
+  const bool site_runner = runner_ && runner_->finished && last_solution_;
+  if (members.front() != node.id() && !site_runner) return;
   if (node.member_list_age() < options_.settle) return;
   // Units that hold a saved calibration check it first (no round while one does); a unit whose
   // saved calibration held needs no round.
@@ -64,18 +69,38 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
   if (checking) return;
   // A round already ran: a new one only when units joined that it did not include (a node
   // that started late, or after the round) and that do not hold a checked calibration. Units
-  // that left cause none.
+  // that left cause none. Joining units are calibrated against the site, which is held (a
+  // join round); without the site's solution (this runner's round failed), all again.
+  std::vector<NodeId> joining;
+  const bool peer_calibrated = std::any_of(members.begin(), members.end(), [&](NodeId m) {
+    return m != node.id() && state_of(m) == wire::CALIBRATION_STATE_CALIBRATED;
+  });
+  if (peer_calibrated &&
+      first_seen_calibrated_peer_ == std::chrono::steady_clock::time_point::max())
+    first_seen_calibrated_peer_ = std::chrono::steady_clock::now();
   if (runner_ || calibrated_) {
     if (!runner_) return;  // calibrated by another runner: that runner decides
-    bool grew = false;
     for (NodeId m : members) {
-      grew |= std::find(runner_->members.begin(), runner_->members.end(), m) ==
-                  runner_->members.end() &&
-              state_of(m) != wire::CALIBRATION_STATE_VERIFIED;
+      if (std::find(runner_->members.begin(), runner_->members.end(), m) ==
+              runner_->members.end() &&
+          state_of(m) != wire::CALIBRATION_STATE_VERIFIED) {
+        joining.push_back(m);
+      }
     }
-    if (!grew) return;
-    ST_LOG(kInfo) << "self-calibration: units joined after the last round; calibrating again";
+    if (joining.empty()) return;
+    if (site_runner) {
+      ST_LOG(kInfo) << "self-calibration: " << joining.size()
+                    << " unit(s) joined the calibrated site; calibrating them against it";
+    } else {
+      ST_LOG(kInfo) << "self-calibration: units joined after the last round; calibrating again";
+      joining.clear();
+      if (members.front() != node.id()) return;
+    }
     runner_.reset();
+  } else if (peer_calibrated &&
+             std::chrono::steady_clock::now() - first_seen_calibrated_peer_ < kJoinWait) {
+    // Joining a calibrated site as its lowest id: its runner calibrates this unit against it.
+    return;
   } else if (all_hold) {
     if (!logged_all_hold_) {
       ST_LOG(kInfo) << "self-calibration: every unit's saved calibration held its check; no round";
@@ -93,18 +118,24 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
   r.round = static_cast<uint64_t>(proto::SteadyNowNs());
   r.self = node.id();
   r.members = members;
+  r.join = !joining.empty();
+  r.projecting = r.join ? joining : members;
   r.projector_size = sizes;
   r.round_started = std::chrono::steady_clock::now();
-  ST_LOG(kInfo) << "self-calibration: running round " << r.round << " for " << members.size()
-                << " units";
-  // Pre-pass: black everywhere, a black reference, then each projector white alone.
+  ST_LOG(kInfo) << "self-calibration: running " << (r.join ? "join " : "") << "round " << r.round
+                << " for " << r.projecting.size() << " of " << members.size() << " units";
+  // Pre-pass: the projecting units black, a black reference on every camera, then each
+  // projecting unit white alone. (In a join round the calibrated units go on showing what they
+  // show: the reference holds it.)
   Runner::Stage black, reference;
   black.label = "pre-pass black";
   reference.label = "pre-pass reference";
-  for (NodeId m : members) {
+  for (NodeId m : r.projecting) {
     wire::CalibrationStep show = MakeStep(r.round, wire::CALIBRATION_ACTION_SHOW);
     show.set_show(wire::SHOW_WHAT_BLACK);
     black.commands.push_back({m, show});
+  }
+  for (NodeId m : members) {
     wire::CalibrationStep capture = MakeStep(r.round, wire::CALIBRATION_ACTION_CAPTURE);
     capture.set_slot(kBlackSlot);
     reference.commands.push_back({m, capture});
@@ -112,7 +143,7 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
   r.stages.push_back(black);
   r.stages.push_back(reference);
   r.prepass_frames = 1;
-  for (NodeId p : members) {
+  for (NodeId p : r.projecting) {
     Runner::Stage white, capture, off;
     white.label = "pre-pass white " + std::to_string(p);
     wire::CalibrationStep show = MakeStep(r.round, wire::CALIBRATION_ACTION_SHOW);
@@ -139,7 +170,7 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
   r.stages.back().after = [this](NodeRuntime& n) {
     Runner& rr = *runner_;
     // Who sees whom, the schedule, the plans.
-    for (NodeId p : rr.members) {
+    for (NodeId p : rr.projecting) {
       if (!rr.Active(p)) continue;
       std::set<NodeId> seeing;
       for (const auto& [c, count] : rr.lit[p]) {
@@ -247,7 +278,13 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
       s.set_frames(expected);
       local.commands.push_back({p, s});
     }
-    local.after = [this](NodeRuntime& n2) { StartSolve(n2); };
+    local.after = [this](NodeRuntime& n2) {
+      if (runner_->join) {
+        StartJoinSolve(n2);
+      } else {
+        StartSolve(n2);
+      }
+    };
     rr.stages.push_back(local);
     (void)n;
   };
@@ -452,11 +489,11 @@ Expected<MpcdiSite> SiteAsMpcdi(const ClusterSolution& solution, const Scene* mo
 
 }  // namespace
 
-void SelfCalibrationService::StartSolve(NodeRuntime& node) {
+void SelfCalibrationService::CollectInputs(ClusterObservations* observations_out,
+                                           std::map<NodeId, LocalGeometry>* local_out) {
   Runner& r = *runner_;
-  r.solving = true;
-  ClusterObservations observations;
-  std::map<NodeId, LocalGeometry> local;
+  ClusterObservations& observations = *observations_out;
+  std::map<NodeId, LocalGeometry>& local = *local_out;
   for (const auto& [id, input] : r.inputs) {
     if (!r.Active(id)) continue;
     Expected<CameraModel> camera = proto::FromWire(input.camera_model());
@@ -484,11 +521,55 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
     const std::vector<Track> tracks = BuildTracks(id, by_camera);
     observations.tracks.insert(observations.tracks.end(), tracks.begin(), tracks.end());
   }
-  for (NodeId m : r.members) {
+  for (NodeId m : r.projecting) {
     if (r.Active(m) && !observations.units.count(m)) {
       r.left_out[m] = "unit " + std::to_string(m) + ": sent no calibration input";
     }
   }
+}
+
+void SelfCalibrationService::StartJoinSolve(NodeRuntime& node) {
+  Runner& r = *runner_;
+  r.solving = true;
+  r.path = "join";
+  r.path_reason = "units joined a calibrated site; the calibrated units are held";
+  ClusterObservations observations;
+  std::map<NodeId, LocalGeometry> local;
+  CollectInputs(&observations, &local);
+  struct Solved {
+    std::optional<ClusterSolution> solution;
+    Status status = OkStatus();
+    double cpu_s = 0.0;
+  };
+  std::shared_ptr<const ClusterSolution> site = last_solution_;
+  const BundleOptions bundle = options_.solve.bundle;
+  node.workers().Run<Solved>(
+      [observations = std::move(observations), local = std::move(local), site, bundle] {
+        Solved s;
+        const double t0 = ThreadCpuSeconds();
+        Expected<ClusterSolution> solved = SolveJoin(*site, observations, local, bundle);
+        if (solved.ok()) {
+          s.solution = std::move(*solved);
+        } else {
+          s.status = solved.status();
+        }
+        s.cpu_s = ThreadCpuSeconds() - t0;
+        return s;
+      },
+      [this, &node](Solved s) {
+        if (s.solution && last_solution_) {
+          for (const auto& [id, c] : s.solution->calibrations) last_solution_->calibrations[id] = c;
+        }
+        FinishRound(s.solution ? &*s.solution : nullptr, s.status, s.cpu_s, node);
+      });
+}
+
+void SelfCalibrationService::StartSolve(NodeRuntime& node) {
+  Runner& r = *runner_;
+  r.solving = true;
+  ClusterObservations observations;
+  std::map<NodeId, LocalGeometry> local;
+  CollectInputs(&observations, &local);
   // The path: planar when every unit's probe found its footprint planar (and the site asks
   // for no full path), else full.
   int planar_units = 0, probed = 0;
@@ -560,6 +641,7 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
       [this, &node](Solved s) {
         site_mpcdi_ = s.mpcdi;
         if (s.fell_back) runner_->path = "full";
+        if (s.solution) last_solution_ = std::make_shared<ClusterSolution>(*s.solution);
         FinishRound(s.solution ? &*s.solution : nullptr, s.status, s.cpu_s, node);
       });
 }
@@ -675,7 +757,7 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
   const std::string report_text = report.dump();
   ST_LOG(kInfo) << "self-calibration: round done in " << report["wall_s"].get<double>() << " s; "
                 << (solution ? "solved" : status.message());
-  for (NodeId m : r.members) {
+  for (NodeId m : r.projecting) {
     wire::Envelope e;
     wire::CalibrationResult* result = e.mutable_calibration_result();
     result->set_round(r.round);

@@ -39,6 +39,10 @@ struct SelfCalibrationService::Runner {
   uint64_t round = 0;
   NodeId self = kInvalidNodeId;
   std::vector<NodeId> members;
+  // The units whose projectors are calibrated in this round: all members, or in a join round
+  // (join) the units that joined a calibrated site (the others are held).
+  std::vector<NodeId> projecting;
+  bool join = false;
   std::map<NodeId, std::pair<int, int>> projector_size;  // from the Hello capabilities
   std::map<NodeId, std::string> left_out;                // unit -> why
   std::deque<Stage> stages;

@@ -72,6 +72,16 @@ Expected<nlohmann::json> ExportSelfCalibration(const SelfCalibrationOutcome& out
       report_path.clear();
     }
   }
+  // A unit that joined a calibrated site keeps its join round's report.
+  std::string join_report_path;
+  if (outcome.report.value("path", std::string()) == "join") {
+    join_report_path = export_dir + "/join_report-unit-" + std::to_string(id) + ".json";
+    if (Status written = WriteFileAtomically(join_report_path, outcome.report.dump(2) + "\n");
+        !written.ok()) {
+      ST_LOG(kError) << "cannot write the join report: " << written.ToString();
+      join_report_path.clear();
+    }
+  }
   std::string mpcdi_path;
   if (outcome.site_mpcdi) {
     mpcdi_path = export_dir + "/site.mpcdi";
@@ -86,6 +96,7 @@ Expected<nlohmann::json> ExportSelfCalibration(const SelfCalibrationOutcome& out
                         {"yaml", exported->yaml_path},
                         {"report", report_path},
                         {"mpcdi", mpcdi_path},
+                        {"join_report", join_report_path},
                         {"round", outcome.round},
                         {"verified", outcome.verified},
                         {"compute_s", outcome.compute_s},

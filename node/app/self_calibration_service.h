@@ -154,6 +154,9 @@ class SelfCalibrationService : public NodeService {
   void RunnerDone(NodeId from, const wire::CalibrationStepDone& done, NodeRuntime& node);
   void RunnerInput(NodeId from, const wire::CalibrationInput& input, NodeRuntime& node);
   void StartSolve(NodeRuntime& node);
+  void StartJoinSolve(NodeRuntime& node);
+  // The round's inputs as the solvers take them (units that sent none are left out).
+  void CollectInputs(ClusterObservations* observations, std::map<NodeId, LocalGeometry>* local);
   // `solution` is null when the solve failed with `status`.
   void FinishRound(const ClusterSolution* solution, const Status& status, double solve_cpu_s,
                    NodeRuntime& node);
@@ -185,6 +188,14 @@ class SelfCalibrationService : public NodeService {
   bool logged_all_hold_ = false;
 
   std::unique_ptr<Runner> runner_;
+  // The runner's last solved site (every unit it calibrated; joined units are added), which a
+  // join round holds the joining units against.
+  std::shared_ptr<ClusterSolution> last_solution_;
+  // A unit that is the lowest id of a site whose other units are calibrated waits this long for
+  // their runner's join round before it runs a round itself (that runner may have left).
+  static constexpr std::chrono::seconds kJoinWait{15};
+  std::chrono::steady_clock::time_point first_seen_calibrated_peer_ =
+      std::chrono::steady_clock::time_point::max();
 };
 
 }  // namespace sandtable::node

@@ -252,6 +252,13 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
   // Priors and held groups.
   const double rotation_sigma_rad = options.prior_mount_rotation_deg * M_PI / 180.0;
   for (auto& [id, b] : blocks) {
+    if (options.held_units.count(id)) {
+      for (double* block : {b.pose, b.mount, b.pk, b.pd, b.ck, b.cd}) {
+        if (problem.HasParameterBlock(block)) problem.SetParameterBlockConstant(block);
+      }
+      result.report.units[id].free_parameters.push_back("none (held)");
+      continue;
+    }
     const UnitBlocks& f = factory.at(id);
     auto intrinsics_prior = [&](const double* mean) {
       auto* p = new PriorCost<4>;
@@ -296,7 +303,7 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
       } else {
         problem.SetParameterBlockConstant(b.pd);
       }
-      if (id == root && !warm_start) {
+      if (id == root && !warm_start && options.held_units.empty()) {
         problem.SetParameterBlockConstant(b.pose);
       } else {
         unit_report.free_parameters.push_back("pose");
@@ -325,7 +332,8 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
         delete mount_prior;
         problem.SetParameterBlockConstant(b.mount);
       }
-      if (!has && id == root && !warm_start) problem.SetParameterBlockConstant(b.pose);
+      if (!has && id == root && !warm_start && options.held_units.empty())
+        problem.SetParameterBlockConstant(b.pose);
     } else {
       delete mount_prior;
     }

@@ -21,6 +21,7 @@
 #pragma once
 
 #include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -59,6 +60,9 @@ struct BundleOptions {
   int min_tracks = 50;
   int rounds = 2;
   bool log_progress = false;  // Ceres' per-iteration lines and full report on stderr (sweeps)
+  // Units held entirely (pose, mount, intrinsics, distortion: no priors), e.g. the calibrated
+  // units a joining unit is fitted against; with any held unit no other pose is held.
+  std::set<NodeId> held_units;
   Status Check() const;
 };
 

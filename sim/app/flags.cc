@@ -127,6 +127,9 @@ void AddWorldCommands(CLI::App& app, WorldCommandLine& line) {
   serve->add_option("--threads", v.threads, "transport threads (0: all cores)")
       ->check(cli::Integer(0, 1024));
   serve->add_flag("--prebuild", v.prebuild, "build every camera's transport map first");
+  serve->add_option("--frame-log", v.frame_log,
+                    "append every frame a projector is given to FILE (JSON lines: projector, "
+                    "frame_index, hash, time_ms)");
   serve->add_option("--curve-keys", v.curve_keys,
                     "site CURVE key file (sandtable-coordinator --generate-curve-keys): "
                     "serve only clients holding the site key");

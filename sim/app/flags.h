@@ -58,6 +58,7 @@ struct ServeArgs {
   int threads = 0;
   bool prebuild = false;   // build every camera's transport map before serving
   std::string curve_keys;  // site CURVE key file: require CURVE from every client
+  std::string frame_log;   // every frame set, one JSON line each (world_server.h)
 };
 
 // The parsed values, and which subcommand was given (after parsing: exactly one `parsed()`).

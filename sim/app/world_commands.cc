@@ -241,6 +241,7 @@ int ServeCommand(const ServeArgs& args, const std::atomic<bool>& stop, std::ostr
   options.bind_endpoint = bind;
   options.noise = !args.no_noise;
   options.noise_seed = args.noise_seed;
+  options.frame_log_path = args.frame_log;
   options.curve = curve;
   WorldServer server(std::move(loaded.world), options);
   if (Status started = server.Start(); !started.ok()) {

@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <random>
 #include <set>
@@ -48,6 +49,12 @@ WorldServer::~WorldServer() {
 }
 
 Status WorldServer::Start() {
+  if (!options_.frame_log_path.empty()) {
+    frame_log_.open(options_.frame_log_path, std::ios::app);
+    if (!frame_log_) {
+      return InvalidArgumentError("--frame-log: cannot open " + options_.frame_log_path);
+    }
+  }
   ST_RETURN_IF_ERROR(options_.Check());
   net::SocketOptions socket_options;
   socket_options.max_message_bytes = static_cast<int64_t>(options_.limits.max_message_bytes);
@@ -173,6 +180,21 @@ wire::Envelope WorldServer::SetFrame(const wire::SetFrameRequest& request) {
   const Status set = world_->SetProjectorFrame(request.projector_id(), channels == 3 ? bgr : frame);
   if (!set.ok()) return fail(set.message());
   ++stats_.frames_set;
+  if (frame_log_.is_open()) {
+    uint64_t hash = 1469598103934665603ull;  // FNV-1a 64
+    for (const char c : request.pixels()) {
+      hash = (hash ^ static_cast<uint8_t>(c)) * 1099511628211ull;
+    }
+    char hex[17];
+    std::snprintf(hex, sizeof(hex), "%016llx", static_cast<unsigned long long>(hash));
+    const int64_t now_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+                               std::chrono::system_clock::now().time_since_epoch())
+                               .count();
+    frame_log_ << "{\"projector\":" << request.projector_id()
+               << ",\"frame_index\":" << request.frame_index() << ",\"hash\":\"" << hex
+               << "\",\"time_ms\":" << now_ms << "}\n";
+    frame_log_.flush();
+  }
   reply->set_ok(true);
   return envelope;
 }

@@ -27,6 +27,7 @@
 #include <chrono>
 #include <cstdint>
 #include <map>
+#include <fstream>
 #include <memory>
 #include <optional>
 #include <string>
@@ -52,6 +53,10 @@ struct WorldServerOptions {
   uint64_t noise_seed = 1;
   proto::CodecLimits limits;
   std::optional<net::CurveKeyPair> curve;  // site keys: require CURVE from every client
+  // Every frame a projector is given, one JSON line each (appended, flushed):
+  // {"projector":N,"frame_index":I,"hash":"<FNV-1a 64 of the pixels, hex>","time_ms":T}
+  // (T: system clock, ms since the epoch). Empty: none.
+  std::string frame_log_path;
   Status Check() const;
 };
 
@@ -97,6 +102,7 @@ class WorldServer {
   wire::Envelope GroundTruth(const wire::GroundTruthRequest& request);
 
   std::unique_ptr<World> world_;
+  std::ofstream frame_log_;
   WorldServerOptions options_;
   zmq::context_t context_;
   std::unique_ptr<net::ZapHandler> zap_;

@@ -164,6 +164,7 @@ json LabReportJson(const LabResult& r) {
     calibration["self_calibration_report"] = rr;
   }
   if (sc.contains("mpcdi")) calibration["mpcdi"] = sc["mpcdi"];
+  if (!r.join.is_null()) calibration["join"] = r.join;
   if (sc.contains("verification")) calibration["verification"] = sc["verification"];
   if (sc.contains("round_ran")) calibration["round_ran"] = sc["round_ran"];
   if (sc.contains("compute_time_s")) {
@@ -284,6 +285,28 @@ std::string LabReportMarkdown(const LabResult& r) {
     }
     md << "\n";
   }
+  if (!r.join.is_null()) {
+    const json& j = r.join;
+    md << "## Live join\n\n"
+       << "Unit " << j.value("unit", 0) << " started once the others held their calibration: "
+       << (j.value("calibrated", false) ? "calibrated against them" : "**not calibrated**")
+       << " in " << Fixed(j.value("wall_s", 0.0), 1) << " s of wall time; units recalibrated "
+       << "meanwhile: "
+       << (j.contains("others_recalibrated") && !j["others_recalibrated"].empty()
+               ? j["others_recalibrated"].dump()
+               : std::string("none"))
+       << "; projectors given no new frame meanwhile (world's frame log): "
+       << (j.contains("units_showing_the_same_frame") ? j["units_showing_the_same_frame"].dump()
+                                                      : std::string("?"))
+       << ".";
+    if (j.contains("report")) {
+      const json& jr = j["report"];
+      md << " Its round: " << jr.value("site_frames", 0) << " frames ("
+         << Fixed(jr.value("device_time_s", 0.0), 3) << " s of modeled projection), solve "
+         << Fixed(jr.value("solve_compute_s", 0.0), 2) << " s.";
+    }
+    md << " Its registration error is in the unit rows above.\n\n";
+  }
   if (r.self_calibration.contains("runner_report")) {
     const json& rr = r.self_calibration["runner_report"];
     md << "## Self-calibration\n\n"
@@ -294,8 +317,7 @@ std::string LabReportMarkdown(const LabResult& r) {
        << rr.value("colours", 0) << " colours; slowest node's compute "
        << Fixed(r.self_calibration.value("compute_time_s", 0.0), 2) << " s (one core); "
        << Fixed(r.self_calibration.value("messages_per_node", 0.0), 0) << " messages and "
-       << Fixed(r.self_calibration.value("bytes_per_node", 0.0) / 1024.0, 0)
-       << " KiB per node.\n\n"
+       << Fixed(r.self_calibration.value("bytes_per_node", 0.0) / 1024.0, 0) << " KiB per node.\n\n"
        << "Path: **" << rr.value("path", std::string("?")) << "** ("
        << rr.value("path_reason", std::string()) << ").\n\n";
     if (rr.contains("planarity") && rr["planarity"].is_object()) {

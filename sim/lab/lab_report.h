@@ -73,6 +73,7 @@ struct LabResult {
   // Self-calibration (docs/calibration.md): the runner's report, per-unit compute, messages
   // and bytes; units that could not calibrate and why; the model's placement against the truth.
   nlohmann::json self_calibration = nlohmann::json::object();
+  nlohmann::json join;  // --join-late: the late unit's join (null when none)
   std::map<NodeId, std::string> unit_failures;
   bool model_offset_measured = false;
   // The nodes found no placement of the model: the registration was measured with the true one

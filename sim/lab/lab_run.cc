@@ -10,6 +10,7 @@
 #include <map>
 #include <optional>
 #include <set>
+#include <sstream>
 
 #include <nlohmann/json.hpp>
 
@@ -97,8 +98,8 @@ class LabRun {
     result_.metric_options.num_samples = options_.metric_samples;
     result_.metric_options.seed = options_.seed;
     if (int usage = Prepare(); usage != kExitOk) return usage;
-    const bool ok =
-        StartWorld() && StartCoordinator() && StartNodes() && Calibrate() && Hold() && Measure();
+    const bool ok = StartWorld() && StartCoordinator() && StartNodes() && Calibrate() && Join() &&
+                    Hold() && Measure();
     (void)ok;  // a failure is in result_.failure
     return Finish();
   }
@@ -157,11 +158,21 @@ class LabRun {
     return kExitOk;
   }
 
+  std::string FrameLogPath() const {
+    return fs::absolute(fs::path(options_.out_dir) / "world_frames.jsonl").string();
+  }
+  static int64_t SystemMs() {
+    return std::chrono::duration_cast<std::chrono::milliseconds>(
+               std::chrono::system_clock::now().time_since_epoch())
+        .count();
+  }
+
   bool StartWorld() {
     Phase("start world", 1);
-    ChildProcess* world = StartChild("world", "world",
-                                     {world_bin_, "serve", "--site", inputs_.site_path, "--scene",
-                                      inputs_.scene_path, "--bind", "tcp://127.0.0.1:*"});
+    ChildProcess* world =
+        StartChild("world", "world",
+                   {world_bin_, "serve", "--site", inputs_.site_path, "--scene", inputs_.scene_path,
+                    "--bind", "tcp://127.0.0.1:*", "--frame-log", FrameLogPath()});
     if (!world) return false;
     return Wait(
         "start world", [&] { return !world_endpoint_.empty(); }, ToMs(options_.start_timeout_s),
@@ -184,11 +195,113 @@ class LabRun {
         coordinator);
   }
 
+  bool Late(NodeId id) const {
+    return options_.join_late >= 0 && static_cast<NodeId>(options_.join_late) == id;
+  }
+  int ExpectedUnits() const {
+    int n = 0;
+    for (const UnitSpec& unit : inputs_.site.units) n += Late(unit.id) ? 0 : 1;
+    return n;
+  }
+
   bool StartNodes() {
-    const int n = result_.num_units;
+    const int n = ExpectedUnits();
     Phase("start nodes", n);
-    const std::string export_dir = fs::absolute(fs::path(options_.out_dir) / "calibration");
     for (const UnitSpec& unit : inputs_.site.units) {
+      if (!Late(unit.id) && !StartNode(unit)) return false;
+    }
+    return Wait(
+        "start nodes", [&] { return static_cast<int>(nodes_ready_.size()) == n; },
+        ToMs(options_.start_timeout_s),
+        "not every sandtable-node printed its readiness line "
+        "{\"ready\":\"sandtable-node\",\"id\":N,..}",
+        nullptr, [&] { return static_cast<int>(nodes_ready_.size()); },
+        [&] { return Missing(nodes_ready_); });
+  }
+
+  // The late unit (--join-late): started once the others hold their calibration; done when it
+  // holds its own, and 2 s more so that a round that recalibrated the others would show.
+  bool Join() {
+    if (options_.join_late < 0) return true;
+    Phase("join", 1);
+    const NodeId late = static_cast<NodeId>(options_.join_late);
+    const std::map<NodeId, json> before = calibrated_;
+    const auto t0 = std::chrono::steady_clock::now();
+    const int64_t t0_ms = SystemMs();
+    const UnitSpec* spec = inputs_.site.FindUnit(late);
+    if (!spec) {
+      return FailedWith("join", "--join-late " + std::to_string(late) + ": the site has no unit " +
+                                    std::to_string(late));
+    }
+    if (!StartNode(*spec)) return false;
+    if (!Wait(
+            "join", [&] { return calibrated_.count(late) || calibration_failed_.count(late); },
+            ToMs(options_.calibration_timeout_s), "the late sandtable-node reported no calibration",
+            nullptr, [&] { return static_cast<int>(calibrated_.count(late)); },
+            [&] { return "node-" + std::to_string(late); })) {
+      return false;
+    }
+    const double wall_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const bool never = false;
+    const WaitOutcome settled =
+        supervisor_.WaitUntil([&] { return never; }, ToMs(2.0), stop_, Handler());
+    if (settled != WaitOutcome::kDeadline) return Failed("join", settled, "", nullptr);
+    std::vector<NodeId> recalibrated;
+    for (const auto& [id, line] : before) {
+      if (calibrated_.at(id).value("round", uint64_t{0}) != line.value("round", uint64_t{0}))
+        recalibrated.push_back(id);
+    }
+    // What every projector was given meanwhile, from the world's own record.
+    const int64_t t1_ms = SystemMs();
+    std::map<NodeId, int> frames;
+    std::map<NodeId, std::set<std::string>> distinct;
+    for (const UnitSpec& unit : inputs_.site.units) frames[unit.id] = 0;
+    if (Expected<std::string> log = ReadInputFile(FrameLogPath(), size_t{256} << 20, "256 MiB");
+        log.ok()) {
+      std::istringstream lines(*log);
+      for (std::string text; std::getline(lines, text);) {
+        json line = json::parse(text, nullptr, false);
+        if (line.is_discarded() || !line.is_object()) continue;
+        const int64_t t = line.value("time_ms", int64_t{0});
+        if (t < t0_ms || t > t1_ms) continue;
+        const NodeId p = line.value("projector", kInvalidNodeId);
+        ++frames[p];
+        distinct[p].insert(line.value("hash", std::string()));
+      }
+    }
+    json frames_json = json::object();
+    std::vector<NodeId> unchanged;
+    for (const auto& [p, count] : frames) {
+      frames_json[std::to_string(p)] = {{"frames_set", count}, {"distinct", distinct[p].size()}};
+      if (p != late && count == 0) unchanged.push_back(p);
+    }
+    json join = {{"unit", late},
+                 {"wall_s", wall_s},
+                 {"calibrated", calibrated_.count(late) > 0},
+                 {"others_recalibrated", recalibrated},
+                 {"frames_during_join", frames_json},
+                 {"units_showing_the_same_frame", unchanged}};
+    if (calibrated_.count(late)) {
+      const std::string path = calibrated_.at(late).value("join_report", std::string());
+      if (!path.empty()) {
+        Expected<std::string> text = ReadInputFile(path, size_t{16} << 20, "16 MiB");
+        if (text.ok()) {
+          json parsed = json::parse(*text, nullptr, false);
+          if (!parsed.is_discarded()) join["report"] = parsed;
+        }
+      }
+    } else {
+      join["error"] = calibration_failed_.at(late);
+    }
+    result_.join = join;
+    progress_.End();
+    return true;
+  }
+
+  bool StartNode(const UnitSpec& unit) {
+    const std::string export_dir = fs::absolute(fs::path(options_.out_dir) / "calibration");
+    {
       const std::string id = std::to_string(unit.id);
       std::vector<std::string> argv = {node_bin_,
                                        "--id",
@@ -218,19 +331,13 @@ class LabRun {
       ChildProcess* node = StartChild("node-" + id, "node", argv);
       if (!node) return false;
     }
-    return Wait(
-        "start nodes", [&] { return static_cast<int>(nodes_ready_.size()) == n; },
-        ToMs(options_.start_timeout_s),
-        "not every sandtable-node printed its readiness line "
-        "{\"ready\":\"sandtable-node\",\"id\":N,..}",
-        nullptr, [&] { return static_cast<int>(nodes_ready_.size()); },
-        [&] { return Missing(nodes_ready_); });
+    return true;
   }
 
   bool TruePoseMode() const { return options_.calibration == "true-pose"; }
 
   bool Calibrate() {
-    const int n = result_.num_units;
+    const int n = ExpectedUnits();
     Phase("calibration held", n);
     // A node that reports it could not calibrate is done too: the report names it and why.
     // With saved calibrations: when one does not hold (or a unit has none) a round runs, and
@@ -690,6 +797,10 @@ Status LabRunOptions::Check() const {
   }
   if (metric_samples < 1) return InvalidArgumentError("--samples must be >= 1");
   if (image_width_px < 16) return InvalidArgumentError("--image-width must be >= 16");
+  if (join_late >= 0 && (calibration == "true-pose" || !saved_calibration.empty())) {
+    return InvalidArgumentError(
+        "--join-late: only with structured-light calibration and no --saved-calibration");
+  }
   return OkStatus();
 }
 

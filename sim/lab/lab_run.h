@@ -63,6 +63,10 @@ struct LabRunOptions {
   // Self-calibration path of the nodes: "auto" (planar when every footprint is planar) or
   // "full" (docs/calibration.md, "Planar sites").
   std::string calibration_path = "auto";
+  // A unit started only once the others hold their calibration (a live join, docs/lab.md):
+  // it is calibrated against them; the report says whether any of them was recalibrated.
+  // -1: none.
+  int join_late = -1;
   std::string command_line;  // for the report
   Status Check() const;
 };

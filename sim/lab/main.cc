@@ -6,6 +6,7 @@
 //                     [--calibration-timeout-s S] [--image-width W] [--progress auto|bar|plain]
 //                     [--calibration structured-light|true-pose] [--model FILE.gltf]
 //                     [--saved-calibration DIR] [--calibration-path auto|full]
+//                     [--join-late ID]
 //
 // Exit codes: 0 ok, 1 the run failed (report written), 2 usage, 130 interrupted (SIGINT or
 // SIGTERM: the site is torn down and the report says so).
@@ -78,6 +79,11 @@ static int Run(int argc, char** argv) {
                   "self-calibration: auto (the planar path when every footprint is planar) or "
                   "full (for comparison)")
       ->check(CLI::IsMember({"auto", "full"}));
+  run->add_option("--join-late", options.join_late,
+                  "start this unit only once the others hold their calibration: it joins the "
+                  "calibrated site (a live join; the report says whether any other unit was "
+                  "recalibrated)")
+      ->check(CLI::Range(0, 1 << 20));
   run->add_option("--image-width", options.image_width_px, "Width of the report's pictures (px)")
       ->check(cli::Integer<int>(16, 8192));
   run->add_flag("--curve", options.curve,

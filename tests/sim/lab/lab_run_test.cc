@@ -243,6 +243,32 @@ TEST_F(LabRunTest, Sandtable3NamesTheFaultsAndTheOthersFinish) {
   EXPECT_TRUE(AllProcessesGone(ReadJson("run/processes.json")));
 }
 
+// A live join: unit 2 starts once units 0 and 1 hold their calibration; it is calibrated
+// against them (held), nobody is recalibrated, and the world's frame log shows that units 0
+// and 1 were given no new frame meanwhile.
+TEST_F(LabRunTest, Sandtable3LateUnitJoinsWithoutRecalibratingTheOthers) {
+  ChildProcess lab(LabArgs({"--join-late", "2"}));
+  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
+  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "report.md";
+  const json report = ReadJson("report.json");
+  ASSERT_FALSE(report.is_discarded());
+  const json& c = report["calibration"];
+  ASSERT_TRUE(c.contains("join")) << c.dump();
+  const json& join = c["join"];
+  EXPECT_TRUE(join["calibrated"].get<bool>());
+  EXPECT_TRUE(join["others_recalibrated"].empty()) << join["others_recalibrated"].dump();
+  EXPECT_EQ(join["units_showing_the_same_frame"], json::array({0, 1}));
+  EXPECT_GT(join["frames_during_join"]["2"]["frames_set"].get<int>(), 0);
+  EXPECT_EQ(join["report"]["path"], "join");
+  // Unit 2 against the held units: the acceptance figures of a full round.
+  const json& unit2 = c["per_unit"]["2"];
+  EXPECT_EQ(unit2["source"], "structured_light");
+  EXPECT_LT(unit2["rms_mm"].get<double>(), kAcceptanceRms_mm);
+  EXPECT_LT(unit2["rms_px"].get<double>(), kAcceptanceRms_px);
+  EXPECT_LT(unit2["max_mm"].get<double>(), kAcceptanceMax_mm);
+  EXPECT_TRUE(AllProcessesGone(ReadJson("processes.json")));
+}
+
 TEST_F(LabRunTest, Sandtable3WritesTheReportAndLeavesNoProcess) {
   ChildProcess lab(LabArgs({"--calibration", "true-pose"}));
   ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
@@ -324,9 +350,10 @@ TEST_F(LabRunTest, HelpListsEveryFlag) {
   std::string text;
   while (std::optional<std::string> line = lab.ReadLine(kRunDeadline)) text += *line + "\n";
   EXPECT_EQ(lab.Wait(), 0);
-  for (const char* flag : {"--site", "--scene", "--out", "--seed", "--hold-s", "--bin-dir",
-                           "--samples", "--start-timeout-s", "--calibration-timeout-s",
-                           "--image-width", "--progress", "--calibration", "--model"}) {
+  for (const char* flag :
+       {"--site", "--scene", "--out", "--seed", "--hold-s", "--bin-dir", "--samples",
+        "--start-timeout-s", "--calibration-timeout-s", "--image-width", "--progress",
+        "--calibration", "--model", "--saved-calibration", "--calibration-path", "--join-late"}) {
     EXPECT_NE(text.find(flag), std::string::npos) << flag;
   }
 }
