@@ -206,6 +206,32 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
     }
     ST_LOG(kInfo) << "self-calibration: " << rr.cameras_seeing.size() << " projectors in "
                   << colour_count << " colours";
+    // A join round: the calibrated neighbours whose cameras saw a joining projector's light
+    // blank it in what they display while its sequence is captured (and only then).
+    Runner::Stage blank, restore;
+    blank.label = "neighbours blank";
+    restore.label = "neighbours restore";
+    if (rr.join) {
+      std::set<NodeId> neighbours;
+      for (const auto& [p, seeing] : rr.cameras_seeing) {
+        for (NodeId cam : seeing) {
+          if (std::find(rr.projecting.begin(), rr.projecting.end(), cam) != rr.projecting.end())
+            continue;
+          wire::CalibrationStep b = MakeStep(rr.round, wire::CALIBRATION_ACTION_BLANK);
+          b.set_about_projector(p);
+          b.set_has_about_projector(true);
+          b.set_blank_on(true);
+          blank.commands.push_back({cam, b});
+          neighbours.insert(cam);
+        }
+      }
+      for (NodeId cam : neighbours) {
+        wire::CalibrationStep b = MakeStep(rr.round, wire::CALIBRATION_ACTION_BLANK);
+        b.set_blank_on(false);
+        restore.commands.push_back({cam, b});
+      }
+      if (!blank.commands.empty()) rr.stages.push_back(blank);
+    }
     // One sequence per colour class.
     for (int colour = 0; colour < colour_count; ++colour) {
       std::vector<NodeId> projectors;
@@ -244,6 +270,7 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
         rr.stages.push_back(capture);
       }
       rr.site_frames += frames;
+      if (colour == colour_count - 1 && !restore.commands.empty()) rr.stages.push_back(restore);
       Runner::Stage off, decode;
       off.label = "colour " + std::to_string(colour) + " off";
       decode.label = "colour " + std::to_string(colour) + " decode";
@@ -377,6 +404,9 @@ void SelfCalibrationService::RunnerDone(NodeId from, const wire::CalibrationStep
       r.overlaps.insert(
           {std::min<NodeId>(other, command.about), std::max<NodeId>(other, command.about)});
     }
+  }
+  if (command.step.action() == wire::CALIBRATION_ACTION_BLANK && command.step.blank_on()) {
+    r.blanked_px[from] = std::max(r.blanked_px[from], done.blanked_pixels());
   }
   if (command.step.action() == wire::CALIBRATION_ACTION_DECODE && done.points() < 50) {
     r.notes.push_back("camera " + std::to_string(from) + " decoded " +
@@ -698,6 +728,12 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
                : nlohmann::json{{"planar", false}, {"error", p.message()}};
   }
   report["planarity"] = planarity;
+  if (r.join) {
+    nlohmann::json blanked = nlohmann::json::object();
+    for (const auto& [id, px] : r.blanked_px) blanked[std::to_string(id)] = px;
+    report["joining"] = r.projecting;
+    report["neighbours_blanked_px"] = blanked;
+  }
   nlohmann::json left = nlohmann::json::object();
   for (const auto& [id, why] : r.left_out) left[std::to_string(id)] = why;
   report["left_out"] = left;

@@ -6,6 +6,7 @@
 #include "node/app/calibration_service.h"
 #include "node/app/self_calibration_runner.h"
 #include "node/calibration/cluster_initializer.h"
+#include "node/calibration/display_frames.h"
 #include "proto/convert.h"
 
 namespace sandtable::node {
@@ -238,7 +239,9 @@ void SelfCalibrationService::MaybeVerify(NodeRuntime& node) {
         node.set_calibration_state(wire::CALIBRATION_STATE_VERIFIED);
         SelfCalibrationOutcome outcome = Outcome(*saved_);
         outcome.verified = true;
-        if (on_calibrated_) on_calibrated_(outcome);
+        StartDisplay(*saved_, node, [this, outcome] {
+          if (on_calibrated_) on_calibrated_(outcome);
+        });
       });
 }
 
@@ -464,6 +467,60 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
           });
       return;
     }
+    case wire::CALIBRATION_ACTION_BLANK: {
+      // A calibrated unit while a joining neighbour captures: its display blanked where that
+      // neighbour's light fell in this unit's camera, or restored.
+      auto lit = lit_masks_.find(step.about_projector());
+      if (!projector_ || display_.empty() || !holding_ ||
+          (step.blank_on() && lit == lit_masks_.end())) {
+        done.set_ok(true);  // nothing shown, or nothing of it seen: nothing to blank
+        Answer(from, done, node);
+        return;
+      }
+      ProjectorOutput* projector = projector_;
+      const cv::Mat display = display_;
+      const cv::Mat camera_mask = step.blank_on() ? lit->second : cv::Mat();
+      const UnitCalibration holding = *holding_;
+      std::shared_ptr<const Scene> model = model_;
+      struct Blanked {
+        Status status = OkStatus();
+        int pixels = 0;
+        double cpu_s = 0.0;
+      };
+      node.workers().Run<Blanked>(
+          [projector, display, camera_mask, holding, model] {
+            Blanked b;
+            const double t0 = ThreadCpuSeconds();
+            cv::Mat frame = display;
+            if (!camera_mask.empty()) {
+              Expected<cv::Mat> mask = JoinBlankMask(holding, model.get(), camera_mask);
+              if (!mask.ok()) {
+                b.status = mask.status();
+                return b;
+              }
+              frame = display.clone();
+              frame.setTo(0, *mask);
+              b.pixels = cv::countNonZero(*mask);
+            }
+            b.cpu_s = ThreadCpuSeconds() - t0;
+            Expected<ShownFrame> shown = projector->Show(frame);
+            if (!shown.ok()) b.status = shown.status();
+            return b;
+          },
+          [this, from, done, step, &node](Blanked b) mutable {
+            compute_s_ += b.cpu_s;
+            done.set_compute_s(b.cpu_s);
+            done.set_ok(b.status.ok());
+            if (!b.status.ok()) done.set_message(b.status.message());
+            done.set_blanked_pixels(static_cast<uint32_t>(b.pixels));
+            if (step.blank_on()) {
+              ST_LOG(kInfo) << "self-calibration: display blanked on " << b.pixels
+                            << " px while unit " << step.about_projector() << " captures";
+            }
+            Answer(from, done, node);
+          });
+      return;
+    }
     case wire::CALIBRATION_ACTION_LOCAL:
       pending_local_ = std::make_pair(step, from);
       pending_local_since_ = std::chrono::steady_clock::now();
@@ -601,6 +658,30 @@ void SelfCalibrationService::RunLocal(const wire::CalibrationStep& step, NodeId 
       });
 }
 
+void SelfCalibrationService::StartDisplay(const UnitCalibration& calibration, NodeRuntime& node,
+                                          std::function<void()> then) {
+  holding_ = calibration;
+  if (!projector_) return then();
+  Expected<cv::Mat> grid = TableGridFrame(calibration);
+  if (!grid.ok() || grid->size() != projector_->size()) {
+    ST_LOG(kWarning) << "self-calibration: no display frame: "
+                     << (grid.ok() ? "size" : grid.status().message());
+    return then();
+  }
+  display_ = *grid;
+  ProjectorOutput* projector = projector_;
+  const cv::Mat frame = display_;
+  node.workers().Run<Status>(
+      [projector, frame] {
+        Expected<ShownFrame> shown = projector->Show(frame);
+        return shown.ok() ? OkStatus() : shown.status();
+      },
+      [then = std::move(then)](Status shown) {
+        if (!shown.ok()) ST_LOG(kWarning) << "self-calibration: display: " << shown.message();
+        then();
+      });
+}
+
 void SelfCalibrationService::HandleResult(const wire::CalibrationResult& result,
                                           NodeRuntime& node) {
   if (result.projector_id() != node.id()) return;
@@ -640,7 +721,11 @@ void SelfCalibrationService::HandleResult(const wire::CalibrationResult& result,
   node.set_calibration_state(wire::CALIBRATION_STATE_CALIBRATED);
   ST_LOG(kInfo) << "self-calibration: calibrated (projector rms " << c.projector_rms_px
                 << " px, compute " << compute_s_ << " s)";
-  if (on_calibrated_) on_calibrated_(outcome);
+  // Reported once its display is on the projector (a lab that starts a late unit right after
+  // sees the display already there).
+  StartDisplay(c, node, [this, outcome] {
+    if (on_calibrated_) on_calibrated_(outcome);
+  });
 }
 
 Status SelfCalibrationService::OnStep(NodeRuntime& node) {

@@ -183,6 +183,13 @@ class SelfCalibrationService : public NodeService {
   uint64_t messages_sent_ = 0, messages_received_ = 0, bytes_sent_ = 0, bytes_received_ = 0;
   std::shared_ptr<const MpcdiSite> site_mpcdi_;  // the runner's, of the last round solved
   std::optional<UnitCalibration> saved_;
+  // What the unit shows between calibrations (display_frames.h: the table grid of the
+  // calibration it holds), and that calibration; empty until it holds one.
+  cv::Mat display_;
+  std::optional<UnitCalibration> holding_;
+  // Shows the display of `calibration` (on a worker), then runs `then`.
+  void StartDisplay(const UnitCalibration& calibration, NodeRuntime& node,
+                    std::function<void()> then);
   OnVerification on_verification_;
   bool verify_started_ = false;
   bool logged_all_hold_ = false;

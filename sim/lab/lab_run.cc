@@ -256,6 +256,7 @@ class LabRun {
     const int64_t t1_ms = SystemMs();
     std::map<NodeId, int> frames;
     std::map<NodeId, std::set<std::string>> distinct;
+    std::map<NodeId, std::string> hash_before, hash_after;
     for (const UnitSpec& unit : inputs_.site.units) frames[unit.id] = 0;
     if (Expected<std::string> log = ReadInputFile(FrameLogPath(), size_t{256} << 20, "256 MiB");
         log.ok()) {
@@ -264,16 +265,23 @@ class LabRun {
         json line = json::parse(text, nullptr, false);
         if (line.is_discarded() || !line.is_object()) continue;
         const int64_t t = line.value("time_ms", int64_t{0});
-        if (t < t0_ms || t > t1_ms) continue;
         const NodeId p = line.value("projector", kInvalidNodeId);
+        const std::string hash = line.value("hash", std::string());
+        if (t < t0_ms) hash_before[p] = hash;
+        if (t < t0_ms || t > t1_ms) continue;
         ++frames[p];
-        distinct[p].insert(line.value("hash", std::string()));
+        distinct[p].insert(hash);
+        hash_after[p] = hash;
       }
     }
     json frames_json = json::object();
     std::vector<NodeId> unchanged;
     for (const auto& [p, count] : frames) {
-      frames_json[std::to_string(p)] = {{"frames_set", count}, {"distinct", distinct[p].size()}};
+      frames_json[std::to_string(p)] = {
+          {"frames_set", count},
+          {"distinct", distinct[p].size()},
+          // Back on the frame it showed before the join (or never given another).
+          {"restored", count == 0 || (hash_before.count(p) && hash_after[p] == hash_before[p])}};
       if (p != late && count == 0) unchanged.push_back(p);
     }
     json join = {{"unit", late},

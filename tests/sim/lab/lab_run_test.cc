@@ -243,9 +243,10 @@ TEST_F(LabRunTest, Sandtable3NamesTheFaultsAndTheOthersFinish) {
   EXPECT_TRUE(AllProcessesGone(ReadJson("run/processes.json")));
 }
 
-// A live join: unit 2 starts once units 0 and 1 hold their calibration; it is calibrated
-// against them (held), nobody is recalibrated, and the world's frame log shows that units 0
-// and 1 were given no new frame meanwhile.
+// A live join: unit 2 starts once units 0 and 1 hold their calibration (and show their
+// display); it is calibrated against them (held), nobody is recalibrated, and the world's frame
+// log shows that units 0 and 1 (both overlap unit 2 on sandtable-3) were given exactly two
+// frames meanwhile: their display blanked where unit 2 lights, and their display again.
 TEST_F(LabRunTest, Sandtable3LateUnitJoinsWithoutRecalibratingTheOthers) {
   ChildProcess lab(LabArgs({"--join-late", "2"}));
   ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
@@ -257,7 +258,14 @@ TEST_F(LabRunTest, Sandtable3LateUnitJoinsWithoutRecalibratingTheOthers) {
   const json& join = c["join"];
   EXPECT_TRUE(join["calibrated"].get<bool>());
   EXPECT_TRUE(join["others_recalibrated"].empty()) << join["others_recalibrated"].dump();
-  EXPECT_EQ(join["units_showing_the_same_frame"], json::array({0, 1}));
+  for (const char* id : {"0", "1"}) {
+    const json& frames = join["frames_during_join"][id];
+    EXPECT_EQ(frames["frames_set"].get<int>(), 2) << id << ": " << frames.dump();
+    EXPECT_TRUE(frames["restored"].get<bool>()) << id;
+    const int blanked = join["report"]["neighbours_blanked_px"][id].get<int>();
+    EXPECT_GT(blanked, 0) << id;
+    EXPECT_LT(blanked, 1280 * 800) << id;  // only where unit 2 lights
+  }
   EXPECT_GT(join["frames_during_join"]["2"]["frames_set"].get<int>(), 0);
   EXPECT_EQ(join["report"]["path"], "join");
   // Unit 2 against the held units: the acceptance figures of a full round.
