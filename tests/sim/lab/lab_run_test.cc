@@ -243,6 +243,32 @@ TEST_F(LabRunTest, Sandtable3NamesTheFaultsAndTheOthersFinish) {
   EXPECT_TRUE(AllProcessesGone(ReadJson("run/processes.json")));
 }
 
+// A projector that no camera sees (unit 2's lamp all but dead: 1e-5 of its light; a site file
+// refuses a projector aimed off the table): the report names the unit and the cause, its camera
+// still serves its neighbours, and the other units calibrate.
+TEST_F(LabRunTest, Sandtable3NamesAProjectorNoCameraSees) {
+  Expected<Site> site = MakeSitePreset("sandtable-3");
+  ASSERT_TRUE(site.ok());
+  site->units[2].projector.peak_luminance_at_1m_nits *= 1e-5;
+  std::filesystem::create_directories(dir_);
+  const std::filesystem::path site_path = dir_ / "site-turned.json";
+  ASSERT_TRUE(WriteSiteFile(*site, site_path.string()).ok());
+  ChildProcess lab(LabArgs({}, site_path.string(), dir_ / "run"));
+  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
+  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "run" / "report.md";
+  const json report = ReadJson("run/report.json");
+  ASSERT_FALSE(report.is_discarded());
+  const json& c = report["calibration"];
+  ASSERT_TRUE(c.contains("failures")) << c.dump();
+  const std::string why = c["failures"]["2"].get<std::string>();
+  EXPECT_NE(why.find("projector 2: no camera sees it"), std::string::npos) << why;
+  for (const char* id : {"0", "1"}) {
+    EXPECT_EQ(c["per_unit"][id]["source"], "structured_light") << id;
+    EXPECT_LT(c["per_unit"][id]["rms_mm"].get<double>(), kAcceptanceMax_mm) << id;
+  }
+  EXPECT_TRUE(AllProcessesGone(ReadJson("run/processes.json")));
+}
+
 // A live join: unit 2 starts once units 0 and 1 hold their calibration (and show their
 // display); it is calibrated against them (held), nobody is recalibrated, and the world's frame
 // log shows that units 0 and 1 (both overlap unit 2 on sandtable-3) were given exactly two
