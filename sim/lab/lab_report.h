@@ -74,6 +74,7 @@ struct LabResult {
   // and bytes; units that could not calibrate and why; the model's placement against the truth.
   nlohmann::json self_calibration = nlohmann::json::object();
   nlohmann::json join;  // --join-late: the late unit's join (null when none)
+  nlohmann::json kill;  // --kill-unit: what the others did (null when none)
   std::map<NodeId, std::string> unit_failures;
   bool model_offset_measured = false;
   // The nodes found no placement of the model: the registration was measured with the true one

@@ -5,6 +5,7 @@
 #include <Eigen/Geometry>
 
 #include <chrono>
+#include <csignal>
 #include <filesystem>
 #include <future>
 #include <map>
@@ -344,13 +345,64 @@ class LabRun {
 
   bool TruePoseMode() const { return options_.calibration == "true-pose"; }
 
+  // --kill-unit: SIGKILL the unit once kill_at_s have passed since the calibration phase began.
+  void MaybeKill() {
+    const bool holding = hold_started_ != std::chrono::steady_clock::time_point{};
+    if (options_.kill_unit < 0 || killed_ || (options_.kill_after_calibration && !holding)) return;
+    const auto from = options_.kill_after_calibration ? hold_started_ : calibration_started_;
+    if (std::chrono::steady_clock::now() - from <
+        std::chrono::duration<double>(options_.kill_at_s)) {
+      return;
+    }
+    const NodeId unit = static_cast<NodeId>(options_.kill_unit);
+    for (const auto& child : supervisor_.children()) {
+      if (child->name() != "node-" + std::to_string(unit)) continue;
+      supervisor_.ExpectExit(child.get());
+      child->Signal(SIGKILL);
+      killed_ = true;
+      kill_at_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - from).count();
+      killed_while_calibrating_ = !calibrated_.count(unit);
+      calibrated_at_kill_ = calibrated_;
+      if (killed_while_calibrating_) {
+        calibration_failed_[unit] = "unit " + std::to_string(unit) + ": killed by the lab " +
+                                    std::to_string(kill_at_s_) +
+                                    " s into the calibration (--kill-unit)";
+      }
+      ST_LOG(kWarning) << "lab: killed node-" << unit << " (--kill-unit)";
+    }
+  }
+
+  // What the other units did after the kill (their calibrated lines' rounds).
+  void RecordKill() {
+    if (!killed_) return;
+    const NodeId unit = static_cast<NodeId>(options_.kill_unit);
+    std::vector<NodeId> recalibrated;
+    for (const auto& [id, line] : calibrated_at_kill_) {
+      if (id == unit) continue;
+      if (calibrated_.at(id).value("round", uint64_t{0}) != line.value("round", uint64_t{0}))
+        recalibrated.push_back(id);
+    }
+    std::vector<NodeId> finished;
+    for (const auto& [id, line] : calibrated_) {
+      if (id != unit) finished.push_back(id);
+    }
+    result_.kill = {{"unit", unit},
+                    {"at_s", kill_at_s_},
+                    {"counted_from", options_.kill_after_calibration ? "hold" : "calibration"},
+                    {"during_calibration", killed_while_calibrating_},
+                    {"others_calibrated", finished},
+                    {"others_recalibrated_after_the_kill", recalibrated}};
+  }
+
   bool Calibrate() {
     const int n = ExpectedUnits();
     Phase("calibration held", n);
     // A node that reports it could not calibrate is done too: the report names it and why.
     // With saved calibrations: when one does not hold (or a unit has none) a round runs, and
     // every unit's result must then come from it (a unit whose saved one held reports twice).
+    calibration_started_ = std::chrono::steady_clock::now();
     auto done = [&] {
+      MaybeKill();
       if (static_cast<int>(calibrated_.size() + calibration_failed_.size()) < n) return false;
       bool round_needed = static_cast<int>(given_saved_.size()) < n;
       for (const auto& [id, line] : verification_) round_needed |= !line.value("holds", false);
@@ -375,9 +427,13 @@ class LabRun {
   bool Hold() {
     if (options_.hold_s <= 0) return true;
     Phase("hold", 0);
-    const bool never = false;
-    const WaitOutcome outcome =
-        supervisor_.WaitUntil([&] { return never; }, ToMs(options_.hold_s), stop_, Handler());
+    hold_started_ = std::chrono::steady_clock::now();
+    const WaitOutcome outcome = supervisor_.WaitUntil(
+        [&] {
+          MaybeKill();
+          return false;
+        },
+        ToMs(options_.hold_s), stop_, Handler());
     if (outcome == WaitOutcome::kDeadline) {
       progress_.End();
       return true;
@@ -386,6 +442,7 @@ class LabRun {
   }
 
   bool Measure() {
+    RecordKill();
     Phase("metrics", result_.num_units);
     std::vector<EstimatedRegistration> estimates;
     std::set<std::string> sources;
@@ -788,6 +845,10 @@ class LabRun {
   std::string progress_phase_;
   std::string world_endpoint_, coordinator_requests_, coordinator_events_;
   std::set<NodeId> nodes_ready_;
+  std::chrono::steady_clock::time_point calibration_started_{}, hold_started_{};
+  bool killed_ = false, killed_while_calibrating_ = false;
+  double kill_at_s_ = 0.0;
+  std::map<NodeId, json> calibrated_at_kill_;
   std::map<NodeId, json> calibrated_;
   std::map<NodeId, std::string> calibration_failed_;
   std::set<NodeId> given_saved_;         // nodes started with --saved-calibration
@@ -805,6 +866,7 @@ Status LabRunOptions::Check() const {
   }
   if (metric_samples < 1) return InvalidArgumentError("--samples must be >= 1");
   if (image_width_px < 16) return InvalidArgumentError("--image-width must be >= 16");
+  if (kill_unit >= 0 && !(kill_at_s >= 0)) return InvalidArgumentError("--kill-at-s must be >= 0");
   if (join_late >= 0 && (calibration == "true-pose" || !saved_calibration.empty())) {
     return InvalidArgumentError(
         "--join-late: only with structured-light calibration and no --saved-calibration");

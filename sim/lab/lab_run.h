@@ -67,7 +67,13 @@ struct LabRunOptions {
   // it is calibrated against them; the report says whether any of them was recalibrated.
   // -1: none.
   int join_late = -1;
-  std::string command_line;  // for the report
+  // A unit the lab kills (SIGKILL) kill_at_s seconds after the calibration phase began: during
+  // the round (a node lost mid-calibration) or, with a --hold-s past it, after (a node that
+  // leaves). The run goes on; the report says what the others did. -1: none.
+  int kill_unit = -1;
+  double kill_at_s = 0.0;
+  bool kill_after_calibration = false;  // kill_at_s counted from the hold phase's start
+  std::string command_line;             // for the report
   Status Check() const;
 };
 

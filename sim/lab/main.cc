@@ -6,7 +6,7 @@
 //                     [--calibration-timeout-s S] [--image-width W] [--progress auto|bar|plain]
 //                     [--calibration structured-light|true-pose] [--model FILE.gltf]
 //                     [--saved-calibration DIR] [--calibration-path auto|full]
-//                     [--join-late ID]
+//                     [--join-late ID] [--kill-unit ID --kill-at-s S]
 //
 // Exit codes: 0 ok, 1 the run failed (report written), 2 usage, 130 interrupted (SIGINT or
 // SIGTERM: the site is torn down and the report says so).
@@ -79,6 +79,15 @@ static int Run(int argc, char** argv) {
                   "self-calibration: auto (the planar path when every footprint is planar) or "
                   "full (for comparison)")
       ->check(CLI::IsMember({"auto", "full"}));
+  run->add_option("--kill-unit", options.kill_unit,
+                  "SIGKILL this unit --kill-at-s seconds after calibration began (during the "
+                  "round, or after it with a longer --hold-s); the run goes on")
+      ->check(CLI::Range(0, 1 << 20));
+  run->add_option("--kill-at-s", options.kill_at_s, "when --kill-unit strikes (s)")
+      ->check(CLI::Range(0.0, 3600.0));
+  run->add_flag("--kill-after-calibration", options.kill_after_calibration,
+                "count --kill-at-s from the hold phase (every unit calibrated): a node that "
+                "leaves a calibrated site");
   run->add_option("--join-late", options.join_late,
                   "start this unit only once the others hold their calibration: it joins the "
                   "calibrated site (a live join; the report says whether any other unit was "

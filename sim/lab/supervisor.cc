@@ -45,6 +45,10 @@ WaitOutcome Supervisor::WaitUntil(const std::function<bool()>& done,
     }
     if (done()) return WaitOutcome::kDone;
     for (const auto& child : children_) {
+      if (expected_exits_.count(child.get())) {
+        if (child->Reap()) child->ReadLines();
+        continue;
+      }
       if (child->Reap()) {
         child->ReadLines();  // drain the pipe into the log
         dead_child_ = child.get();

@@ -15,6 +15,7 @@
 #include <chrono>
 #include <functional>
 #include <memory>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -49,6 +50,8 @@ class Supervisor {
 
   // The child whose death ended the last WaitUntil (nullptr otherwise).
   const ChildProcess* dead_child() const { return dead_child_; }
+  // A child the caller is about to stop on purpose: its exit no longer ends a WaitUntil.
+  void ExpectExit(const ChildProcess* child) { expected_exits_.insert(child); }
   const std::vector<std::unique_ptr<ChildProcess>>& children() const { return children_; }
 
   // SIGTERM everyone (reverse start order: nodes, coordinator, world), SIGKILL after `grace`.
@@ -61,6 +64,7 @@ class Supervisor {
   std::string processes_json_path_;
   std::vector<std::unique_ptr<ChildProcess>> children_;
   const ChildProcess* dead_child_ = nullptr;
+  std::set<const ChildProcess*> expected_exits_;
 };
 
 }  // namespace sandtable::sim

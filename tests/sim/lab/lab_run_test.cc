@@ -269,6 +269,42 @@ TEST_F(LabRunTest, Sandtable3NamesAProjectorNoCameraSees) {
   EXPECT_TRUE(AllProcessesGone(ReadJson("run/processes.json")));
 }
 
+// A node killed in the middle of the calibration round (unit 2, 4 s in: the pre-pass or its
+// sequences): the runner leaves it out and says why, units 0 and 1 calibrate.
+TEST_F(LabRunTest, Sandtable3NodeKilledMidCalibrationIsNamedAndTheOthersFinish) {
+  ChildProcess lab(LabArgs({"--kill-unit", "2", "--kill-at-s", "4"}));
+  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
+  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "report.md";
+  const json report = ReadJson("report.json");
+  ASSERT_FALSE(report.is_discarded());
+  const json& c = report["calibration"];
+  ASSERT_TRUE(c.contains("kill")) << c.dump();
+  EXPECT_TRUE(c["kill"]["during_calibration"].get<bool>());
+  EXPECT_EQ(c["kill"]["others_calibrated"], json::array({0, 1}));
+  EXPECT_EQ(c["self_calibration_report"]["left_out"]["2"],
+            "unit 2: left the site during calibration");
+  for (const char* id : {"0", "1"}) {
+    EXPECT_EQ(c["per_unit"][id]["source"], "structured_light") << id;
+    EXPECT_LT(c["per_unit"][id]["rms_mm"].get<double>(), kAcceptanceMax_mm) << id;
+  }
+  EXPECT_TRUE(AllProcessesGone(ReadJson("processes.json")));
+}
+
+// A node that leaves a calibrated site (unit 2 killed 1 s into the hold; the coordinator drops
+// it within 0.5 s) causes no recalibration in the 7 s that follow.
+TEST_F(LabRunTest, Sandtable3NodeThatLeavesCausesNoRecalibration) {
+  ChildProcess lab(LabArgs(
+      {"--kill-unit", "2", "--kill-at-s", "1", "--kill-after-calibration", "--hold-s", "8"}));
+  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
+  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "report.md";
+  const json report = ReadJson("report.json");
+  ASSERT_FALSE(report.is_discarded());
+  const json& kill = report["calibration"]["kill"];
+  EXPECT_FALSE(kill["during_calibration"].get<bool>()) << kill.dump();
+  EXPECT_TRUE(kill["others_recalibrated_after_the_kill"].empty()) << kill.dump();
+  EXPECT_TRUE(AllProcessesGone(ReadJson("processes.json")));
+}
+
 // A live join: unit 2 starts once units 0 and 1 hold their calibration (and show their
 // display); it is calibrated against them (held), nobody is recalibrated, and the world's frame
 // log shows that units 0 and 1 (both overlap unit 2 on sandtable-3) were given exactly two
