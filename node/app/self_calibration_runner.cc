@@ -409,6 +409,9 @@ void SelfCalibrationService::RunnerDone(NodeId from, const wire::CalibrationStep
     r.blanked_px[from] = std::max(r.blanked_px[from], done.blanked_pixels());
   }
   if (command.step.action() == wire::CALIBRATION_ACTION_DECODE && done.points() < 50) {
+    ST_LOG(kWarning) << "self-calibration: camera " << from << " decoded " << done.points()
+                     << " points of projector " << command.step.projector_id()
+                     << " (too few to use)";
     r.notes.push_back("camera " + std::to_string(from) + " decoded " +
                       std::to_string(done.points()) + " points of projector " +
                       std::to_string(command.step.projector_id()) + " (too few to use)");
