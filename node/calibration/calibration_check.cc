@@ -45,6 +45,16 @@ Status CalibrationCheckOptions::Check() const {
   return OkStatus();
 }
 
+Expected<std::unique_ptr<RayCaster>> KnownSurfaceCaster(const UnitCalibration& calibration,
+                                                        const Scene* model) {
+  auto surface = std::make_shared<Scene>(
+      MakeRectangleMesh(Eigen::Vector2d(kTableSquare_m, kTableSquare_m), 0));
+  if (model && calibration.table_from_model) {
+    surface->Append(MovedScene(*model, *calibration.table_from_model));
+  }
+  return RayCaster::Create(std::shared_ptr<const Scene>(surface), "threads=1");
+}
+
 Expected<CalibrationCheckPlan> PlanCalibrationCheck(const UnitCalibration& calibration,
                                                     const Scene* model,
                                                     const CalibrationCheckOptions& options) {
@@ -53,13 +63,7 @@ Expected<CalibrationCheckPlan> PlanCalibrationCheck(const UnitCalibration& calib
   if (!calibration.table_from_projector) {
     return InvalidArgumentError("calibration check: the calibration has no table_from_projector");
   }
-  auto surface = std::make_shared<Scene>(
-      MakeRectangleMesh(Eigen::Vector2d(kTableSquare_m, kTableSquare_m), 0));
-  if (model && calibration.table_from_model) {
-    surface->Append(MovedScene(*model, *calibration.table_from_model));
-  }
-  Expected<std::unique_ptr<RayCaster>> caster =
-      RayCaster::Create(std::shared_ptr<const Scene>(surface), "threads=1");
+  Expected<std::unique_ptr<RayCaster>> caster = KnownSurfaceCaster(calibration, model);
   if (!caster.ok()) return caster.status();
   const CameraModel& projector = calibration.projector;
   const CameraModel& camera = calibration.camera;

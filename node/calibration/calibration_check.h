@@ -36,6 +36,7 @@
 
 #include "common/base/status.h"
 #include "common/io/unit_calibration_file.h"
+#include "common/scene/ray_caster.h"
 #include "common/scene/scene.h"
 
 namespace sandtable::node {
@@ -77,6 +78,12 @@ struct CalibrationCheckReport {
   double wall_median_px = 0.0;
   std::string reason;  // why it does not hold
 };
+
+// The surface a calibrated unit knows: the table plane (a 20 m square at z = 0 of the table
+// frame) and, when given and placed (calibration.table_from_model), the model; as an Embree
+// caster on one thread. Errors: the caster's.
+Expected<std::unique_ptr<RayCaster>> KnownSurfaceCaster(const UnitCalibration& calibration,
+                                                        const Scene* model);
 
 // INVALID_ARGUMENT when the calibration has no table_from_projector or fails its Check, or the
 // options are invalid; DEGENERATE when fewer than min_dots dots can be predicted. `model` (may be

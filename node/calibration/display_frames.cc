@@ -7,8 +7,7 @@
 
 #include <opencv2/imgproc.hpp>
 
-#include "common/scene/procedural_scene.h"
-#include "common/scene/ray_caster.h"
+#include "node/calibration/calibration_check.h"
 
 namespace sandtable::node {
 namespace {
@@ -16,7 +15,6 @@ namespace {
 // The grid covers this square about the table frame's origin quadrant (metres).
 constexpr double kGridFrom_m = -1.0, kGridTo_m = 4.0;
 constexpr double kGridSample_m = 0.005;
-constexpr double kTableSquare_m = 20.0;
 
 }  // namespace
 
@@ -67,13 +65,7 @@ Expected<cv::Mat> JoinBlankMask(const UnitCalibration& calibration, const Scene*
       camera_mask.rows != camera.height_px) {
     return InvalidArgumentError("blank mask: the camera mask must be CV_8UC1 of the camera's size");
   }
-  auto surface = std::make_shared<Scene>(
-      MakeRectangleMesh(Eigen::Vector2d(kTableSquare_m, kTableSquare_m), 0));
-  if (model && calibration.table_from_model) {
-    surface->Append(MovedScene(*model, *calibration.table_from_model));
-  }
-  Expected<std::unique_ptr<RayCaster>> caster =
-      RayCaster::Create(std::shared_ptr<const Scene>(surface), "threads=1");
+  Expected<std::unique_ptr<RayCaster>> caster = KnownSurfaceCaster(calibration, model);
   if (!caster.ok()) return caster.status();
   const Rigid3d table_from_camera =
       *calibration.table_from_projector * calibration.projector_from_camera;

@@ -67,6 +67,23 @@ class LabRunTest : public ::testing::Test {
     return false;
   }
 
+  // Runs the lab to its end: true when it printed its done line and exited 0; *report is then
+  // OUT/report.json (`out` under dir_; "" = dir_ itself).
+  bool RunToEnd(const std::vector<std::string>& args, const std::string& out, json* report) {
+    ChildProcess lab(args);
+    const std::filesystem::path where = out.empty() ? dir_ : dir_ / out;
+    if (!ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; })) {
+      ADD_FAILURE() << "the lab printed no done line; see " << where / "report.md";
+      return false;
+    }
+    if (const int code = lab.Wait(); code != 0) {
+      ADD_FAILURE() << "the lab exited " << code << "; see " << where / "report.md";
+      return false;
+    }
+    *report = ReadJson((out.empty() ? "" : out + "/") + "report.json");
+    return !report->is_discarded();
+  }
+
   json ReadJson(const std::string& name) const {
     std::ifstream in(dir_ / name);
     return json::parse(in, nullptr, false);
@@ -104,11 +121,8 @@ constexpr double kAcceptanceVerifyTime_s = 0.2;  // modeled projection of the re
 // Also the restart: the saved calibrations checked and kept, then one unit moved and the site
 // calibrated again.
 TEST_F(LabRunTest, Sandtable3SelfCalibratesAndFindsTheModel) {
-  ChildProcess lab(LabArgs({}));
-  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
-  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "report.md";
-  const json report = ReadJson("report.json");
-  ASSERT_FALSE(report.is_discarded());
+  json report;
+  ASSERT_TRUE(RunToEnd(LabArgs({}), "", &report));
   EXPECT_EQ(report["status"], "ok");
   const json& calibration = report["calibration"];
   EXPECT_EQ(calibration["source"], "structured_light");
@@ -217,11 +231,9 @@ TEST_F(LabRunTest, Sandtable3NamesTheFaultsAndTheOthersFinish) {
   const std::filesystem::path model_path = dir_ / "other-model.gltf";
   ASSERT_TRUE(WriteGltfScene(wrong->scene, model_path.string()).ok());
 
-  ChildProcess lab(LabArgs({"--model", model_path.string()}, site_path.string(), dir_ / "run"));
-  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
-  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "run" / "report.md";
-  const json report = ReadJson("run/report.json");
-  ASSERT_FALSE(report.is_discarded());
+  json report;
+  ASSERT_TRUE(RunToEnd(LabArgs({"--model", model_path.string()}, site_path.string(), dir_ / "run"),
+                       "run", &report));
   const json& c = report["calibration"];
   ASSERT_TRUE(c.contains("failures")) << c.dump();
   const std::string why = c["failures"]["2"].get<std::string>();
@@ -254,11 +266,8 @@ TEST_F(LabRunTest, Sandtable3NamesAProjectorNoCameraSees) {
   std::filesystem::create_directories(dir_);
   const std::filesystem::path site_path = dir_ / "site-turned.json";
   ASSERT_TRUE(WriteSiteFile(*site, site_path.string()).ok());
-  ChildProcess lab(LabArgs({}, site_path.string(), dir_ / "run"));
-  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
-  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "run" / "report.md";
-  const json report = ReadJson("run/report.json");
-  ASSERT_FALSE(report.is_discarded());
+  json report;
+  ASSERT_TRUE(RunToEnd(LabArgs({}, site_path.string(), dir_ / "run"), "run", &report));
   const json& c = report["calibration"];
   ASSERT_TRUE(c.contains("failures")) << c.dump();
   const std::string why = c["failures"]["2"].get<std::string>();
@@ -284,11 +293,8 @@ TEST_F(LabRunTest, Sandtable3NamesACaptureThatDecodesTooFewPoints) {
   std::filesystem::create_directories(dir_);
   const std::filesystem::path site_path = dir_ / "site-turned-camera.json";
   ASSERT_TRUE(WriteSiteFile(*site, site_path.string()).ok());
-  ChildProcess lab(LabArgs({}, site_path.string(), dir_ / "run"));
-  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
-  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "run" / "report.md";
-  const json report = ReadJson("run/report.json");
-  ASSERT_FALSE(report.is_discarded());
+  json report;
+  ASSERT_TRUE(RunToEnd(LabArgs({}, site_path.string(), dir_ / "run"), "run", &report));
   const json& c = report["calibration"];
   bool named = false;
   for (const json& note : c["self_calibration_report"]["notes"]) {
@@ -307,11 +313,8 @@ TEST_F(LabRunTest, Sandtable3NamesACaptureThatDecodesTooFewPoints) {
 // A node killed in the middle of the calibration round (unit 2, 4 s in: the pre-pass or its
 // sequences): the runner leaves it out and says why, units 0 and 1 calibrate.
 TEST_F(LabRunTest, Sandtable3NodeKilledMidCalibrationIsNamedAndTheOthersFinish) {
-  ChildProcess lab(LabArgs({"--kill-unit", "2", "--kill-at-s", "4"}));
-  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
-  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "report.md";
-  const json report = ReadJson("report.json");
-  ASSERT_FALSE(report.is_discarded());
+  json report;
+  ASSERT_TRUE(RunToEnd(LabArgs({"--kill-unit", "2", "--kill-at-s", "4"}), "", &report));
   const json& c = report["calibration"];
   ASSERT_TRUE(c.contains("kill")) << c.dump();
   EXPECT_TRUE(c["kill"]["during_calibration"].get<bool>());
@@ -328,12 +331,10 @@ TEST_F(LabRunTest, Sandtable3NodeKilledMidCalibrationIsNamedAndTheOthersFinish) 
 // A node that leaves a calibrated site (unit 2 killed 1 s into the hold; the coordinator drops
 // it within 0.5 s) causes no recalibration in the 7 s that follow.
 TEST_F(LabRunTest, Sandtable3NodeThatLeavesCausesNoRecalibration) {
-  ChildProcess lab(LabArgs(
-      {"--kill-unit", "2", "--kill-at-s", "1", "--kill-after-calibration", "--hold-s", "8"}));
-  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
-  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "report.md";
-  const json report = ReadJson("report.json");
-  ASSERT_FALSE(report.is_discarded());
+  json report;
+  ASSERT_TRUE(RunToEnd(LabArgs({"--kill-unit", "2", "--kill-at-s", "1", "--kill-after-calibration",
+                                "--hold-s", "8"}),
+                       "", &report));
   const json& kill = report["calibration"]["kill"];
   EXPECT_FALSE(kill["during_calibration"].get<bool>()) << kill.dump();
   EXPECT_TRUE(kill["others_recalibrated_after_the_kill"].empty()) << kill.dump();
@@ -345,11 +346,8 @@ TEST_F(LabRunTest, Sandtable3NodeThatLeavesCausesNoRecalibration) {
 // log shows that units 0 and 1 (both overlap unit 2 on sandtable-3) were given exactly two
 // frames meanwhile: their display blanked where unit 2 lights, and their display again.
 TEST_F(LabRunTest, Sandtable3LateUnitJoinsWithoutRecalibratingTheOthers) {
-  ChildProcess lab(LabArgs({"--join-late", "2"}));
-  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
-  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "report.md";
-  const json report = ReadJson("report.json");
-  ASSERT_FALSE(report.is_discarded());
+  json report;
+  ASSERT_TRUE(RunToEnd(LabArgs({"--join-late", "2"}), "", &report));
   const json& c = report["calibration"];
   ASSERT_TRUE(c.contains("join")) << c.dump();
   const json& join = c["join"];
@@ -375,11 +373,8 @@ TEST_F(LabRunTest, Sandtable3LateUnitJoinsWithoutRecalibratingTheOthers) {
 }
 
 TEST_F(LabRunTest, Sandtable3WritesTheReportAndLeavesNoProcess) {
-  ChildProcess lab(LabArgs({"--calibration", "true-pose"}));
-  ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("lab", "") == "done"; }));
-  ASSERT_EQ(lab.Wait(), 0) << "see " << dir_ / "report.md";
-  const json report = ReadJson("report.json");
-  ASSERT_FALSE(report.is_discarded());
+  json report;
+  ASSERT_TRUE(RunToEnd(LabArgs({"--calibration", "true-pose"}), "", &report));
   EXPECT_EQ(report["status"], "ok");
   EXPECT_EQ(report["site"]["name"], "sandtable-3");
   const json& calibration = report["calibration"];
