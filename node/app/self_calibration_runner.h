@@ -66,7 +66,7 @@ struct SelfCalibrationService::Runner {
 
   // Inputs and the solve.
   std::map<NodeId, wire::CalibrationInput> inputs;
-  std::map<NodeId, double> compute_s;  // per node, from the step answers
+  std::map<NodeId, double> compute_s;     // per node, from the step answers
   std::map<NodeId, uint32_t> blanked_px;  // join round: what each neighbour blanked
   std::string path;  // "planar" or "full" (docs/calibration.md, "Planar sites")
   std::string path_reason;

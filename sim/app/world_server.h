@@ -26,8 +26,8 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
-#include <map>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
