@@ -92,9 +92,9 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
       ST_LOG(kInfo) << "self-calibration: " << joining.size()
                     << " unit(s) joined the calibrated site; calibrating them against it";
     } else {
+      // (Not the site's runner, so the lowest id: the check above.)
       ST_LOG(kInfo) << "self-calibration: units joined after the last round; calibrating again";
       joining.clear();
-      if (members.front() != node.id()) return;
     }
     runner_.reset();
   } else if (peer_calibrated &&

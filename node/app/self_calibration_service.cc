@@ -64,25 +64,23 @@ Expected<nlohmann::json> ExportSelfCalibration(const SelfCalibrationOutcome& out
                                                const std::string& export_dir) {
   Expected<ExportedCalibration> exported = ExportCalibration(outcome.calibration, export_dir);
   if (!exported.ok()) return exported.status();
-  std::string report_path;
-  if (outcome.report.value("runner", kInvalidNodeId) == id) {
-    report_path = export_dir + "/self_calibration_report.json";
-    if (Status written = WriteFileAtomically(report_path, outcome.report.dump(2) + "\n");
-        !written.ok()) {
-      ST_LOG(kError) << "cannot write the report: " << written.ToString();
-      report_path.clear();
+  // The round's report under `name`; "" when it cannot be written (logged).
+  auto write_report = [&](const std::string& name) {
+    const std::string path = export_dir + "/" + name;
+    if (Status written = WriteFileAtomically(path, outcome.report.dump(2) + "\n"); !written.ok()) {
+      ST_LOG(kError) << "cannot write " << name << ": " << written.ToString();
+      return std::string();
     }
-  }
+    return path;
+  };
+  const std::string report_path = outcome.report.value("runner", kInvalidNodeId) == id
+                                      ? write_report("self_calibration_report.json")
+                                      : std::string();
   // A unit that joined a calibrated site keeps its join round's report.
-  std::string join_report_path;
-  if (outcome.report.value("path", std::string()) == "join") {
-    join_report_path = export_dir + "/join_report-unit-" + std::to_string(id) + ".json";
-    if (Status written = WriteFileAtomically(join_report_path, outcome.report.dump(2) + "\n");
-        !written.ok()) {
-      ST_LOG(kError) << "cannot write the join report: " << written.ToString();
-      join_report_path.clear();
-    }
-  }
+  const std::string join_report_path =
+      outcome.report.value("path", std::string()) == "join"
+          ? write_report("join_report-unit-" + std::to_string(id) + ".json")
+          : std::string();
   std::string mpcdi_path;
   if (outcome.site_mpcdi) {
     mpcdi_path = export_dir + "/site.mpcdi";
