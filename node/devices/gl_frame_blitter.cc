@@ -7,6 +7,8 @@
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/glcorearb.h>
 
+#include "node/devices/gl_util.h"
+
 namespace sandtable::node {
 namespace {
 
@@ -30,48 +32,6 @@ void main() {
   colour = vec4(texelFetch(u_frame, texel, 0).rgb, 1.0);
 }
 )";
-
-std::string GlErrorText(GLenum error) {
-  switch (error) {
-    case GL_INVALID_ENUM:
-      return "GL_INVALID_ENUM";
-    case GL_INVALID_VALUE:
-      return "GL_INVALID_VALUE";
-    case GL_INVALID_OPERATION:
-      return "GL_INVALID_OPERATION";
-    case GL_OUT_OF_MEMORY:
-      return "GL_OUT_OF_MEMORY";
-    case GL_INVALID_FRAMEBUFFER_OPERATION:
-      return "GL_INVALID_FRAMEBUFFER_OPERATION";
-    default:
-      return "GL error " + std::to_string(error);
-  }
-}
-
-Status CheckGl(const char* what) {
-  const GLenum error = glGetError();
-  if (error == GL_NO_ERROR) return OkStatus();
-  while (glGetError() != GL_NO_ERROR) {
-  }
-  return InternalError(std::string("OpenGL: ") + what + ": " + GlErrorText(error));
-}
-
-Expected<GLuint> CompileShader(GLenum type, const char* source) {
-  const GLuint shader = glCreateShader(type);
-  glShaderSource(shader, 1, &source, nullptr);
-  glCompileShader(shader);
-  GLint ok = GL_FALSE;
-  glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
-  if (ok != GL_TRUE) {
-    GLint length = 0;
-    glGetShaderiv(shader, GL_INFO_LOG_LENGTH, &length);
-    std::string log(static_cast<size_t>(std::max(length, 1)), '\0');
-    glGetShaderInfoLog(shader, length, nullptr, log.data());
-    glDeleteShader(shader);
-    return InternalError("OpenGL: shader does not compile: " + log);
-  }
-  return shader;
-}
 
 GLuint MakeTexture(GLint internal_format, GLenum format, cv::Size size, bool gray) {
   GLuint texture = 0;
@@ -102,22 +62,9 @@ Expected<std::unique_ptr<GlFrameBlitter>> GlFrameBlitter::Create(cv::Size size_p
 }
 
 Status GlFrameBlitter::Init() {
-  Expected<GLuint> vertex = CompileShader(GL_VERTEX_SHADER, kVertexShader);
-  if (!vertex.ok()) return vertex.status();
-  Expected<GLuint> fragment = CompileShader(GL_FRAGMENT_SHADER, kFragmentShader);
-  if (!fragment.ok()) {
-    glDeleteShader(*vertex);
-    return fragment.status();
-  }
-  program_ = glCreateProgram();
-  glAttachShader(program_, *vertex);
-  glAttachShader(program_, *fragment);
-  glLinkProgram(program_);
-  glDeleteShader(*vertex);
-  glDeleteShader(*fragment);
-  GLint linked = GL_FALSE;
-  glGetProgramiv(program_, GL_LINK_STATUS, &linked);
-  if (linked != GL_TRUE) return InternalError("OpenGL: the frame program does not link");
+  Expected<unsigned int> program = LinkProgram("frame blitter", kVertexShader, kFragmentShader);
+  if (!program.ok()) return program.status();
+  program_ = *program;
   glUseProgram(program_);
   glUniform1i(glGetUniformLocation(program_, "u_frame"), 0);
   glGenVertexArrays(1, &vertex_array_);

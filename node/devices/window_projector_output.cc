@@ -194,8 +194,14 @@ Expected<ShownFrame> WindowProjectorOutput::Show(const cv::Mat& frame) {
     if (!drawn.ok()) return drawn.status().WithContext(description_);
     last_read_back_ = std::move(*drawn);
   }
+  return PresentBackBuffer();
+}
+
+Expected<ShownFrame> WindowProjectorOutput::PresentBackBuffer() {
+  MakeCurrent();
   glfwSwapBuffers(window_);
   glFinish();  // the swap has happened (with vsync: at the vertical blank)
+  glfwPollEvents();
   ShownFrame shown;
   shown.shown_time = DeviceClock::now();
   shown.frame_index = ++frames_shown_;

@@ -59,9 +59,14 @@ class WindowProjectorOutput : public ProjectorOutput {
   // Xvfb, keeps no client-side copy of it.)
   const cv::Mat& last_read_back() const { return last_read_back_; }
 
+  // For a renderer that draws into the window itself (node/render/gl_context.h): makes the
+  // window's context current on the calling thread (framebuffer 0 is the window's back buffer),
+  // and swaps what was drawn there like Show() does (poll, swap, wait for the swap).
+  void MakeCurrent();
+  Expected<ShownFrame> PresentBackBuffer();
+
  private:
   WindowProjectorOutput() = default;
-  void MakeCurrent();
 
   GLFWwindow* window_ = nullptr;
   bool glfw_acquired_ = false;

@@ -1,0 +1,128 @@
+// Renderer: what a projector shows, drawn with OpenGL 3.3 core into a GlContext
+// (docs/render.md). Passes, in TR09-017's order (its Figure 7):
+//   shadow   the virtual sun's depth map (orthographic from the sun); only when the sun or the
+//            scene changed since the last one
+//   scene    the glTF model from the calibrated projector: base colour x base-colour texture,
+//            lit by the sun (ambient + Lambert x shadow) when there is one; or white, or the
+//            table grid, for those test patterns. Material groups outside the frustum are culled
+//   overlay  strokes, traces and markers (overlay_geometry.h), depth-tested against the scene
+//   warp     mask x intensity correction (linear light) and the lens-distortion pre-warp,
+//            folded into one full-screen pass from the ideal image to the output
+//   pattern  a 2D test pattern (id, colour bars) or raw white, instead of all of the above
+// A pass a frame does not need is skipped and counted in FrameStats: without pre-warp and mask
+// the scene is drawn straight into the output framebuffer (no ideal image, no warp pass).
+//
+// Calibration and masks swap in between frames (SetView, SetMask); the distortion map is
+// computed beforehand off the render thread (PrepareProjectorView). Every call needs the
+// context current on the calling thread; errors are Status (INTERNAL with the GL error),
+// nothing aborts.
+#pragma once
+
+#include <array>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "common/base/status.h"
+#include "common/scene/scene.h"
+#include "node/render/gl_context.h"
+#include "node/render/overlay_geometry.h"
+#include "node/render/projector_view.h"
+#include "node/render/render_content.h"
+
+namespace sandtable::node {
+
+struct RendererOptions {
+  int shadow_map_px = 2048;
+  double ambient = 0.35;        // share of light that is not the sun's (sky), in [0, 1]
+  double grid_spacing_m = 0.1;  // the table grid's line spacing
+  double grid_line_width_m = 0.003;
+  OverlayOptions overlay;
+  bool time_passes = false;  // glFinish after each pass to time it (benchmarks)
+  Status Check() const;
+};
+
+enum class Pass { kShadow = 0, kScene, kOverlay, kWarp, kPattern };
+inline constexpr int kPassCount = 5;
+const char* PassName(Pass pass);
+
+struct FrameStats {
+  double frame_ms = 0.0;                     // CPU wall time of Render, GL work finished
+  std::array<bool, kPassCount> ran{};        // which passes ran
+  std::array<double, kPassCount> pass_ms{};  // with RendererOptions::time_passes
+  int groups_drawn = 0, groups_culled = 0;   // material groups of the model
+  int overlay_triangles = 0;
+  bool overlay_rebuilt = false;
+};
+
+class Renderer {
+ public:
+  // `context` stays current-able and outlives the renderer; `scene` in the table frame (the
+  // model as placed, table included).
+  static Expected<std::unique_ptr<Renderer>> Create(GlContext* context, const Scene& scene,
+                                                    const RendererOptions& options = {});
+  ~Renderer();
+  Renderer(const Renderer&) = delete;
+  Renderer& operator=(const Renderer&) = delete;
+
+  // The calibrated projector (size must be the context's). Cheap: uploads the distortion map.
+  Status SetView(const ProjectorView& view);
+  bool has_view() const { return has_view_; }
+  // Per output pixel factor in [0, 1] (CV_32FC1 or CV_8UC1 / 255 of the context's size, row 0
+  // at the top), applied in linear light: the blend mask times the intensity correction times
+  // a join's blanking. Empty: identity (the warp pass may be skipped).
+  Status SetMask(const cv::Mat& mask);
+
+  // Draws one frame into the context's output framebuffer (not presented: GlContext::Present).
+  Expected<FrameStats> Render(const RenderContent& content);
+  // The floor: one full-screen textured pass at the output size, GL work finished; ms.
+  Expected<double> RenderFloor();
+
+ private:
+  Renderer(GlContext* context, const RendererOptions& options)
+      : context_(context), options_(options) {}
+  Status Init(const Scene& scene);
+  Status DrawScene(const RenderContent& content, unsigned int target, FrameStats* stats);
+  Status DrawShadow(const Eigen::Vector3d& sun);
+  Status DrawOverlay(const RenderContent& content, FrameStats* stats);
+  Status DrawWarp();
+  Status DrawPattern(const RenderContent& content);
+  Status EnsureIdealTarget();
+
+  struct Group {
+    int first_vertex = 0, vertex_count = 0;
+    int material = -1;
+    Eigen::AlignedBox3d bounds;
+  };
+
+  GlContext* context_;
+  RendererOptions options_;
+  cv::Size size_;
+  Eigen::AlignedBox3d scene_bounds_;
+  std::vector<Group> groups_;
+  std::vector<Eigen::Vector4d> material_colours_;
+  std::vector<int> material_textures_;
+  std::vector<unsigned int> textures_;
+  unsigned int scene_program_ = 0, shadow_program_ = 0, overlay_program_ = 0;
+  unsigned int warp_program_ = 0, blit_program_ = 0;
+  unsigned int scene_vao_ = 0, scene_vbo_ = 0, overlay_vao_ = 0, overlay_vbo_ = 0;
+  unsigned int empty_vao_ = 0;
+  unsigned int shadow_fbo_ = 0, shadow_texture_ = 0;
+  unsigned int ideal_fbo_ = 0, ideal_colour_ = 0, ideal_depth_ = 0;
+  unsigned int output_depth_ = 0;
+  unsigned int source_texture_ = 0, mask_texture_ = 0, pattern_texture_ = 0;
+  unsigned int floor_texture_ = 0;
+  bool has_view_ = false, has_mask_ = false;
+  ProjectorView view_;
+  std::optional<Eigen::Vector3d> shadow_sun_;  // the sun of the current shadow map
+  Eigen::Matrix4d sun_clip_from_table_ = Eigen::Matrix4d::Identity();
+  uint64_t overlay_version_ = ~uint64_t{0};
+  bool overlay_view_dirty_ = true;
+  int overlay_vertices_ = 0;
+  TestPattern pattern_uploaded_ = TestPattern::kNone;
+  uint32_t pattern_id_uploaded_ = ~0u;
+};
+
+}  // namespace sandtable::node

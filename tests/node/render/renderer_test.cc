@@ -1,0 +1,344 @@
+// The renderer on Mesa's llvmpipe through EGL (no GPU, no display): the GL projection of the
+// calibrated model against CameraModel::Project (distortion included), raw patterns exact,
+// passes skipped when a frame does not need them, the overlay's depth test, the mask in
+// linear light, and golden images of each pass.
+//
+// Golden images: tests/node/render/golden/<name>.png. SANDTABLE_UPDATE_GOLDEN=1 rewrites
+// them (look at them before committing).
+#include <cmath>
+#include <cstdlib>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "node/render/gl_context.h"
+#include "node/render/renderer.h"
+#include "node/render/test_patterns.h"
+#include "tests/node/render/render_test_scene.h"
+
+namespace sandtable::node {
+namespace {
+
+constexpr int kW = 320, kH = 200;
+// The bound: GL puts a table point within 0.05 px of CameraModel::Project.
+constexpr double kProjectionTolerance_px = 0.05;
+// Golden images: llvmpipe is deterministic for one Mesa build; these leave room for another
+// build's rounding on edges, never for a wrong picture.
+constexpr double kGoldenMaxDiff = 48.0;  // levels, any channel of any pixel
+constexpr double kGoldenMeanDiff = 0.5;  // levels, mean over all channels and pixels
+
+std::unique_ptr<GlContext> MakeContext(OutputFormat format = OutputFormat::kRgba8) {
+  Expected<std::unique_ptr<GlContext>> context = CreateEglContext(cv::Size(kW, kH), format);
+  EXPECT_TRUE(context.ok()) << context.status().ToString();
+  return context.ok() ? std::move(*context) : nullptr;
+}
+
+std::unique_ptr<Renderer> MakeRenderer(GlContext* context, bool distortion,
+                                       const RendererOptions& options = {}) {
+  const Scene scene = testing::RenderTestScene();
+  Expected<std::unique_ptr<Renderer>> renderer = Renderer::Create(context, scene, options);
+  EXPECT_TRUE(renderer.ok()) << renderer.status().ToString();
+  if (!renderer.ok()) return nullptr;
+  Expected<ProjectorView> view =
+      PrepareProjectorView(testing::RenderTestProjector(kW, kH, distortion),
+                           testing::RenderTestProjectorFromTable(), scene.Bounds());
+  EXPECT_TRUE(view.ok()) << view.status().ToString();
+  EXPECT_TRUE((*renderer)->SetView(*view).ok());
+  return std::move(*renderer);
+}
+
+cv::Mat RenderToImage(GlContext* context, Renderer* renderer, const RenderContent& content,
+                      FrameStats* stats = nullptr) {
+  Expected<FrameStats> rendered = renderer->Render(content);
+  EXPECT_TRUE(rendered.ok()) << rendered.status().ToString();
+  if (stats && rendered.ok()) *stats = *rendered;
+  Expected<cv::Mat> image = context->ReadOutput();
+  EXPECT_TRUE(image.ok()) << image.status().ToString();
+  return image.ok() ? *image : cv::Mat();
+}
+
+void ExpectGolden(const cv::Mat& rgb, const std::string& name) {
+  const std::string path = "tests/node/render/golden/" + name + ".png";
+  cv::Mat bgr;
+  cv::cvtColor(rgb, bgr, cv::COLOR_RGB2BGR);
+  const char* update = std::getenv("SANDTABLE_UPDATE_GOLDEN");
+  if (update && std::string(update) == "1") {
+    ASSERT_TRUE(cv::imwrite(path, bgr)) << path;
+    return;
+  }
+  const cv::Mat golden = cv::imread(path, cv::IMREAD_COLOR);
+  ASSERT_FALSE(golden.empty()) << "no golden image " << path
+                               << " (SANDTABLE_UPDATE_GOLDEN=1 writes it)";
+  ASSERT_EQ(golden.size(), bgr.size()) << path;
+  cv::Mat diff;
+  cv::absdiff(golden, bgr, diff);
+  double max_diff = 0.0;
+  cv::minMaxLoc(diff.reshape(1), nullptr, &max_diff);
+  const cv::Scalar mean = cv::mean(diff);
+  const double mean_diff = (mean[0] + mean[1] + mean[2]) / 3.0;
+  EXPECT_LE(max_diff, kGoldenMaxDiff) << name;
+  EXPECT_LE(mean_diff, kGoldenMeanDiff) << name;
+  if (max_diff > kGoldenMaxDiff || mean_diff > kGoldenMeanDiff) {
+    cv::imwrite(::testing::TempDir() + name + "-rendered.png", bgr);
+  }
+}
+
+// Every 3rd output pixel the table covers: the float output holds the table point that pixel
+// shows; the calibrated model must project it back onto the pixel.
+double MaxProjectionError_px(bool distortion, int* checked) {
+  std::unique_ptr<GlContext> context = MakeContext(OutputFormat::kRgba32f);
+  if (!context) return 1e9;
+  std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), distortion);
+  if (!renderer) return 1e9;
+  RenderContent content;
+  content.debug_positions = true;
+  const cv::Mat positions = RenderToImage(context.get(), renderer.get(), content);
+  const CameraModel projector = testing::RenderTestProjector(kW, kH, distortion);
+  const Rigid3d projector_from_table = testing::RenderTestProjectorFromTable();
+  double worst = 0.0;
+  *checked = 0;
+  for (int v = 4; v < kH - 4; v += 3) {
+    for (int u = 4; u < kW - 4; u += 3) {
+      const cv::Vec3f p = positions.at<cv::Vec3f>(v, u);
+      // Table pixels only, away from the table's edge and the buildings' outlines (where the
+      // pre-warp's bilinear lookup mixes two surfaces).
+      if (std::abs(p[2]) > 1e-6 || std::abs(p[0]) > 0.55 || std::abs(p[1]) > 0.35) continue;
+      bool near_building = false;
+      for (int dv = -2; dv <= 2 && !near_building; ++dv) {
+        for (int du = -2; du <= 2; ++du) {
+          const cv::Vec3f q = positions.at<cv::Vec3f>(v + dv, u + du);
+          // A building, or the background (cleared to 0, 0, 0).
+          if (std::abs(q[2]) > 1e-6 || (q[0] == 0.0f && q[1] == 0.0f)) near_building = true;
+        }
+      }
+      if (near_building) continue;
+      const std::optional<Eigen::Vector2d> pixel =
+          projector.Project(projector_from_table * Eigen::Vector3d(p[0], p[1], p[2]));
+      if (!pixel) continue;
+      worst = std::max(worst, (*pixel - Eigen::Vector2d(u, v)).norm());
+      ++*checked;
+    }
+  }
+  return worst;
+}
+
+TEST(RendererTest, GlProjectionPutsTablePointsOnCameraModelPixels) {
+  int checked = 0;
+  const double pinhole_px = MaxProjectionError_px(/*distortion=*/false, &checked);
+  EXPECT_GT(checked, 1000);
+  EXPECT_LE(pinhole_px, kProjectionTolerance_px);
+  const double distorted_px = MaxProjectionError_px(/*distortion=*/true, &checked);
+  EXPECT_GT(checked, 1000);
+  EXPECT_LE(distorted_px, kProjectionTolerance_px);
+  std::cout << "max |GL - CameraModel::Project|: pinhole " << pinhole_px << " px, distorted "
+            << distorted_px << " px over " << checked << " pixels\n";
+}
+
+TEST(RendererTest, DistortionMapSkippedBelowATenthOfAPixel) {
+  const Scene scene = testing::RenderTestScene();
+  CameraModel tiny = testing::RenderTestProjector(kW, kH, false);
+  tiny.distortion.k1 = 1e-7;
+  Expected<ProjectorView> view =
+      PrepareProjectorView(tiny, testing::RenderTestProjectorFromTable(), scene.Bounds());
+  ASSERT_TRUE(view.ok());
+  EXPECT_LT(view->max_displacement_px, kSkipDistortion_px);
+  EXPECT_FALSE(view->needs_prewarp());
+  view = PrepareProjectorView(testing::RenderTestProjector(kW, kH, true),
+                              testing::RenderTestProjectorFromTable(), scene.Bounds());
+  ASSERT_TRUE(view.ok());
+  EXPECT_GT(view->max_displacement_px, 1.0);
+  EXPECT_TRUE(view->needs_prewarp());
+}
+
+int CountDifferent(const cv::Mat& a, const cv::Mat& b) {
+  cv::Mat diff;
+  cv::absdiff(a, b, diff);
+  return cv::countNonZero(diff.reshape(1));
+}
+
+TEST(RendererTest, RawPatternsAreExact) {
+  std::unique_ptr<GlContext> context = MakeContext();
+  ASSERT_TRUE(context);
+  std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), true);
+  ASSERT_TRUE(renderer);
+  RenderContent content;
+  content.pattern = TestPattern::kRawWhite;
+  cv::Mat image = RenderToImage(context.get(), renderer.get(), content);
+  EXPECT_EQ(cv::countNonZero(image.reshape(1) != 255), 0);
+  content.pattern = TestPattern::kColourBars;
+  image = RenderToImage(context.get(), renderer.get(), content);
+  EXPECT_EQ(CountDifferent(image, ColourBarsPattern(image.size())), 0);
+  content.pattern = TestPattern::kProjectorId;
+  content.projector_id = 7;
+  image = RenderToImage(context.get(), renderer.get(), content);
+  EXPECT_EQ(CountDifferent(image, ProjectorIdPattern(image.size(), 7)), 0);
+  ExpectGolden(image, "pattern-id");
+}
+
+TEST(RendererTest, PassesAFrameDoesNotNeedAreSkipped) {
+  std::unique_ptr<GlContext> context = MakeContext();
+  ASSERT_TRUE(context);
+  std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), /*distortion=*/false);
+  ASSERT_TRUE(renderer);
+  auto ran = [](const FrameStats& s, Pass p) { return s.ran[static_cast<int>(p)]; };
+  RenderContent content;
+  FrameStats stats;
+  RenderToImage(context.get(), renderer.get(), content, &stats);
+  EXPECT_TRUE(ran(stats, Pass::kScene));
+  EXPECT_FALSE(ran(stats, Pass::kWarp)) << "no distortion, no mask: drawn straight";
+  EXPECT_FALSE(ran(stats, Pass::kOverlay)) << "no strokes";
+  EXPECT_FALSE(ran(stats, Pass::kShadow)) << "no sun";
+  EXPECT_EQ(stats.groups_drawn, 3);
+  content.sun_direction_in_table = SunDirection(10.0);
+  RenderToImage(context.get(), renderer.get(), content, &stats);
+  EXPECT_TRUE(ran(stats, Pass::kShadow));
+  RenderToImage(context.get(), renderer.get(), content, &stats);
+  EXPECT_FALSE(ran(stats, Pass::kShadow)) << "the sun did not move";
+  content.sun_direction_in_table = SunDirection(10.5);
+  RenderToImage(context.get(), renderer.get(), content, &stats);
+  EXPECT_TRUE(ran(stats, Pass::kShadow));
+  ASSERT_TRUE(renderer->SetMask(cv::Mat(kH, kW, CV_32FC1, cv::Scalar(0.5))).ok());
+  RenderToImage(context.get(), renderer.get(), content, &stats);
+  EXPECT_TRUE(ran(stats, Pass::kWarp)) << "a mask";
+  // A projector looking away from the model: every group culled, the scene pass skipped.
+  const Scene scene = testing::RenderTestScene();
+  const Rigid3d away = Rigid3d(Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix(),
+                               Eigen::Vector3d::Zero()) *
+                       testing::RenderTestProjectorFromTable();
+  Expected<ProjectorView> view =
+      PrepareProjectorView(testing::RenderTestProjector(kW, kH, false), away, scene.Bounds());
+  ASSERT_TRUE(view.ok());
+  ASSERT_TRUE(renderer->SetView(*view).ok());
+  RenderToImage(context.get(), renderer.get(), content, &stats);
+  EXPECT_EQ(stats.groups_drawn, 0);
+  EXPECT_EQ(stats.groups_culled, 3);
+  EXPECT_FALSE(ran(stats, Pass::kScene));
+}
+
+// A point's output pixel (the calibrated model's projection, rounded).
+cv::Point PixelOf(const Eigen::Vector3d& x_in_table_m, bool distortion) {
+  const std::optional<Eigen::Vector2d> px =
+      testing::RenderTestProjector(kW, kH, distortion)
+          .Project(testing::RenderTestProjectorFromTable() * x_in_table_m);
+  return px ? cv::Point(static_cast<int>(std::lround(px->x())),
+                        static_cast<int>(std::lround(px->y())))
+            : cv::Point(-1, -1);
+}
+
+TEST(RendererTest, StrokesAreHiddenBehindBuildingsAndShownOnSurfaces) {
+  std::unique_ptr<GlContext> context = MakeContext();
+  ASSERT_TRUE(context);
+  std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), /*distortion=*/true);
+  ASSERT_TRUE(renderer);
+  RenderContent content;
+  content.pattern = TestPattern::kNone;
+  // Green stroke on the open table, a magenta one on the table right behind the tower as the
+  // projector sees it (the tower stands at (-0.25, -0.1), 0.3 m tall, the projector at
+  // (0, -0.9, 1.3): the ray to (-0.29, 0.03, 0) meets the tower 0.18 m up), a blue one on the
+  // box's roof.
+  Polyline open;
+  open.points_in_table_m = {{0.3, -0.25, 0.0}, {0.45, -0.2, 0.0}};
+  open.colour = {0.0f, 1.0f, 0.0f};
+  open.width_m = 0.02;
+  Polyline hidden;
+  hidden.points_in_table_m = {{-0.28, 0.0, 0.0}, {-0.3, 0.06, 0.0}};
+  hidden.colour = {1.0f, 0.0f, 1.0f};
+  hidden.width_m = 0.02;
+  Polyline roof;
+  roof.points_in_table_m = {{0.08, 0.04, 0.15}, {0.12, 0.06, 0.15}};
+  roof.colour = {0.0f, 0.0f, 1.0f};
+  roof.width_m = 0.02;
+  content.strokes = {open, hidden, roof};
+  Marker cursor;
+  cursor.position_in_table_m = Eigen::Vector3d(0.35, 0.2, 0.0);
+  cursor.ring = true;
+  cursor.radius_m = 0.03;
+  content.markers = {cursor};
+  content.overlay_version = 1;
+  FrameStats stats;
+  const cv::Mat image = RenderToImage(context.get(), renderer.get(), content, &stats);
+  EXPECT_TRUE(stats.ran[static_cast<int>(Pass::kOverlay)]);
+  EXPECT_TRUE(stats.overlay_rebuilt);
+  auto at = [&](const Eigen::Vector3d& x) {
+    const cv::Point p = PixelOf(x, true);
+    return image.at<cv::Vec3b>(p);
+  };
+  EXPECT_EQ(at({0.375, -0.225, 0.0}), cv::Vec3b(0, 255, 0));
+  EXPECT_EQ(at({0.10, 0.05, 0.15}), cv::Vec3b(0, 0, 255));
+  const cv::Vec3b behind = at({-0.29, 0.03, 0.0});
+  EXPECT_NE(behind, cv::Vec3b(255, 0, 255)) << "a stroke shows through the tower";
+  // The cursor's ring: yellow at its radius, not at its centre.
+  EXPECT_EQ(at({0.35 + 0.85 * 0.03, 0.2, 0.0}), cv::Vec3b(255, 255, 0));
+  EXPECT_NE(at({0.35, 0.2, 0.0}), cv::Vec3b(255, 255, 0));
+  ExpectGolden(image, "overlay");
+  // The same content again: nothing rebuilt.
+  RenderToImage(context.get(), renderer.get(), content, &stats);
+  EXPECT_FALSE(stats.overlay_rebuilt);
+}
+
+TEST(RendererTest, MaskMultipliesInLinearLight) {
+  std::unique_ptr<GlContext> context = MakeContext();
+  ASSERT_TRUE(context);
+  std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), /*distortion=*/false);
+  ASSERT_TRUE(renderer);
+  cv::Mat mask(kH, kW, CV_32FC1, cv::Scalar(1.0));
+  mask.colRange(0, kW / 2).setTo(0.5);
+  ASSERT_TRUE(renderer->SetMask(mask).ok());
+  RenderContent content;
+  content.pattern = TestPattern::kWhite;
+  const cv::Mat image = RenderToImage(context.get(), renderer.get(), content);
+  // A table pixel in each half: 255 where the mask is 1, sRGB-encoded 0.5 (188) where 0.5.
+  const cv::Point left = PixelOf({-0.4, -0.3, 0.0}, false);
+  const cv::Point right = PixelOf({0.4, -0.3, 0.0}, false);
+  ASSERT_LT(left.x, kW / 2);
+  ASSERT_GE(right.x, kW / 2);
+  EXPECT_EQ(image.at<cv::Vec3b>(right), cv::Vec3b(255, 255, 255));
+  EXPECT_NEAR(image.at<cv::Vec3b>(left)[0], 188, 1);
+}
+
+TEST(RendererTest, GoldenImagesOfEachPass) {
+  std::unique_ptr<GlContext> context = MakeContext();
+  ASSERT_TRUE(context);
+  {
+    std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), /*distortion=*/false);
+    ASSERT_TRUE(renderer);
+    RenderContent content;
+    ExpectGolden(RenderToImage(context.get(), renderer.get(), content), "scene");
+    content.sun_direction_in_table = SunDirection(9.0);
+    ExpectGolden(RenderToImage(context.get(), renderer.get(), content), "scene-sun");
+    content.pattern = TestPattern::kTableGrid;
+    ExpectGolden(RenderToImage(context.get(), renderer.get(), content), "grid");
+  }
+  {
+    std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), /*distortion=*/true);
+    ASSERT_TRUE(renderer);
+    cv::Mat mask(kH, kW, CV_32FC1);
+    for (int u = 0; u < kW; ++u) mask.col(u).setTo(std::min(1.0, 2.0 * u / kW));
+    ASSERT_TRUE(renderer->SetMask(mask).ok());
+    RenderContent content;
+    content.pattern = TestPattern::kTableGrid;
+    ExpectGolden(RenderToImage(context.get(), renderer.get(), content), "warp-mask-grid");
+  }
+}
+
+TEST(RendererTest, RefusesAViewOfAnotherSizeAndABadMask) {
+  std::unique_ptr<GlContext> context = MakeContext();
+  ASSERT_TRUE(context);
+  std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), false);
+  ASSERT_TRUE(renderer);
+  const Scene scene = testing::RenderTestScene();
+  Expected<ProjectorView> view =
+      PrepareProjectorView(testing::RenderTestProjector(640, 400, false),
+                           testing::RenderTestProjectorFromTable(), scene.Bounds());
+  ASSERT_TRUE(view.ok());
+  const Status refused = renderer->SetView(*view);
+  EXPECT_EQ(refused.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.message().find("640x400"), std::string::npos) << refused.message();
+  EXPECT_EQ(renderer->SetMask(cv::Mat(10, 10, CV_32FC1)).code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(CreateEglContext(cv::Size(0, 10)).status().code(), StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace sandtable::node
