@@ -72,7 +72,18 @@ class Builder {
       Triangle(q0 - side, q0 + side, q1 + side, line.colour);
       Triangle(q0 - side, q1 + side, q1 - side, line.colour);
     }
-    for (const Eigen::Vector3d& q : lifted) Disc(q, half, 0.0, line.colour);
+    // Round joints where the line turns by more than kJointTurn (a smaller turn leaves a gap
+    // of at most half x sin(turn / 2) on its outer side) and round caps at both ends.
+    constexpr double kJointTurnCos = 0.94;  // cos 20 deg
+    for (size_t i = 0; i < lifted.size(); ++i) {
+      bool joint = i == 0 || i + 1 == lifted.size();
+      if (!joint) {
+        const Eigen::Vector3d a = lifted[i] - lifted[i - 1], b = lifted[i + 1] - lifted[i];
+        const double n = a.norm() * b.norm();
+        joint = n > 0.0 && a.dot(b) < kJointTurnCos * n;
+      }
+      if (joint) Disc(lifted[i], half, 0.0, line.colour);
+    }
   }
 
  private:

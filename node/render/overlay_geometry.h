@@ -1,10 +1,11 @@
 // The overlay layer as triangles: annotation strokes and track traces as ribbons with round
-// joints, the cursor as a ring and track heads as discs, built facing the projector and
-// lifted towards it by `lift_m` plus their half width (a disc's radius) so that the scene's
-// depth buffer hides them where the model stands in front (a building between the projector
-// and the stroke) and shows them on the surface they lie on, even where that surface is at a
-// slant to the projector. The lift bounds what the depth test gets wrong: within it of an
-// occluding edge (measured along the projector's ray) a stroke may still show.
+// caps and round joints where they turn by more than 20 degrees, the cursor as a ring and track
+// heads as discs, built facing the projector and lifted towards it by `lift_m` plus their half
+// width (a disc's radius) so that the scene's depth buffer hides them where the model stands in
+// front (a building between the projector and the stroke) and shows them on the surface they lie
+// on, even where that surface is at a slant to the projector. The lift bounds what the depth test
+// gets wrong: within it of an occluding edge (measured along the projector's ray) a stroke may
+// still show.
 #pragma once
 
 #include <vector>
@@ -23,7 +24,7 @@ struct OverlayVertex {
 
 struct OverlayOptions {
   double lift_m = 0.015;
-  int round_segments = 12;  // per joint disc and marker
+  int round_segments = 12;  // per cap, joint disc and marker
 };
 
 // Appends the triangles (3 vertices each) of everything in `content` as seen from a projector

@@ -58,6 +58,36 @@ Expected<ProjectorView> PrepareProjectorView(const CameraModel& projector,
     }
   }
   view.max_displacement_px = max_displacement;
+  // The lens model's curvature: second differences of Distort over the ideal image, every
+  // 16 px, step 8 px.
+  const double step_px = 8.0;
+  auto distorted_px = [&](const Eigen::Vector2d& ideal_px) {
+    return projector.PixelFromNormalized(
+        projector.Distort(projector.NormalizedFromPixel(ideal_px)));
+  };
+  double curvature = 0.0;
+  for (int v = 0; v < h; v += 16) {
+    for (int u = 0; u < w; u += 16) {
+      const Eigen::Vector2d c(u, v);
+      const Eigen::Vector2d dc = distorted_px(c);
+      for (const Eigen::Vector2d& step :
+           {Eigen::Vector2d(step_px, 0), Eigen::Vector2d(0, step_px),
+            Eigen::Vector2d(Eigen::Vector2d(step_px, step_px) / std::sqrt(2.0))}) {
+        const Eigen::Vector2d second = distorted_px(c + step) - 2.0 * dc + distorted_px(c - step);
+        curvature = std::max(curvature, second.norm() / (step_px * step_px));
+      }
+    }
+  }
+  view.max_curvature_per_px = curvature;
+  // The monotonic domain: bisection on the radius (InDistortionDomain holds on a disc).
+  if (!projector.InDistortionDomain(Eigen::Vector2d(10.0, 0.0))) {
+    double lo = 0.0, hi = 10.0;
+    for (int i = 0; i < 60; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      (projector.InDistortionDomain(Eigen::Vector2d(mid, 0.0)) ? lo : hi) = mid;
+    }
+    view.distortion_domain_r2 = lo * lo;
+  }
   if (max_displacement >= kSkipDistortion_px) view.source_px = source;
   return view;
 }

@@ -37,6 +37,12 @@ struct ProjectorView {
   double max_displacement_px = 0.0;
   cv::Mat source_px;  // CV_32FC2 (empty: no pre-warp)
   bool needs_prewarp() const { return !source_px.empty(); }
+  // For the pre-warp folded into the vertex shader (renderer.h): the squared normalized radius
+  // up to which the Brown model is monotonic (CameraModel::InDistortionDomain; capped at 100).
+  double distortion_domain_r2 = 100.0;
+  // ... and the largest second derivative of the distorted pixel against the ideal pixel over
+  // the image (px per px^2), which sets how finely the model is tessellated.
+  double max_curvature_per_px = 0.0;
 };
 
 // `scene_bounds` in the table frame (the model as placed, and the table); near and far are

@@ -22,75 +22,115 @@ double MsSince(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
-// sRGB transfer functions, shared by the scene and warp programs.
-constexpr const char* kTransfer = R"(
-float Encode(float l) { return l <= 0.0031308 ? 12.92 * l : 1.055 * pow(l, 1.0 / 2.4) - 0.055; }
-float Decode(float e) { return e <= 0.04045 ? e / 12.92 : pow((e + 0.055) / 1.055, 2.4); }
-vec3 Encode(vec3 c) { return vec3(Encode(c.r), Encode(c.g), Encode(c.b)); }
-vec3 Decode(vec3 c) { return vec3(Decode(c.r), Decode(c.g), Decode(c.b)); }
+// Shaders are specialised by #define (a variant per feature set, compiled on first use):
+// llvmpipe runs both sides of a branch on a uniform, so one shader with every feature behind
+// uniforms costs as much as all of them together.
+
+// The pre-warp in a vertex shader: the pinhole clip position, with x and y replaced by those
+// of the Brown-distorted pixel (CameraModel::Project) when DISTORT; w and z stay, so clipping,
+// depth and perspective-correct interpolation are the pinhole's. Past the monotonic domain of
+// the lens model (far outside the image) the pinhole position is kept.
+constexpr const char* kProject = R"(
+#if DISTORT
+uniform mat4 u_camera_from_table;
+uniform vec4 u_intrinsics;   // fx, fy, cx, cy (px)
+uniform vec2 u_size_px;
+uniform vec3 u_radial;       // k1, k2, k3
+uniform vec2 u_tangential;   // p1, p2
+uniform float u_domain_r2;
+vec4 Project(vec3 x_in_table, mat4 clip_from_table) {
+  vec4 clip = clip_from_table * vec4(x_in_table, 1.0);
+  vec3 c = (u_camera_from_table * vec4(x_in_table, 1.0)).xyz;
+  if (c.z <= 0.0) return clip;
+  vec2 n = c.xy / c.z;
+  float r2 = dot(n, n);
+  if (r2 > u_domain_r2) return clip;
+  float radial = 1.0 + r2 * (u_radial.x + r2 * (u_radial.y + r2 * u_radial.z));
+  vec2 d = n * radial +
+           vec2(2.0 * u_tangential.x * n.x * n.y + u_tangential.y * (r2 + 2.0 * n.x * n.x),
+                u_tangential.x * (r2 + 2.0 * n.y * n.y) + 2.0 * u_tangential.y * n.x * n.y);
+  vec2 px = u_intrinsics.xy * d + u_intrinsics.zw;
+  vec2 ndc = vec2(2.0 * (px.x + 0.5) / u_size_px.x - 1.0, 1.0 - 2.0 * (px.y + 0.5) / u_size_px.y);
+  return vec4(ndc * clip.w, clip.z, clip.w);
+}
+#else
+vec4 Project(vec3 x_in_table, mat4 clip_from_table) {
+  return clip_from_table * vec4(x_in_table, 1.0);
+}
+#endif
 )";
 
-constexpr const char* kSceneVertex = R"(#version 330 core
+const std::string kSceneVertex = std::string(R"(
 layout(location = 0) in vec3 a_position;
 layout(location = 1) in vec3 a_normal;
 layout(location = 2) in vec2 a_uv;
 uniform mat4 u_clip_from_table;
 uniform mat4 u_sun_clip_from_table;
+uniform vec3 u_sun_direction;
+uniform float u_ambient;
+uniform float u_inverse_gamma;
 out vec3 v_position;
-out vec3 v_normal;
 out vec2 v_uv;
 out vec3 v_sun;
+out vec2 v_light;  // encoded light in shadow, in the sun (flat faces: per vertex is exact)
+)") + kProject + R"(
 void main() {
   v_position = a_position;
-  v_normal = a_normal;
   v_uv = a_uv;
   v_sun = (u_sun_clip_from_table * vec4(a_position, 1.0)).xyz * 0.5 + 0.5;
-  gl_Position = u_clip_from_table * vec4(a_position, 1.0);
+  float lambert = max(dot(a_normal, u_sun_direction), 0.0);
+  v_light = vec2(pow(u_ambient, u_inverse_gamma),
+                 pow(u_ambient + (1.0 - u_ambient) * lambert, u_inverse_gamma));
+  gl_Position = Project(a_position, u_clip_from_table);
 }
 )";
 
-// u_mode: 0 the show, 1 white, 2 the table grid, 3 table positions (float targets).
-const std::string kSceneFragment = std::string(R"(#version 330 core
-uniform int u_mode;
+// MODE: 0 the show, 1 white, 2 the table grid, 3 table positions (float targets).
+// Colours are display-encoded; u_base_colour is encoded, the light is raised to 1 / gamma in the
+// vertex shader (in shadow and in the sun; the shadow lookup mixes the two) and the mask on
+// upload. The shadow map is looked up with one nearest compare (four cost 2 ms more a frame).
+constexpr const char* kSceneFragment = R"(
 uniform vec4 u_base_colour;
-uniform bool u_textured;
 uniform sampler2D u_texture;
-uniform bool u_sun;
-uniform vec3 u_sun_direction;
-uniform float u_ambient;
 uniform sampler2DShadow u_shadow;
 uniform float u_grid_spacing_m;
 uniform float u_grid_half_line_m;
+uniform sampler2D u_mask;
 in vec3 v_position;
-in vec3 v_normal;
 in vec2 v_uv;
 in vec3 v_sun;
+in vec2 v_light;
 out vec4 o_colour;
-)") + kTransfer + R"(
 void main() {
-  if (u_mode == 1) { o_colour = vec4(1.0); return; }
-  if (u_mode == 3) { o_colour = vec4(v_position, 1.0); return; }
-  if (u_mode == 2) {
-    vec2 cells = v_position.xy / u_grid_spacing_m;
-    vec2 off_m = abs(cells - round(cells)) * u_grid_spacing_m;
-    vec2 half_m = max(vec2(u_grid_half_line_m), 0.75 * fwidth(v_position.xy));
-    float on = (off_m.x < half_m.x || off_m.y < half_m.y) ? 1.0 : 0.0;
-    o_colour = vec4(vec3(on), 1.0);
-    return;
-  }
-  vec4 albedo = u_base_colour;
-  if (u_textured) albedo *= texture(u_texture, v_uv);
-  float light = 1.0;
-  if (u_sun) {
-    float lambert = max(dot(normalize(v_normal), u_sun_direction), 0.0);
-    float lit = lambert > 0.0 ? texture(u_shadow, v_sun) : 0.0;
-    light = u_ambient + (1.0 - u_ambient) * lambert * lit;
-  }
-  o_colour = vec4(Encode(clamp(albedo.rgb * light, 0.0, 1.0)), 1.0);
+#if MODE == 3
+  o_colour = vec4(v_position, 1.0);
+  return;
+#endif
+#if MODE == 1
+  vec3 c = vec3(1.0);
+#elif MODE == 2
+  vec2 cells = v_position.xy / u_grid_spacing_m;
+  vec2 off_m = abs(cells - round(cells)) * u_grid_spacing_m;
+  vec2 half_m = max(vec2(u_grid_half_line_m), 0.75 * fwidth(v_position.xy));
+  vec3 c = vec3((off_m.x < half_m.x || off_m.y < half_m.y) ? 1.0 : 0.0);
+#else
+  vec3 c = u_base_colour.rgb;
+#if TEXTURED
+  c *= texture(u_texture, v_uv).rgb;
+#endif
+#if SUN
+  c *= mix(v_light.x, v_light.y, texture(u_shadow, v_sun));
+#endif
+#endif
+#if MASKED
+  c *= texelFetch(u_mask, ivec2(gl_FragCoord.xy), 0).r;
+#endif
+  o_colour = vec4(c, 1.0);
 }
 )";
 
 constexpr const char* kShadowVertex = R"(#version 330 core
+// The sun's depth map: positions only.
 layout(location = 0) in vec3 a_position;
 uniform mat4 u_sun_clip_from_table;
 void main() { gl_Position = u_sun_clip_from_table * vec4(a_position, 1.0); }
@@ -99,20 +139,27 @@ constexpr const char* kShadowFragment = R"(#version 330 core
 void main() {}
 )";
 
-constexpr const char* kOverlayVertex = R"(#version 330 core
+const std::string kOverlayVertex = std::string(R"(
 layout(location = 0) in vec3 a_position;
 layout(location = 1) in vec4 a_colour;
 uniform mat4 u_clip_from_table;
 out vec4 v_colour;
+)") + kProject + R"(
 void main() {
   v_colour = a_colour;
-  gl_Position = u_clip_from_table * vec4(a_position, 1.0);
+  gl_Position = Project(a_position, u_clip_from_table);
 }
 )";
-constexpr const char* kOverlayFragment = R"(#version 330 core
+constexpr const char* kOverlayFragment = R"(
+uniform sampler2D u_mask;
 in vec4 v_colour;
 out vec4 o_colour;
-void main() { o_colour = v_colour; }
+void main() {
+  o_colour = v_colour;
+#if MASKED
+  o_colour.rgb *= texelFetch(u_mask, ivec2(gl_FragCoord.xy), 0).r;
+#endif
+}
 )";
 
 // Full-screen triangle strip from gl_VertexID.
@@ -124,27 +171,24 @@ void main() {
 )";
 
 // Output pixel p shows the ideal image at u_source[p] (GL texture coordinates, negative: none),
-// times the mask in linear light.
-const std::string kWarpFragment = std::string(R"(#version 330 core
+// times the mask (encoded on upload, or linear for float targets).
+constexpr const char* kWarpFragment = R"(
 uniform sampler2D u_image;
-uniform bool u_warp;
 uniform sampler2D u_source;
-uniform bool u_masked;
 uniform sampler2D u_mask;
-uniform bool u_linear;
 out vec4 o_colour;
-)") + kTransfer + R"(
 void main() {
   ivec2 p = ivec2(gl_FragCoord.xy);
-  vec3 c;
-  if (u_warp) {
-    vec2 t = texelFetch(u_source, p, 0).rg;
-    c = (t.x < 0.0 || t.y < 0.0 || t.x > 1.0 || t.y > 1.0) ? vec3(0.0) : texture(u_image, t).rgb;
-  } else {
-    c = texelFetch(u_image, p, 0).rgb;
-  }
-  if (u_masked) c = u_linear ? c * texelFetch(u_mask, p, 0).r
-                             : Encode(Decode(c) * texelFetch(u_mask, p, 0).r);
+#if DISTORT
+  vec2 t = texelFetch(u_source, p, 0).rg;
+  vec3 c = (t.x <= 0.0 || t.y <= 0.0 || t.x >= 1.0 || t.y >= 1.0) ? vec3(0.0)
+                                                                  : texture(u_image, t).rgb;
+#else
+  vec3 c = texelFetch(u_image, p, 0).rgb;
+#endif
+#if MASKED
+  c *= texelFetch(u_mask, p, 0).r;
+#endif
   o_colour = vec4(c, 1.0);
 }
 )";
@@ -253,73 +297,20 @@ Status Renderer::Init(const Scene& scene) {
   ST_RETURN_IF_ERROR(context_->MakeCurrent());
   size_ = context_->size();
   scene_bounds_ = scene.Bounds();
-  Expected<unsigned int> program = LinkProgram("scene", kSceneVertex, kSceneFragment.c_str());
-  if (!program.ok()) return program.status();
-  scene_program_ = *program;
-  program = LinkProgram("shadow", kShadowVertex, kShadowFragment);
+  scene_ = scene;
+  Expected<unsigned int> program = LinkProgram("shadow", kShadowVertex, kShadowFragment);
   if (!program.ok()) return program.status();
   shadow_program_ = *program;
-  program = LinkProgram("overlay", kOverlayVertex, kOverlayFragment);
-  if (!program.ok()) return program.status();
-  overlay_program_ = *program;
-  program = LinkProgram("warp", kQuadVertex, kWarpFragment.c_str());
-  if (!program.ok()) return program.status();
-  warp_program_ = *program;
   program = LinkProgram("blit", kQuadVertex, kBlitFragment);
   if (!program.ok()) return program.status();
   blit_program_ = *program;
 
-  // The model, grouped by material (one draw call each), flat normals.
-  std::vector<std::vector<int>> by_material(std::max<size_t>(scene.materials.size(), 1));
-  for (int t = 0; t < scene.NumTriangles(); ++t) {
-    int m = t < static_cast<int>(scene.triangle_material.size()) ? scene.triangle_material[t] : 0;
-    if (m < 0 || m >= static_cast<int>(by_material.size())) m = 0;
-    by_material[m].push_back(t);
-  }
-  std::vector<SceneVertex> vertices;
-  vertices.reserve(static_cast<size_t>(scene.NumTriangles()) * 3);
-  const bool has_uv = scene.texcoords.size() == scene.positions_in_table_m.size();
-  for (size_t m = 0; m < by_material.size(); ++m) {
-    if (by_material[m].empty()) continue;
-    Group group;
-    group.first_vertex = static_cast<int>(vertices.size());
-    group.material = static_cast<int>(m);
-    for (int t : by_material[m]) {
-      const Eigen::Vector3d n = scene.FaceNormal(t);
-      for (int k = 0; k < 3; ++k) {
-        const int v = scene.triangles[t][k];
-        SceneVertex sv{};
-        const Eigen::Vector3f& p = scene.positions_in_table_m[v];
-        for (int i = 0; i < 3; ++i) {
-          sv.position[i] = p[i];
-          sv.normal[i] = static_cast<float>(n[i]);
-        }
-        if (has_uv) {
-          sv.uv[0] = scene.texcoords[v].x();
-          sv.uv[1] = scene.texcoords[v].y();
-        }
-        group.bounds.extend(p.cast<double>());
-        vertices.push_back(sv);
-      }
-    }
-    group.vertex_count = static_cast<int>(vertices.size()) - group.first_vertex;
-    groups_.push_back(group);
-  }
   glGenVertexArrays(1, &scene_vao_);
-  glBindVertexArray(scene_vao_);
   glGenBuffers(1, &scene_vbo_);
-  glBindBuffer(GL_ARRAY_BUFFER, scene_vbo_);
-  glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(vertices.size() * sizeof(SceneVertex)),
-               vertices.data(), GL_STATIC_DRAW);
-  glEnableVertexAttribArray(0);
-  glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(SceneVertex),
-                        reinterpret_cast<void*>(offsetof(SceneVertex, position)));
-  glEnableVertexAttribArray(1);
-  glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, sizeof(SceneVertex),
-                        reinterpret_cast<void*>(offsetof(SceneVertex, normal)));
-  glEnableVertexAttribArray(2);
-  glVertexAttribPointer(2, 2, GL_FLOAT, GL_FALSE, sizeof(SceneVertex),
-                        reinterpret_cast<void*>(offsetof(SceneVertex, uv)));
+  glGenVertexArrays(1, &shadow_vao_);
+  glGenBuffers(1, &shadow_vbo_);
+  ST_RETURN_IF_ERROR(UploadGeometry(shadow_vao_, shadow_vbo_, /*edge_px=*/0.0, &shadow_groups_));
+  ST_RETURN_IF_ERROR(UploadGeometry(scene_vao_, scene_vbo_, /*edge_px=*/0.0, &groups_));
 
   glGenVertexArrays(1, &overlay_vao_);
   glBindVertexArray(overlay_vao_);
@@ -334,9 +325,14 @@ Status Renderer::Init(const Scene& scene) {
   glGenVertexArrays(1, &empty_vao_);
   glBindVertexArray(0);
 
-  // Materials and their textures (sRGB: the sampler returns linear values, mipmapped).
+  // Materials and their textures (encoded texels, filtered as they are; mipmapped).
+  // Base colour factors are linear (glTF): encoded here once (see the colour note in renderer.h).
   for (const Material& material : scene.materials) {
-    material_colours_.push_back(material.base_color_factor);
+    Eigen::Vector4d encoded = material.base_color_factor;
+    for (int i = 0; i < 3; ++i) {
+      encoded[i] = std::pow(std::clamp(encoded[i], 0.0, 1.0), 1.0 / options_.display_gamma);
+    }
+    material_colours_.push_back(encoded);
     material_textures_.push_back(material.base_color_texture);
   }
   for (const Texture& texture : scene.textures) {
@@ -344,10 +340,17 @@ Status Renderer::Init(const Scene& scene) {
     glGenTextures(1, &id);
     glBindTexture(GL_TEXTURE_2D, id);
     glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
-    glTexImage2D(GL_TEXTURE_2D, 0, GL_SRGB8_ALPHA8, texture.width_px, texture.height_px, 0, GL_RGBA,
+    glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, texture.width_px, texture.height_px, 0, GL_RGBA,
                  GL_UNSIGNED_BYTE, texture.rgba.data());
     glGenerateMipmap(GL_TEXTURE_2D);
-    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
+    // Mipmaps (the nearest level, filtered bilinearly: trilinear costs twice on llvmpipe) only
+    // for a texture larger than the output, which a projector can see minified; a smaller one
+    // is magnified or near 1:1 and sampled bilinearly (mip selection costs ~2 ms a frame on
+    // llvmpipe at 1280x800).
+    const bool mipmapped =
+        std::max(texture.width_px, texture.height_px) > std::max(size_.width, size_.height);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER,
+                    mipmapped ? GL_LINEAR_MIPMAP_NEAREST : GL_LINEAR);
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S,
                     texture.repeat_s ? GL_REPEAT : GL_CLAMP_TO_EDGE);
@@ -361,8 +364,8 @@ Status Renderer::Init(const Scene& scene) {
   glBindTexture(GL_TEXTURE_2D, shadow_texture_);
   glTexImage2D(GL_TEXTURE_2D, 0, GL_DEPTH_COMPONENT24, options_.shadow_map_px,
                options_.shadow_map_px, 0, GL_DEPTH_COMPONENT, GL_FLOAT, nullptr);
-  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
-  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
   glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_BORDER);
   glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_BORDER);
   const float border[4] = {1, 1, 1, 1};
@@ -403,13 +406,125 @@ Status Renderer::Init(const Scene& scene) {
   return CheckGl("creating the renderer");
 }
 
+// The model into the vertex buffer, grouped by material (one draw call each), flat normals.
+// With edge_px > 0, every triangle in front of the projector is split at the midpoint of its
+// longest edge until no edge spans more than edge_px on the projector's (pinhole) image: the
+// folded pre-warp bends edges only at vertices.
+Status Renderer::UploadGeometry(unsigned int vao, unsigned int vbo, double edge_px,
+                                std::vector<Group>* groups) {
+  const bool tessellate = edge_px > 0.0;
+  const Scene& scene = scene_;
+  std::vector<std::vector<int>> by_material(std::max<size_t>(scene.materials.size(), 1));
+  for (int t = 0; t < scene.NumTriangles(); ++t) {
+    int m = t < static_cast<int>(scene.triangle_material.size()) ? scene.triangle_material[t] : 0;
+    if (m < 0 || m >= static_cast<int>(by_material.size())) m = 0;
+    by_material[m].push_back(t);
+  }
+  const bool has_uv = scene.texcoords.size() == scene.positions_in_table_m.size();
+  const double max_edge2 = edge_px * edge_px;
+  const Eigen::Matrix3d rotation = view_.projector_from_table.rotation.toRotationMatrix();
+  const Eigen::Vector3d translation = view_.projector_from_table.translation;
+  const double fx = view_.projector.fx_px, fy = view_.projector.fy_px;
+  // The pinhole pixel of a vertex; nullopt at or behind the near plane.
+  auto pixel = [&](const SceneVertex& v) -> std::optional<Eigen::Vector2d> {
+    const Eigen::Vector3d c =
+        rotation * Eigen::Vector3d(v.position[0], v.position[1], v.position[2]) + translation;
+    if (c.z() <= view_.near_m) return std::nullopt;
+    return Eigen::Vector2d(fx * c.x() / c.z() + view_.projector.cx_px,
+                           fy * c.y() / c.z() + view_.projector.cy_px);
+  };
+  // Bounds the work a degenerate request could cause: at most this many triangles.
+  constexpr size_t kMaxTessellatedTriangles = 4'000'000;
+  std::vector<SceneVertex> vertices;
+  vertices.reserve(static_cast<size_t>(scene.NumTriangles()) * 3);
+  groups->clear();
+  std::vector<std::array<SceneVertex, 3>> stack;
+  for (size_t m = 0; m < by_material.size(); ++m) {
+    if (by_material[m].empty()) continue;
+    Group group;
+    group.first_vertex = static_cast<int>(vertices.size());
+    group.material = static_cast<int>(m);
+    for (int t : by_material[m]) {
+      const Eigen::Vector3d n = scene.FaceNormal(t);
+      std::array<SceneVertex, 3> tri{};
+      for (int k = 0; k < 3; ++k) {
+        const int v = scene.triangles[t][k];
+        const Eigen::Vector3f& p = scene.positions_in_table_m[v];
+        for (int i = 0; i < 3; ++i) {
+          tri[k].position[i] = p[i];
+          tri[k].normal[i] = static_cast<float>(n[i]);
+        }
+        if (has_uv) {
+          tri[k].uv[0] = scene.texcoords[v].x();
+          tri[k].uv[1] = scene.texcoords[v].y();
+        }
+        group.bounds.extend(p.cast<double>());
+      }
+      stack.push_back(tri);
+      while (!stack.empty()) {
+        const std::array<SceneVertex, 3> a = stack.back();
+        stack.pop_back();
+        int longest = -1;
+        double longest2 = max_edge2;
+        if (tessellate && vertices.size() / 3 + stack.size() < kMaxTessellatedTriangles) {
+          const std::optional<Eigen::Vector2d> px[3] = {pixel(a[0]), pixel(a[1]), pixel(a[2])};
+          // Off the image (all three corners beyond one of its sides, with a margin of one
+          // edge): nothing of it is seen, it is left whole.
+          bool off_image = !(px[0] && px[1] && px[2]);
+          for (int axis = 0; axis < 2 && !off_image; ++axis) {
+            const double size = axis == 0 ? size_.width : size_.height;
+            const double lo = -edge_px, hi = size + edge_px;
+            off_image = ((*px[0])[axis] < lo && (*px[1])[axis] < lo && (*px[2])[axis] < lo) ||
+                        ((*px[0])[axis] > hi && (*px[1])[axis] > hi && (*px[2])[axis] > hi);
+          }
+          for (int e = 0; e < 3 && !off_image; ++e) {
+            const double d2 = (*px[e] - *px[(e + 1) % 3]).squaredNorm();
+            if (d2 > longest2) {
+              longest2 = d2;
+              longest = e;
+            }
+          }
+        }
+        if (longest < 0) {
+          vertices.insert(vertices.end(), a.begin(), a.end());
+          continue;
+        }
+        // Split edge (longest, longest + 1) at its midpoint.
+        const int i0 = longest, i1 = (longest + 1) % 3, i2 = (longest + 2) % 3;
+        SceneVertex mid = a[i0];
+        for (int i = 0; i < 3; ++i)
+          mid.position[i] = 0.5f * (a[i0].position[i] + a[i1].position[i]);
+        for (int i = 0; i < 2; ++i) mid.uv[i] = 0.5f * (a[i0].uv[i] + a[i1].uv[i]);
+        stack.push_back({a[i0], mid, a[i2]});
+        stack.push_back({mid, a[i1], a[i2]});
+      }
+    }
+    group.vertex_count = static_cast<int>(vertices.size()) - group.first_vertex;
+    groups->push_back(group);
+  }
+  glBindVertexArray(vao);
+  glBindBuffer(GL_ARRAY_BUFFER, vbo);
+  glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(vertices.size() * sizeof(SceneVertex)),
+               vertices.data(), GL_STATIC_DRAW);
+  glEnableVertexAttribArray(0);
+  glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(SceneVertex),
+                        reinterpret_cast<void*>(offsetof(SceneVertex, position)));
+  glEnableVertexAttribArray(1);
+  glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, sizeof(SceneVertex),
+                        reinterpret_cast<void*>(offsetof(SceneVertex, normal)));
+  glEnableVertexAttribArray(2);
+  glVertexAttribPointer(2, 2, GL_FLOAT, GL_FALSE, sizeof(SceneVertex),
+                        reinterpret_cast<void*>(offsetof(SceneVertex, uv)));
+  glBindVertexArray(0);
+  return CheckGl("uploading the model");
+}
+
 Renderer::~Renderer() {
   if (!context_->MakeCurrent().ok()) return;
-  const GLuint programs[] = {scene_program_, shadow_program_, overlay_program_, warp_program_,
-                             blit_program_};
-  for (GLuint p : programs) {
+  for (GLuint p : {shadow_program_, blit_program_}) {
     if (p) glDeleteProgram(p);
   }
+  for (const auto& [key, p] : variants_) glDeleteProgram(p);
   std::vector<GLuint> textures = textures_;
   for (GLuint t : {shadow_texture_, ideal_colour_, source_texture_, mask_texture_, pattern_texture_,
                    floor_texture_}) {
@@ -422,10 +537,10 @@ Renderer::~Renderer() {
   for (GLuint fb : {shadow_fbo_, ideal_fbo_}) {
     if (fb) glDeleteFramebuffers(1, &fb);
   }
-  for (GLuint b : {scene_vbo_, overlay_vbo_}) {
+  for (GLuint b : {scene_vbo_, shadow_vbo_, overlay_vbo_}) {
     if (b) glDeleteBuffers(1, &b);
   }
-  for (GLuint a : {scene_vao_, overlay_vao_, empty_vao_}) {
+  for (GLuint a : {scene_vao_, shadow_vao_, overlay_vao_, empty_vao_}) {
     if (a) glDeleteVertexArrays(1, &a);
   }
 }
@@ -445,23 +560,39 @@ Status Renderer::SetView(const ProjectorView& view) {
     glDeleteTextures(1, &source_texture_);
     source_texture_ = 0;
   }
-  if (view.needs_prewarp()) {
+  const bool fold = options_.fold_prewarp && view.needs_prewarp();
+  if (fold) {
+    // Edges short enough that the lens model's curvature bends them by at most
+    // prewarp_tolerance_px between vertices: a chord of L px deviates by L^2 / 8 x curvature.
+    tessellation_px_ = std::clamp(
+        std::sqrt(8.0 * options_.prewarp_tolerance_px / std::max(view.max_curvature_per_px, 1e-12)),
+        options_.min_tessellation_px, options_.max_tessellation_px);
+    ST_RETURN_IF_ERROR(UploadGeometry(scene_vao_, scene_vbo_, tessellation_px_, &groups_));
+    geometry_tessellated_ = true;
+  } else if (geometry_tessellated_) {
+    ST_RETURN_IF_ERROR(UploadGeometry(scene_vao_, scene_vbo_, 0.0, &groups_));
+    geometry_tessellated_ = false;
+    tessellation_px_ = 0.0;
+  }
+  if (view.needs_prewarp() && !options_.fold_prewarp) {
     // OpenCV ideal pixel -> GL texture coordinates of the ideal image; rows in GL order.
     cv::Mat coords(view.source_px.size(), CV_32FC2);
     for (int v = 0; v < coords.rows; ++v) {
       const auto* in = view.source_px.ptr<cv::Vec2f>(v);
       auto* out = coords.ptr<cv::Vec2f>(v);
       for (int u = 0; u < coords.cols; ++u) {
-        const cv::Vec2f s = in[u];
-        if (!std::isfinite(s[0]) || !std::isfinite(s[1])) {
+        const cv::Vec2f src = in[u];
+        if (!std::isfinite(src[0]) || !std::isfinite(src[1])) {
           out[u] = cv::Vec2f(-1.0f, -1.0f);
         } else {
-          out[u] = cv::Vec2f((s[0] + 0.5f) / size_.width, 1.0f - (s[1] + 0.5f) / size_.height);
+          out[u] = cv::Vec2f((src[0] + 0.5f) / size_.width, 1.0f - (src[1] + 0.5f) / size_.height);
         }
       }
     }
     const cv::Mat gl_rows = FlippedContinuous(coords);
-    source_texture_ = MakeTexture2D(GL_RG32F, size_.width, size_.height, GL_RG, GL_FLOAT,
+    // 16-bit normalized (0.02 px at 1280 px: a quarter of the bandwidth of RG32F); 0 and 1
+    // (clamped) mean "no source".
+    source_texture_ = MakeTexture2D(GL_RG16, size_.width, size_.height, GL_RG, GL_FLOAT,
                                     gl_rows.data, GL_NEAREST);
     ST_RETURN_IF_ERROR(EnsureIdealTarget());
   }
@@ -484,12 +615,16 @@ Status Renderer::SetMask(const cv::Mat& mask) {
   if (mask.type() == CV_8UC1) {
     mask.convertTo(factor, CV_32F, 1.0 / 255.0);
   } else {
-    factor = mask;
+    factor = mask.clone();
   }
+  cv::max(cv::min(factor, 1.0), 0.0, factor);
+  // Encoded once here (the colour note in renderer.h); a float target holds linear values.
+  if (!context_->float_output()) cv::pow(factor, 1.0 / options_.display_gamma, factor);
   const cv::Mat gl_rows = FlippedContinuous(factor);
   if (!mask_texture_) {
-    mask_texture_ = MakeTexture2D(GL_R32F, size_.width, size_.height, GL_RED, GL_FLOAT,
-                                  gl_rows.data, GL_NEAREST);
+    // 16-bit normalized (a float output keeps the float values for tests).
+    mask_texture_ = MakeTexture2D(context_->float_output() ? GL_R32F : GL_R16, size_.width,
+                                  size_.height, GL_RED, GL_FLOAT, gl_rows.data, GL_NEAREST);
   } else {
     glBindTexture(GL_TEXTURE_2D, mask_texture_);
     glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
@@ -497,7 +632,7 @@ Status Renderer::SetMask(const cv::Mat& mask) {
                     gl_rows.data);
   }
   has_mask_ = true;
-  ST_RETURN_IF_ERROR(EnsureIdealTarget());
+  if (!options_.fold_prewarp) ST_RETURN_IF_ERROR(EnsureIdealTarget());
   return CheckGl("setting the mask");
 }
 
@@ -558,12 +693,17 @@ Expected<FrameStats> Renderer::Render(const RenderContent& content) {
       ST_RETURN_IF_ERROR(
           timed(Pass::kShadow, [&] { return DrawShadow(*content.sun_direction_in_table); }));
     }
-    const bool warp = view_.needs_prewarp() || has_mask_;
+    const bool fold = options_.fold_prewarp;
+    const bool warp = !fold && (view_.needs_prewarp() || has_mask_);
     const GLuint target = warp ? ideal_fbo_ : output;
-    ST_RETURN_IF_ERROR(timed(Pass::kScene, [&] { return DrawScene(content, target, &stats); }));
+    ST_RETURN_IF_ERROR(
+        timed(Pass::kScene, [&] { return DrawScene(content, target, fold, &stats); }));
     stats.ran[static_cast<int>(Pass::kScene)] = stats.groups_drawn > 0;
+    stats.prewarp = view_.needs_prewarp();
+    stats.tessellation_px = tessellation_px_;
+    stats.masked = has_mask_ && !content.debug_positions;
     if (show && content.has_overlay()) {
-      ST_RETURN_IF_ERROR(timed(Pass::kOverlay, [&] { return DrawOverlay(content, &stats); }));
+      ST_RETURN_IF_ERROR(timed(Pass::kOverlay, [&] { return DrawOverlay(content, fold, &stats); }));
     }
     if (warp) {
       ST_RETURN_IF_ERROR(timed(Pass::kWarp, [&] { return DrawWarp(); }));
@@ -618,13 +758,68 @@ Status Renderer::DrawShadow(const Eigen::Vector3d& sun) {
   const glm::mat4 m = ToGlm(sun_clip_from_table_);
   glUniformMatrix4fv(glGetUniformLocation(shadow_program_, "u_sun_clip_from_table"), 1, GL_FALSE,
                      glm::value_ptr(m));
-  glBindVertexArray(scene_vao_);
-  for (const Group& g : groups_) glDrawArrays(GL_TRIANGLES, g.first_vertex, g.vertex_count);
+  glBindVertexArray(shadow_vao_);
+  for (const Group& g : shadow_groups_) glDrawArrays(GL_TRIANGLES, g.first_vertex, g.vertex_count);
   glDisable(GL_POLYGON_OFFSET_FILL);
   return CheckGl("drawing the shadow map");
 }
 
-Status Renderer::DrawScene(const RenderContent& content, unsigned int target, FrameStats* stats) {
+void Renderer::SetDistortionUniforms(unsigned int program, bool distort) {
+  auto loc = [&](const char* name) { return glGetUniformLocation(program, name); };
+  if (!distort) return;
+  const CameraModel& p = view_.projector;
+  Eigen::Matrix4d camera_from_table = Eigen::Matrix4d::Identity();
+  camera_from_table.topLeftCorner<3, 3>() = view_.projector_from_table.rotation.toRotationMatrix();
+  camera_from_table.topRightCorner<3, 1>() = view_.projector_from_table.translation;
+  const glm::mat4 m = ToGlm(camera_from_table);
+  glUniformMatrix4fv(loc("u_camera_from_table"), 1, GL_FALSE, glm::value_ptr(m));
+  glUniform4f(loc("u_intrinsics"), static_cast<float>(p.fx_px), static_cast<float>(p.fy_px),
+              static_cast<float>(p.cx_px), static_cast<float>(p.cy_px));
+  glUniform2f(loc("u_size_px"), static_cast<float>(size_.width), static_cast<float>(size_.height));
+  glUniform3f(loc("u_radial"), static_cast<float>(p.distortion.k1),
+              static_cast<float>(p.distortion.k2), static_cast<float>(p.distortion.k3));
+  glUniform2f(loc("u_tangential"), static_cast<float>(p.distortion.p1),
+              static_cast<float>(p.distortion.p2));
+  glUniform1f(loc("u_domain_r2"), static_cast<float>(view_.distortion_domain_r2));
+}
+
+Expected<unsigned int> Renderer::Variant(ProgramKind kind, int mode, bool textured, bool sun,
+                                         bool masked, bool distort) {
+  const int key =
+      static_cast<int>(kind) | mode << 2 | textured << 4 | sun << 5 | masked << 6 | distort << 7;
+  if (auto it = variants_.find(key); it != variants_.end()) return it->second;
+  const std::string defines = "#version 330 core\n#define MODE " + std::to_string(mode) +
+                              "\n#define TEXTURED " + std::to_string(textured) + "\n#define SUN " +
+                              std::to_string(sun) + "\n#define MASKED " + std::to_string(masked) +
+                              "\n#define DISTORT " + std::to_string(distort) + "\n";
+  std::string vertex, fragment;
+  switch (kind) {
+    case ProgramKind::kScene:
+      vertex = defines + kSceneVertex;
+      fragment = defines + kSceneFragment;
+      break;
+    case ProgramKind::kOverlay:
+      vertex = defines + kOverlayVertex;
+      fragment = defines + kOverlayFragment;
+      break;
+    case ProgramKind::kWarp:
+      vertex = kQuadVertex;
+      fragment = defines + kWarpFragment;
+      break;
+  }
+  Expected<unsigned int> program = LinkProgram("variant " + std::to_string(key) + " of the " +
+                                                   (kind == ProgramKind::kScene     ? "scene"
+                                                    : kind == ProgramKind::kOverlay ? "overlay"
+                                                                                    : "warp") +
+                                                   " program",
+                                               vertex.c_str(), fragment.c_str());
+  if (!program.ok()) return program.status();
+  variants_[key] = *program;
+  return *program;
+}
+
+Status Renderer::DrawScene(const RenderContent& content, unsigned int target, bool fold,
+                           FrameStats* stats) {
   glBindFramebuffer(GL_FRAMEBUFFER, target);
   glViewport(0, 0, size_.width, size_.height);
   glClearColor(0, 0, 0, 1);
@@ -634,33 +829,26 @@ Status Renderer::DrawScene(const RenderContent& content, unsigned int target, Fr
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LESS);
   glDisable(GL_CULL_FACE);  // thin walls and open meshes are seen from either side
-  glUseProgram(scene_program_);
   const int mode = content.debug_positions                      ? 3
                    : content.pattern == TestPattern::kWhite     ? 1
                    : content.pattern == TestPattern::kTableGrid ? 2
                                                                 : 0;
   const bool sun = mode == 0 && content.sun_direction_in_table.has_value();
+  // The sun below the horizon lights nothing: ambient only.
+  const Eigen::Vector3d sun_direction = sun && content.sun_direction_in_table->z() > 0.0
+                                            ? content.sun_direction_in_table->normalized()
+                                            : Eigen::Vector3d::Zero();
+  const bool masked = fold && has_mask_ && mode != 3;
+  const bool distort = fold && view_.needs_prewarp();
   const glm::mat4 clip = ToGlm(view_.clip_from_table);
   const glm::mat4 sun_clip = ToGlm(sun_clip_from_table_);
-  auto loc = [&](const char* name) { return glGetUniformLocation(scene_program_, name); };
-  glUniformMatrix4fv(loc("u_clip_from_table"), 1, GL_FALSE, glm::value_ptr(clip));
-  glUniformMatrix4fv(loc("u_sun_clip_from_table"), 1, GL_FALSE, glm::value_ptr(sun_clip));
-  glUniform1i(loc("u_mode"), mode);
-  glUniform1i(loc("u_sun"), sun ? 1 : 0);
-  if (sun) {
-    const glm::vec3 d = ToGlm(content.sun_direction_in_table->normalized());
-    glUniform3f(loc("u_sun_direction"), d.x, d.y, d.z);
-    // Night (the sun below the horizon): ambient only, no shadow lookup.
-    glUniform1f(loc("u_ambient"), static_cast<float>(options_.ambient));
-  }
-  glUniform1f(loc("u_grid_spacing_m"), static_cast<float>(options_.grid_spacing_m));
-  glUniform1f(loc("u_grid_half_line_m"), static_cast<float>(0.5 * options_.grid_line_width_m));
-  glUniform1i(loc("u_texture"), 0);
-  glUniform1i(loc("u_shadow"), 1);
+  glActiveTexture(GL_TEXTURE2);
+  glBindTexture(GL_TEXTURE_2D, mask_texture_);
   glActiveTexture(GL_TEXTURE1);
   glBindTexture(GL_TEXTURE_2D, shadow_texture_);
   glActiveTexture(GL_TEXTURE0);
   glBindVertexArray(scene_vao_);
+  GLuint current = 0;
   for (const Group& g : groups_) {
     if (OutsideFrustum(view_.clip_from_table, g.bounds)) {
       ++stats->groups_culled;
@@ -671,17 +859,37 @@ Status Renderer::DrawScene(const RenderContent& content, unsigned int target, Fr
     const Eigen::Vector4d colour =
         has_material ? material_colours_[g.material] : Eigen::Vector4d(1, 1, 1, 1);
     const int texture = has_material ? material_textures_[g.material] : -1;
+    const bool textured = mode == 0 && texture >= 0 && texture < static_cast<int>(textures_.size());
+    Expected<unsigned int> program =
+        Variant(ProgramKind::kScene, mode, textured, sun, masked, distort);
+    if (!program.ok()) return program.status();
+    auto loc = [&](const char* name) { return glGetUniformLocation(*program, name); };
+    if (*program != current) {
+      current = *program;
+      glUseProgram(current);
+      glUniformMatrix4fv(loc("u_clip_from_table"), 1, GL_FALSE, glm::value_ptr(clip));
+      glUniformMatrix4fv(loc("u_sun_clip_from_table"), 1, GL_FALSE, glm::value_ptr(sun_clip));
+      const glm::vec3 d = ToGlm(sun_direction);
+      glUniform3f(loc("u_sun_direction"), d.x, d.y, d.z);
+      glUniform1f(loc("u_ambient"), static_cast<float>(options_.ambient));
+      glUniform1f(loc("u_inverse_gamma"), static_cast<float>(1.0 / options_.display_gamma));
+      SetDistortionUniforms(current, distort);
+      glUniform1i(loc("u_mask"), 2);
+      glUniform1f(loc("u_grid_spacing_m"), static_cast<float>(options_.grid_spacing_m));
+      glUniform1f(loc("u_grid_half_line_m"), static_cast<float>(0.5 * options_.grid_line_width_m));
+      glUniform1i(loc("u_texture"), 0);
+      glUniform1i(loc("u_shadow"), 1);
+    }
     glUniform4f(loc("u_base_colour"), static_cast<float>(colour[0]), static_cast<float>(colour[1]),
                 static_cast<float>(colour[2]), static_cast<float>(colour[3]));
-    const bool textured = texture >= 0 && texture < static_cast<int>(textures_.size());
-    glUniform1i(loc("u_textured"), textured ? 1 : 0);
     if (textured) glBindTexture(GL_TEXTURE_2D, textures_[texture]);
     glDrawArrays(GL_TRIANGLES, g.first_vertex, g.vertex_count);
+    stats->scene_triangles += g.vertex_count / 3;
   }
   return CheckGl("drawing the scene");
 }
 
-Status Renderer::DrawOverlay(const RenderContent& content, FrameStats* stats) {
+Status Renderer::DrawOverlay(const RenderContent& content, bool fold, FrameStats* stats) {
   if (content.overlay_version != overlay_version_ || overlay_view_dirty_) {
     const std::vector<OverlayVertex> vertices =
         BuildOverlay(content, view_.centre_in_table_m, options_.overlay);
@@ -698,10 +906,19 @@ Status Renderer::DrawOverlay(const RenderContent& content, FrameStats* stats) {
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LEQUAL);
   glDepthMask(GL_FALSE);
-  glUseProgram(overlay_program_);
+  const bool distort = fold && view_.needs_prewarp();
+  Expected<unsigned int> program =
+      Variant(ProgramKind::kOverlay, 0, false, false, fold && has_mask_, distort);
+  if (!program.ok()) return program.status();
+  glUseProgram(*program);
   const glm::mat4 clip = ToGlm(view_.clip_from_table);
-  glUniformMatrix4fv(glGetUniformLocation(overlay_program_, "u_clip_from_table"), 1, GL_FALSE,
+  glUniformMatrix4fv(glGetUniformLocation(*program, "u_clip_from_table"), 1, GL_FALSE,
                      glm::value_ptr(clip));
+  SetDistortionUniforms(*program, distort);
+  glUniform1i(glGetUniformLocation(*program, "u_mask"), 2);
+  glActiveTexture(GL_TEXTURE2);
+  glBindTexture(GL_TEXTURE_2D, mask_texture_);
+  glActiveTexture(GL_TEXTURE0);
   glBindVertexArray(overlay_vao_);
   glDrawArrays(GL_TRIANGLES, 0, overlay_vertices_);
   glDepthMask(GL_TRUE);
@@ -712,14 +929,14 @@ Status Renderer::DrawWarp() {
   glBindFramebuffer(GL_FRAMEBUFFER, context_->output_framebuffer());
   glViewport(0, 0, size_.width, size_.height);
   glDisable(GL_DEPTH_TEST);
-  glUseProgram(warp_program_);
-  auto loc = [&](const char* name) { return glGetUniformLocation(warp_program_, name); };
+  Expected<unsigned int> program =
+      Variant(ProgramKind::kWarp, 0, false, false, has_mask_, view_.needs_prewarp());
+  if (!program.ok()) return program.status();
+  glUseProgram(*program);
+  auto loc = [&](const char* name) { return glGetUniformLocation(*program, name); };
   glUniform1i(loc("u_image"), 0);
   glUniform1i(loc("u_source"), 1);
   glUniform1i(loc("u_mask"), 2);
-  glUniform1i(loc("u_warp"), view_.needs_prewarp() ? 1 : 0);
-  glUniform1i(loc("u_masked"), has_mask_ ? 1 : 0);
-  glUniform1i(loc("u_linear"), context_->float_output() ? 1 : 0);
   glActiveTexture(GL_TEXTURE1);
   glBindTexture(GL_TEXTURE_2D, source_texture_);
   glActiveTexture(GL_TEXTURE2);

@@ -1,16 +1,26 @@
 // Renderer: what a projector shows, drawn with OpenGL 3.3 core into a GlContext
 // (docs/render.md). Passes, in TR09-017's order (its Figure 7):
-//   shadow   the virtual sun's depth map (orthographic from the sun); only when the sun or the
-//            scene changed since the last one
+//   shadow   the virtual sun's depth map (orthographic from the sun); only when the sun moved
+//            or was never drawn
 //   scene    the glTF model from the calibrated projector: base colour x base-colour texture,
 //            lit by the sun (ambient + Lambert x shadow) when there is one; or white, or the
 //            table grid, for those test patterns. Material groups outside the frustum are culled
 //   overlay  strokes, traces and markers (overlay_geometry.h), depth-tested against the scene
-//   warp     mask x intensity correction (linear light) and the lens-distortion pre-warp,
-//            folded into one full-screen pass from the ideal image to the output
+//   warp     the lens-distortion pre-warp and the mask (blend x intensity correction)
 //   pattern  a 2D test pattern (id, colour bars) or raw white, instead of all of the above
-// A pass a frame does not need is skipped and counted in FrameStats: without pre-warp and mask
-// the scene is drawn straight into the output framebuffer (no ideal image, no warp pass).
+// Folding (RendererOptions::fold_prewarp; off by default: on llvmpipe the tessellation it needs
+// costs more than the warp pass it saves, docs/render.md): the pre-warp runs in the vertex shader
+// (each vertex goes through the Brown model, exactly CameraModel::Project, on a model tessellated
+// finely enough that the lens bends no edge by more than prewarp_tolerance_px between vertices) and
+// the mask multiplies in the scene's and overlay's fragment shaders: no warp pass, no intermediate
+// image. Unfolded, the scene is drawn with the pinhole matrix into an ideal image and a full-screen
+// warp pass looks each output pixel up in it. A pass a frame does not need is skipped and counted
+// in FrameStats.
+//
+// Colour: every value is display-encoded (what the projector is sent). Products of linear
+// quantities (albedo x light x mask) are taken on encoded values with the display's power law
+// (display_gamma, 2.2): encode(a b) = encode(a) encode(b), exact for a power-law projector
+// such as the world's; texture filtering runs on encoded texels.
 //
 // Calibration and masks swap in between frames (SetView, SetMask); the distortion map is
 // computed beforehand off the render thread (PrepareProjectorView). Every call needs the
@@ -19,6 +29,7 @@
 #pragma once
 
 #include <array>
+#include <map>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -35,7 +46,12 @@
 namespace sandtable::node {
 
 struct RendererOptions {
-  int shadow_map_px = 2048;
+  int shadow_map_px = 1024;            // 1.5 mm per texel over a 1.5 m table
+  bool fold_prewarp = false;           // see above
+  double prewarp_tolerance_px = 0.02;  // folded pre-warp: chord error of a triangle edge
+  double min_tessellation_px = 8.0;    // ... edges never shorter than this
+  double max_tessellation_px = 256.0;  // ... nor left longer
+  double display_gamma = 2.2;
   double ambient = 0.35;        // share of light that is not the sun's (sky), in [0, 1]
   double grid_spacing_m = 0.1;  // the table grid's line spacing
   double grid_line_width_m = 0.003;
@@ -55,6 +71,10 @@ struct FrameStats {
   int groups_drawn = 0, groups_culled = 0;   // material groups of the model
   int overlay_triangles = 0;
   bool overlay_rebuilt = false;
+  int scene_triangles = 0;       // drawn (after tessellation)
+  bool prewarp = false;          // the frame went through the pre-warp (folded or as a pass)
+  double tessellation_px = 0.0;  // folded pre-warp: the longest edge of the scene's triangles
+  bool masked = false;
 };
 
 class Renderer {
@@ -84,9 +104,17 @@ class Renderer {
   Renderer(GlContext* context, const RendererOptions& options)
       : context_(context), options_(options) {}
   Status Init(const Scene& scene);
-  Status DrawScene(const RenderContent& content, unsigned int target, FrameStats* stats);
+  Status DrawScene(const RenderContent& content, unsigned int target, bool fold, FrameStats* stats);
+  struct Group;
+  Status UploadGeometry(unsigned int vao, unsigned int vbo, double edge_px,
+                        std::vector<Group>* groups);
+  void SetDistortionUniforms(unsigned int program, bool distort);
+  enum class ProgramKind { kScene = 0, kOverlay = 1, kWarp = 2 };
+  // The program specialised for these features (compiled on first use, then cached).
+  Expected<unsigned int> Variant(ProgramKind kind, int mode, bool textured, bool sun, bool masked,
+                                 bool distort);
   Status DrawShadow(const Eigen::Vector3d& sun);
-  Status DrawOverlay(const RenderContent& content, FrameStats* stats);
+  Status DrawOverlay(const RenderContent& content, bool fold, FrameStats* stats);
   Status DrawWarp();
   Status DrawPattern(const RenderContent& content);
   Status EnsureIdealTarget();
@@ -99,15 +127,20 @@ class Renderer {
 
   GlContext* context_;
   RendererOptions options_;
+  Scene scene_;
+  bool geometry_tessellated_ = false;
   cv::Size size_;
   Eigen::AlignedBox3d scene_bounds_;
-  std::vector<Group> groups_;
+  std::vector<Group> groups_;         // the scene pass's (tessellated for a folded pre-warp)
+  std::vector<Group> shadow_groups_;  // the model as given
+  double tessellation_px_ = 0.0;
   std::vector<Eigen::Vector4d> material_colours_;
   std::vector<int> material_textures_;
   std::vector<unsigned int> textures_;
-  unsigned int scene_program_ = 0, shadow_program_ = 0, overlay_program_ = 0;
-  unsigned int warp_program_ = 0, blit_program_ = 0;
+  unsigned int shadow_program_ = 0, blit_program_ = 0;
+  std::map<int, unsigned int> variants_;
   unsigned int scene_vao_ = 0, scene_vbo_ = 0, overlay_vao_ = 0, overlay_vbo_ = 0;
+  unsigned int shadow_vao_ = 0, shadow_vbo_ = 0;
   unsigned int empty_vao_ = 0;
   unsigned int shadow_fbo_ = 0, shadow_texture_ = 0;
   unsigned int ideal_fbo_ = 0, ideal_colour_ = 0, ideal_depth_ = 0;
@@ -115,6 +148,7 @@ class Renderer {
   unsigned int source_texture_ = 0, mask_texture_ = 0, pattern_texture_ = 0;
   unsigned int floor_texture_ = 0;
   bool has_view_ = false, has_mask_ = false;
+  cv::Mat mask_linear_;  // the factor as given (CV_32FC1), for the unfolded warp pass
   ProjectorView view_;
   std::optional<Eigen::Vector3d> shadow_sun_;  // the sun of the current shadow map
   Eigen::Matrix4d sun_clip_from_table_ = Eigen::Matrix4d::Identity();

@@ -87,10 +87,12 @@ void ExpectGolden(const cv::Mat& rgb, const std::string& name) {
 
 // Every 3rd output pixel the table covers: the float output holds the table point that pixel
 // shows; the calibrated model must project it back onto the pixel.
-double MaxProjectionError_px(bool distortion, int* checked) {
+double MaxProjectionError_px(bool distortion, bool fold, int* checked) {
   std::unique_ptr<GlContext> context = MakeContext(OutputFormat::kRgba32f);
   if (!context) return 1e9;
-  std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), distortion);
+  RendererOptions options;
+  options.fold_prewarp = fold;
+  std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), distortion, options);
   if (!renderer) return 1e9;
   RenderContent content;
   content.debug_positions = true;
@@ -126,14 +128,19 @@ double MaxProjectionError_px(bool distortion, int* checked) {
 
 TEST(RendererTest, GlProjectionPutsTablePointsOnCameraModelPixels) {
   int checked = 0;
-  const double pinhole_px = MaxProjectionError_px(/*distortion=*/false, &checked);
+  const double pinhole_px = MaxProjectionError_px(/*distortion=*/false, false, &checked);
   EXPECT_GT(checked, 1000);
   EXPECT_LE(pinhole_px, kProjectionTolerance_px);
-  const double distorted_px = MaxProjectionError_px(/*distortion=*/true, &checked);
+  // The pre-warp as a pass (the default) and folded into the vertex shader.
+  const double warp_pass_px = MaxProjectionError_px(/*distortion=*/true, false, &checked);
   EXPECT_GT(checked, 1000);
-  EXPECT_LE(distorted_px, kProjectionTolerance_px);
-  std::cout << "max |GL - CameraModel::Project|: pinhole " << pinhole_px << " px, distorted "
-            << distorted_px << " px over " << checked << " pixels\n";
+  EXPECT_LE(warp_pass_px, kProjectionTolerance_px);
+  const double folded_px = MaxProjectionError_px(/*distortion=*/true, true, &checked);
+  EXPECT_GT(checked, 1000);
+  EXPECT_LE(folded_px, kProjectionTolerance_px);
+  std::cout << "max |GL - CameraModel::Project|: pinhole " << pinhole_px
+            << " px, distorted with the warp pass " << warp_pass_px << " px, folded " << folded_px
+            << " px over " << checked << " pixels\n";
 }
 
 TEST(RendererTest, DistortionMapSkippedBelowATenthOfAPixel) {
@@ -289,13 +296,14 @@ TEST(RendererTest, MaskMultipliesInLinearLight) {
   RenderContent content;
   content.pattern = TestPattern::kWhite;
   const cv::Mat image = RenderToImage(context.get(), renderer.get(), content);
-  // A table pixel in each half: 255 where the mask is 1, sRGB-encoded 0.5 (188) where 0.5.
+  // A table pixel in each half: 255 where the mask is 1, 0.5 encoded with the display's 2.2 power
+  // law (255 x 0.5^(1 / 2.2) = 186.1) where 0.5.
   const cv::Point left = PixelOf({-0.4, -0.3, 0.0}, false);
   const cv::Point right = PixelOf({0.4, -0.3, 0.0}, false);
   ASSERT_LT(left.x, kW / 2);
   ASSERT_GE(right.x, kW / 2);
   EXPECT_EQ(image.at<cv::Vec3b>(right), cv::Vec3b(255, 255, 255));
-  EXPECT_NEAR(image.at<cv::Vec3b>(left)[0], 188, 1);
+  EXPECT_NEAR(image.at<cv::Vec3b>(left)[0], 186, 1);
 }
 
 TEST(RendererTest, GoldenImagesOfEachPass) {
@@ -320,6 +328,19 @@ TEST(RendererTest, GoldenImagesOfEachPass) {
     RenderContent content;
     content.pattern = TestPattern::kTableGrid;
     ExpectGolden(RenderToImage(context.get(), renderer.get(), content), "warp-mask-grid");
+  }
+  {
+    // The same frame with the pre-warp and mask folded into the scene pass: the same picture.
+    RendererOptions folded;
+    folded.fold_prewarp = true;
+    std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), /*distortion=*/true, folded);
+    ASSERT_TRUE(renderer);
+    cv::Mat mask(kH, kW, CV_32FC1);
+    for (int u = 0; u < kW; ++u) mask.col(u).setTo(std::min(1.0, 2.0 * u / kW));
+    ASSERT_TRUE(renderer->SetMask(mask).ok());
+    RenderContent content;
+    content.pattern = TestPattern::kTableGrid;
+    ExpectGolden(RenderToImage(context.get(), renderer.get(), content), "folded-mask-grid");
   }
 }
 

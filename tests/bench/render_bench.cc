@@ -1,0 +1,234 @@
+// The renderer's frame time at a projector's resolution on the default scene, every pass on,
+// against the floor measured in the same run (one full-screen textured pass at the same size).
+//
+//   build/tests/bench/sandtable_render_bench [--frames 300] [--width 1280 --height 800]
+//                                            [--out render-bench.json]
+//
+// The scene: the sandtable preset (seed 1) with synthetic aerial imagery draped over it from
+// above (a 1024 x 1024 texture), seen by sandtable-3's unit 0 projector at its true pose (the
+// default projector's Brown distortion, 3 px at most: the pre-warp runs). Every frame: the virtual
+// sun moves (a new shadow map), 12 strokes, 4 personnel traces that grow and their heads, and the
+// wand cursor (the overlay rebuilt), a blend mask (the warp pass). Reports frame time p50 / p99 (GL
+// work finished), the per-pass times of a second run that finishes after each pass, the floor,
+// and the context's description (llvmpipe, or a GPU's driver). docs/render.md.
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <iostream>
+#include <random>
+
+#include <nlohmann/json.hpp>
+
+#include "common/cli/command_line.h"
+#include "common/scene/procedural_scene.h"
+#include "node/render/gl_context.h"
+#include "node/render/renderer.h"
+#include "sim/site/site_presets.h"
+
+namespace {
+
+using namespace sandtable;
+using namespace sandtable::node;
+
+double Percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const size_t i = std::min(v.size() - 1, static_cast<size_t>(std::ceil(p * v.size()) - 1));
+  return v[i];
+}
+
+// Fields and roads: smooth colour noise with a grid of darker lines, sRGB.
+Texture AerialImagery(int side_px) {
+  Texture t;
+  t.width_px = t.height_px = side_px;
+  t.rgba.resize(static_cast<size_t>(side_px) * side_px * 4);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> phase(0, 2 * M_PI);
+  const double a = phase(rng), b = phase(rng), c = phase(rng);
+  for (int y = 0; y < side_px; ++y) {
+    for (int x = 0; x < side_px; ++x) {
+      const double u = static_cast<double>(x) / side_px, v = static_cast<double>(y) / side_px;
+      const double field = 0.5 + 0.25 * std::sin(13 * u + a) * std::cos(11 * v + b) +
+                           0.15 * std::sin(37 * (u + v) + c);
+      const bool road = (x % 128) < 5 || (y % 160) < 5;
+      uint8_t* p = &t.rgba[(static_cast<size_t>(y) * side_px + x) * 4];
+      p[0] = static_cast<uint8_t>(road ? 90 : 60 + 80 * field);
+      p[1] = static_cast<uint8_t>(road ? 90 : 90 + 100 * field);
+      p[2] = static_cast<uint8_t>(road ? 95 : 40 + 40 * field);
+      p[3] = 255;
+    }
+  }
+  return t;
+}
+
+Scene BenchScene() {
+  ProceduralSceneOptions options;
+  options.seed = 1;
+  Scene scene = MakeProceduralScene(options)->scene;
+  scene.textures.push_back(AerialImagery(1024));
+  for (Material& m : scene.materials) m.base_color_texture = 0;
+  const Eigen::AlignedBox3d box = scene.Bounds();
+  scene.texcoords.clear();
+  for (const Eigen::Vector3f& p : scene.positions_in_table_m) {
+    scene.texcoords.emplace_back(static_cast<float>((p.x() - box.min().x()) / box.sizes().x()),
+                                 static_cast<float>((box.max().y() - p.y()) / box.sizes().y()));
+  }
+  return scene;
+}
+
+RenderContent Content(int frame, const Eigen::AlignedBox3d& box) {
+  RenderContent c;
+  c.sun_direction_in_table = SunDirection(8.0 + 0.01 * frame);
+  const double r = 0.45 * box.sizes().x();
+  for (int s = 0; s < 12; ++s) {
+    Polyline line;
+    line.colour = Eigen::Vector3f(1.0f, 0.2f + 0.05f * s, 0.1f);
+    line.width_m = 0.008;
+    for (int k = 0; k < 40; ++k) {
+      const double t = 0.02 * k + 0.5 * s;
+      line.points_in_table_m.emplace_back(r * std::cos(t) * (0.3 + 0.05 * s),
+                                          r * std::sin(t) * (0.3 + 0.05 * s), 0.0);
+    }
+    c.strokes.push_back(line);
+  }
+  for (int k = 0; k < 4; ++k) {
+    Polyline trace;
+    trace.colour = Eigen::Vector3f(0.1f, 0.4f + 0.15f * k, 1.0f);
+    trace.width_m = 0.006;
+    const int n = 50 + frame % 200;
+    for (int i = 0; i < n; ++i) {
+      const double t = 0.01 * i + k;
+      trace.points_in_table_m.emplace_back(0.5 * r * std::cos(3 * t + k), 0.5 * r * std::sin(2 * t),
+                                           0.0);
+    }
+    Marker head;
+    head.position_in_table_m = trace.points_in_table_m.back();
+    head.colour = trace.colour;
+    head.radius_m = 0.02;
+    c.traces.push_back(trace);
+    c.markers.push_back(head);
+  }
+  Marker cursor;
+  cursor.position_in_table_m = Eigen::Vector3d(0.1 * std::cos(0.05 * frame), 0.1, 0.0);
+  cursor.ring = true;
+  c.markers.push_back(cursor);
+  c.overlay_version = static_cast<uint64_t>(frame) + 1;
+  return c;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app("The renderer's frame time against the floor (docs/render.md)",
+               "sandtable_render_bench");
+  cli::Configure(app);
+  int frames = 300, width = 1280, height = 800;
+  std::string out;
+  app.add_option("--frames", frames, "frames per run")->check(cli::Integer(10, 100000));
+  app.add_option("--width", width, "output width, px")->check(cli::Integer(16, 8192));
+  app.add_option("--height", height, "output height, px")->check(cli::Integer(16, 8192));
+  app.add_option("--out", out, "JSON file of the figures");
+  if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
+
+  Expected<sim::Site> site = sim::MakeSitePreset("sandtable-3");
+  if (!site.ok()) return 1;
+  const sim::UnitSpec& unit = site->units[0];
+  CameraModel projector = unit.projector.model;
+  const double scale = static_cast<double>(width) / projector.width_px;
+  projector.fx_px *= scale;
+  projector.fy_px *= static_cast<double>(height) / projector.height_px;
+  projector.cx_px = (projector.cx_px + 0.5) * scale - 0.5;
+  projector.cy_px = (projector.cy_px + 0.5) * height / projector.height_px - 0.5;
+  projector.width_px = width;
+  projector.height_px = height;
+
+  const Scene scene = BenchScene();
+  Expected<std::unique_ptr<GlContext>> context = CreateEglContext(cv::Size(width, height));
+  if (!context.ok()) {
+    std::cerr << context.status().ToString() << "\n";
+    return 1;
+  }
+  Expected<ProjectorView> view = PrepareProjectorView(
+      projector, unit.projector.table_from_projector.Inverse(), scene.Bounds());
+  if (!view.ok()) {
+    std::cerr << view.status().ToString() << "\n";
+    return 1;
+  }
+  cv::Mat mask(height, width, CV_32FC1);
+  for (int u = 0; u < width; ++u) mask.col(u).setTo(std::min(1.0, 0.5 + u / (1.0 * width)));
+
+  nlohmann::json report;
+  report["context"] = (*context)->description();
+  report["width_px"] = width;
+  report["height_px"] = height;
+  report["triangles"] = scene.NumTriangles();
+  report["frames"] = frames;
+  report["max_distortion_px"] = view->max_displacement_px;
+  // The shipped renderer (the pre-warp and mask as a separate full-screen pass), then the same
+  // frames with them folded into the scene pass (the measurement behind the default).
+  for (bool fold : {false, true}) {
+    std::vector<double> frame_ms;
+    std::vector<std::vector<double>> pass_ms(kPassCount);
+    nlohmann::json& run = report[fold ? "folded" : "separate_warp_pass"];
+    for (bool timed_passes : {false, true}) {
+      RendererOptions options;
+      options.time_passes = timed_passes;
+      options.fold_prewarp = fold;
+      Expected<std::unique_ptr<Renderer>> renderer =
+          Renderer::Create(context->get(), scene, options);
+      if (!renderer.ok() || !(*renderer)->SetView(*view).ok() || !(*renderer)->SetMask(mask).ok()) {
+        std::cerr << "renderer: " << renderer.status().ToString() << "\n";
+        return 1;
+      }
+      for (int f = -10; f < frames; ++f) {  // 10 frames of warm-up
+        Expected<FrameStats> stats = (*renderer)->Render(Content(f + 10, scene.Bounds()));
+        if (!stats.ok()) {
+          std::cerr << stats.status().ToString() << "\n";
+          return 1;
+        }
+        if (f < 0) continue;
+        run["scene_triangles_drawn"] = stats->scene_triangles;
+        run["overlay_triangles"] = stats->overlay_triangles;
+        run["tessellation_px"] = stats->tessellation_px;
+        if (!timed_passes) {
+          frame_ms.push_back(stats->frame_ms);
+        } else {
+          for (int p = 0; p < kPassCount; ++p) {
+            if (stats->ran[p]) pass_ms[p].push_back(stats->pass_ms[p]);
+          }
+        }
+      }
+      if (!timed_passes && !fold) {
+        std::vector<double> floor_ms;
+        for (int f = 0; f < frames; ++f) {
+          Expected<double> ms = (*renderer)->RenderFloor();
+          if (ms.ok()) floor_ms.push_back(*ms);
+        }
+        report["floor_ms_p50"] = Percentile(floor_ms, 0.5);
+        report["floor_ms_p99"] = Percentile(floor_ms, 0.99);
+      }
+    }
+    run["frame_ms_p50"] = Percentile(frame_ms, 0.5);
+    run["frame_ms_p99"] = Percentile(frame_ms, 0.99);
+    run["frame_over_floor"] =
+        run["frame_ms_p50"].get<double>() / std::max(1e-9, report["floor_ms_p50"].get<double>());
+    for (int p = 0; p < kPassCount; ++p) {
+      const char* name = PassName(static_cast<Pass>(p));
+      run["pass_ms_p50"][name] = Percentile(pass_ms[p], 0.5);
+      run["pass_frames"][name] = pass_ms[p].size();
+    }
+  }
+  report["frame_ms_p50"] = report["separate_warp_pass"]["frame_ms_p50"];
+  report["frame_ms_p99"] = report["separate_warp_pass"]["frame_ms_p99"];
+  report["frame_over_floor"] = report["separate_warp_pass"]["frame_over_floor"];
+  std::cout << report.dump(2) << "\n";
+  if (!out.empty()) {
+    std::ofstream file(out);
+    file << report.dump(2) << "\n";
+    if (!file) {
+      std::cerr << "cannot write " << out << "\n";
+      return 1;
+    }
+  }
+  return 0;
+}
