@@ -222,8 +222,8 @@ static int Run(int argc, char** argv) {
   coordinator::AnnotationService annotations(store->get());
   std::unique_ptr<coordinator::TimelineService> timeline;
   if (!timeline_path.empty()) {
-    Expected<coordinator::PersonnelTracks> tracks =
-        coordinator::PersonnelTracks::Load(timeline_path);
+    Expected<cluster::PersonnelTracks> tracks =
+        cluster::PersonnelTracks::Load(timeline_path);
     if (!tracks.ok()) {
       std::cerr << "sandtable-coordinator: --timeline: " << tracks.status().ToString() << "\n";
       return 2;  // bad input file

@@ -12,10 +12,14 @@
 
 #include "cluster/media_clock.h"
 #include "coordinator/membership/coordinator_server.h"
-#include "coordinator/timeline/personnel_tracks.h"
+#include "cluster/personnel_tracks.h"
 #include "proto/timeline.pb.h"
 
 namespace sandtable::coordinator {
+
+using cluster::PersonnelTracks;
+using cluster::TrackPositionAt;
+using cluster::TrackSample;
 
 struct TimelineServiceOptions {
   double publish_rate_hz = 30.0;

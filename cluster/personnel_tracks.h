@@ -1,4 +1,5 @@
 // Recorded personnel tracks for after-action review: positions over media time, table frame.
+// The coordinator replays them on its timeline; nodes draw them as traces (node/render).
 //
 // File format (CSV, docs/coordinator.md "Timeline"): a header line, exactly
 //   track_id,t_s,x_m,y_m,z_m
@@ -27,7 +28,7 @@
 
 #include "common/base/status.h"
 
-namespace sandtable::coordinator {
+namespace sandtable::cluster {
 
 constexpr uint64_t kMaxTimelineFileBytes = uint64_t{256} << 20;
 constexpr size_t kMaxTimelineTracks = 1024;
@@ -70,4 +71,4 @@ class PersonnelTracks {
   double duration_s_ = 0.0;
 };
 
-}  // namespace sandtable::coordinator
+}  // namespace sandtable::cluster

@@ -1,4 +1,4 @@
-#include "coordinator/timeline/personnel_tracks.h"
+#include "cluster/personnel_tracks.h"
 
 #include <algorithm>
 #include <charconv>
@@ -8,7 +8,7 @@
 
 #include "common/base/file_io.h"
 
-namespace sandtable::coordinator {
+namespace sandtable::cluster {
 namespace {
 
 constexpr std::string_view kHeader = "track_id,t_s,x_m,y_m,z_m";
@@ -172,4 +172,4 @@ Expected<double> PersonnelTracks::DistanceAlong_m(uint32_t track_id, double from
   return distance_m;
 }
 
-}  // namespace sandtable::coordinator
+}  // namespace sandtable::cluster

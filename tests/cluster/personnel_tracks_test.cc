@@ -1,11 +1,11 @@
-#include "coordinator/timeline/personnel_tracks.h"
+#include "cluster/personnel_tracks.h"
 
 #include <cmath>
 #include <string>
 
 #include <gtest/gtest.h>
 
-namespace sandtable::coordinator {
+namespace sandtable::cluster {
 namespace {
 
 constexpr double kTolerance_m = 1e-12;
@@ -133,4 +133,4 @@ TEST(TimelinePersonnelTracksTest, TracksPastTheLimitAreRefusedNamingIt) {
 }
 
 }  // namespace
-}  // namespace sandtable::coordinator
+}  // namespace sandtable::cluster
