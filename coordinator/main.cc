@@ -23,6 +23,8 @@
 // work on the database and exit (docs/coordinator.md); a bad session file exits 2 naming the
 // line and field and imports nothing.
 //
+// Test patterns (docs/render.md): test_pattern_request on the ROUTER, site-wide or per node,
+// published as test_pattern_state.
 // --timeline: personnel tracks (CSV, docs/coordinator.md) replayed with play/pause/seek/rate
 // requests and a timeline_clock on the PUB. --status: JSON at http://HOST:PORT/status (port 0:
 // any free port; a bare PORT binds loopback). --status-token-file: a token (one line, 16..256
@@ -64,6 +66,7 @@
 #include "common/scene/gltf_loader.h"
 #include "coordinator/annotations/annotation_service.h"
 #include "coordinator/annotations/session_file.h"
+#include "coordinator/display/test_pattern_service.h"
 #include "coordinator/membership/coordinator_server.h"
 #include "coordinator/status/http_status_server.h"
 #include "coordinator/status/status_service.h"
@@ -222,8 +225,7 @@ static int Run(int argc, char** argv) {
   coordinator::AnnotationService annotations(store->get());
   std::unique_ptr<coordinator::TimelineService> timeline;
   if (!timeline_path.empty()) {
-    Expected<cluster::PersonnelTracks> tracks =
-        cluster::PersonnelTracks::Load(timeline_path);
+    Expected<cluster::PersonnelTracks> tracks = cluster::PersonnelTracks::Load(timeline_path);
     if (!tracks.ok()) {
       std::cerr << "sandtable-coordinator: --timeline: " << tracks.status().ToString() << "\n";
       return 2;  // bad input file
@@ -319,6 +321,8 @@ static int Run(int argc, char** argv) {
 
   coordinator::CoordinatorServer server(options);
   server.AddService(&annotations);
+  coordinator::TestPatternService test_patterns;
+  server.AddService(&test_patterns);
   if (timeline) server.AddService(timeline.get());
   if (wand) server.AddService(wand.get());
   if (status) server.AddService(status.get());

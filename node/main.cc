@@ -6,6 +6,9 @@
 //                  [--true-pose FILE] [--export-dir DIR] [--projector SPEC] [--camera SPEC]
 //                  [--model FILE] [--saved-calibration FILE] [--grid-step-px N]
 //                  [--calibration-path auto|full]
+//                  [--render auto|on|off] [--timeline TRACKS.csv] [--sun on|off]
+//                  [--sun-start-h H] [--sun-hours-per-s R] [--render-max-fps F]
+//                  [--render-log FILE]
 //                  [--bind ENDPOINT] [--curve-keys FILE] [--heartbeat-ms N] [--workers N]
 //   (--world E is short for --projector world:E --camera world:E; node/devices/device_factory.h)
 //   sandtable-node calibrate-unit --poses DIR -o unit.json ...   (the unit's factory calibration)
@@ -16,6 +19,12 @@
 //   {"calibrated":3,"source":"factory+true_pose","json":"DIR/unit-3.json","yaml":"DIR/unit-3.yaml"}
 // (self-calibration adds report, mpcdi, round, verified and its compute and traffic figures);
 // with --saved-calibration, the check's figures first: {"verification":3,"holds":true,...}.
+// The show (node/render, docs/render.md): once the unit holds a calibration it renders the
+// --model where it stands, the annotations, the wand's cursor and the --timeline's personnel
+// tracks at the coordinator's media time, under a virtual sun, into its projector; it prints
+// {"render":ID,"pattern":NAME} when an operator's test pattern is first shown and a summary
+// {"render":ID,"frames":N,"frame_ms_p50":...} every 2 s. --render auto renders when there is a
+// projector and says so when no GL context can be made; on makes that an error.
 // Exit status: 0 after SIGINT/SIGTERM (Goodbye said), 1 when it cannot start, 2 for a bad flag
 // or a bad input file.
 #include <csignal>
@@ -23,6 +32,7 @@
 #include <string>
 #include <vector>
 
+#include "cluster/personnel_tracks.h"
 #include "common/base/log.h"
 #include "common/base/main_guard.h"
 #include "common/base/ready_line.h"
@@ -35,6 +45,8 @@
 #include "node/devices/device_factory.h"
 #include "node/events/event_state_service.h"
 #include "node/net/node_runtime.h"
+#include "node/render/render_loop.h"
+#include "node/render/render_service.h"
 
 namespace {
 
@@ -63,6 +75,9 @@ static int Run(int argc, char** argv) {
   int grid_step_px = 16;
   std::string calibration_path = "auto";
   int heartbeat_ms = 100;
+  std::string render_mode = "auto", timeline_path, sun = "on", render_log;
+  node::SunOptions sun_options;
+  double render_max_fps = 30.0;
   app.add_option("--id", id, "this unit's node id (below 4294967280)")
       ->check(cli::Integer<uint32_t>(0, kFirstReservedSenderId - 1));
   app.add_option("--coordinator", coordinator,
@@ -110,6 +125,23 @@ static int Run(int argc, char** argv) {
                  "self-calibration: projector grid spacing of the correspondences, px")
       ->check(cli::Integer(4, 256));
 
+  app.add_option("--render", render_mode,
+                 "the show: auto (when there is a projector), on (an error without GL), off")
+      ->check(CLI::IsMember({"auto", "on", "off"}));
+  app.add_option("--timeline", timeline_path,
+                 "personnel tracks (CSV, as the coordinator's --timeline) drawn as traces")
+      ->check(CLI::ExistingFile);
+  app.add_option("--sun", sun, "the virtual sun's light and shadows")
+      ->check(CLI::IsMember({"on", "off"}));
+  app.add_option("--sun-start-h", sun_options.start_hour, "time of day at media time 0, h")
+      ->check(CLI::Range(0.0, 24.0));
+  app.add_option("--sun-hours-per-s", sun_options.hours_per_media_s,
+                 "hours of the day per media second")
+      ->check(CLI::Range(0.0, 3600.0));
+  app.add_option("--render-max-fps", render_max_fps, "frames a second at most")
+      ->check(CLI::Range(0.1, 1000.0));
+  app.add_option("--render-log", render_log,
+                 "CSV of every shown frame: steady ns, media time (the lab's skew)");
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
   if (calibrate->parsed()) return node::RunCalibrateUnit(calibrate->remaining());
   auto usage = [&](const std::string& why) { return cli::UsageError(app, why); };
@@ -177,6 +209,13 @@ static int Run(int argc, char** argv) {
     loaded->unit_id = options.id;
     saved = *loaded;
   }
+  std::shared_ptr<const cluster::PersonnelTracks> tracks;
+  if (!timeline_path.empty()) {
+    Expected<cluster::PersonnelTracks> loaded = cluster::PersonnelTracks::Load(timeline_path);
+    if (!loaded.ok()) return usage("--timeline: " + loaded.status().ToString());
+    tracks = std::make_shared<const cluster::PersonnelTracks>(std::move(*loaded));
+  }
+  sun_options.enabled = sun == "on";
   std::shared_ptr<const Scene> model;
   if (!model_path.empty()) {
     Expected<Scene> loaded = LoadGltfScene(model_path);
@@ -236,6 +275,26 @@ static int Run(int argc, char** argv) {
     }
   }
 
+  // The show: the renderer on its own thread, drawing once the unit holds a calibration.
+  std::unique_ptr<node::RenderLoop> render_loop;
+  if (projector && render_mode != "off") {
+    node::RenderLoopOptions render_options;
+    render_options.max_fps = render_max_fps;
+    render_options.frame_log_path = render_log;
+    Expected<std::unique_ptr<node::RenderLoop>> started =
+        node::RenderLoop::Start(projector.get(), model, render_options);
+    if (!started.ok()) {
+      if (render_mode == "on") {
+        std::cerr << "sandtable-node: render: " << started.status().message() << "\n";
+        return cli::kExitFailure;
+      }
+      ST_LOG(kWarning) << "no show (--render auto): " << started.status().message();
+    } else {
+      render_loop = std::move(*started);
+      ST_LOG(kInfo) << "render: " << render_loop->Summary().context;
+    }
+  }
+
   struct sigaction action {};
   action.sa_handler = OnSignal;
   sigaction(SIGINT, &action, nullptr);
@@ -247,6 +306,15 @@ static int Run(int argc, char** argv) {
   node::NodeRuntime runtime(options);
   node::EventStateService events;
   runtime.AddService(&events);
+  std::unique_ptr<node::RenderService> render_service;
+  if (render_loop) {
+    node::RenderServiceOptions render_service_options;
+    render_service_options.sun = sun_options;
+    render_service = std::make_unique<node::RenderService>(
+        &events, render_loop.get(), tracks, model, render_service_options,
+        [](const nlohmann::json& line) { WriteJsonLine(std::cout, line); });
+    runtime.AddService(render_service.get());
+  }
   // Self-calibration (structured light with the neighbours) when the unit has its factory
   // calibration, a projector and a camera, and is not in the lab's true-pose test mode.
   if (calibration && true_pose_path.empty() && projector && !camera_spec.empty()) {
@@ -258,6 +326,7 @@ static int Run(int argc, char** argv) {
         *calibration, projector.get(), model, sc,
         [&, id = options.id](const node::SelfCalibrationOutcome& outcome) {
           calibration = outcome.calibration;
+          if (render_service) render_service->OnCalibration(outcome.calibration, runtime);
           if (export_dir.empty()) return;
           Expected<nlohmann::json> line = node::ExportSelfCalibration(outcome, id, export_dir);
           if (!line.ok()) {
@@ -275,6 +344,7 @@ static int Run(int argc, char** argv) {
       self_calibration->SetSavedCalibration(
           *saved, [](const nlohmann::json& line) { WriteJsonLine(std::cout, line); });
     }
+    if (render_loop) self_calibration->SetRenderLoop(render_loop.get());
     runtime.AddService(self_calibration.get());
   }
   if (saved && !self_calibration) {
@@ -330,7 +400,17 @@ static int Run(int argc, char** argv) {
                               {"json", exported->json_path},
                               {"yaml", exported->yaml_path}});
   }
+  if (calibration && render_loop && !self_calibration && calibration->table_from_projector) {
+    // A unit that starts calibrated (the lab's true-pose mode) shows at once.
+    render_service->OnCalibration(*calibration, runtime);
+    runtime.workers().Run<Status>(
+        [loop = render_loop.get(), c = *calibration] { return loop->ShowCalibration(c); },
+        [](Status shown) {
+          if (!shown.ok()) ST_LOG(kWarning) << "render: " << shown.message();
+        });
+  }
   Status ran = runtime.Run(g_stop);
+  if (render_service) WriteJsonLine(std::cout, render_service->SummaryJson(options.id));
   if (auto offset = runtime.clock_offset()) {
     ST_LOG(kInfo) << "clock offset to coordinator " << offset->offset_s * 1e3
                   << " ms, error <= " << offset->error_bound_s * 1e3 << " ms over "

@@ -176,9 +176,10 @@ void SelfCalibrationService::MaybeVerify(NodeRuntime& node) {
   std::shared_ptr<const Scene> model = model_;
   const CalibrationCheckOptions check = options_.check;
   node.workers().Run<Checked>(
-      [saved, projector, camera, model, check] {
+      [saved, projector, camera, model, check, loop = render_loop_] {
         Checked out;
         const double t0 = ThreadCpuSeconds();
+        if (loop) loop->Suspend();  // the check's two frames take the projector
         Expected<CalibrationCheckPlan> plan = PlanCalibrationCheck(saved, model.get(), check);
         auto fail = [&](const Status& s) {
           out.report = s;
@@ -347,7 +348,8 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
       }
       ProjectorOutput* projector = projector_;
       node.workers().Run<Status>(
-          [projector, frame] {
+          [projector, frame, loop = render_loop_] {
+            if (loop) loop->Suspend();  // calibration takes the projector from the show
             Expected<ShownFrame> shown = projector->Show(frame);
             return shown.ok() ? OkStatus() : shown.status();
           },
@@ -469,7 +471,7 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
       // A calibrated unit while a joining neighbour captures: its display blanked where that
       // neighbour's light fell in this unit's camera, or restored.
       auto lit = lit_masks_.find(step.about_projector());
-      if (!projector_ || display_.empty() || !holding_ ||
+      if (!projector_ || (display_.empty() && !render_loop_) || !holding_ ||
           (step.blank_on() && lit == lit_masks_.end())) {
         done.set_ok(true);  // nothing shown, or nothing of it seen: nothing to blank
         Answer(from, done, node);
@@ -486,21 +488,32 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
         double cpu_s = 0.0;
       };
       node.workers().Run<Blanked>(
-          [projector, display, camera_mask, holding, model] {
+          [projector, display, camera_mask, holding, model, loop = render_loop_] {
             Blanked b;
             const double t0 = ThreadCpuSeconds();
             cv::Mat frame = display;
+            cv::Mat factor;  // for the renderer: 255 shown, 0 blank (empty: restored)
             if (!camera_mask.empty()) {
               Expected<cv::Mat> mask = JoinBlankMask(holding, model.get(), camera_mask);
               if (!mask.ok()) {
                 b.status = mask.status();
                 return b;
               }
-              frame = display.clone();
-              frame.setTo(0, *mask);
+              if (loop) {
+                factor = cv::Mat(mask->size(), CV_8UC1, cv::Scalar(255));
+                factor.setTo(0, *mask);
+              } else {
+                frame = display.clone();
+                frame.setTo(0, *mask);
+              }
               b.pixels = cv::countNonZero(*mask);
             }
             b.cpu_s = ThreadCpuSeconds() - t0;
+            if (loop) {
+              // The show goes on around the blanked area (the renderer's mask pass).
+              b.status = loop->ShowMask(factor);
+              return b;
+            }
             Expected<ShownFrame> shown = projector->Show(frame);
             if (!shown.ok()) b.status = shown.status();
             return b;
@@ -660,6 +673,19 @@ void SelfCalibrationService::StartDisplay(const UnitCalibration& calibration, No
                                           std::function<void()> then) {
   holding_ = calibration;
   if (!projector_) return then();
+  if (render_loop_) {
+    // The renderer shows the model registered with this calibration; reported once shown.
+    RenderLoop* loop = render_loop_;
+    node.workers().Run<Status>([loop, calibration] { return loop->ShowCalibration(calibration); },
+                               [then = std::move(then)](Status shown) {
+                                 if (!shown.ok()) {
+                                   ST_LOG(kWarning)
+                                       << "self-calibration: display: " << shown.message();
+                                 }
+                                 then();
+                               });
+    return;
+  }
   Expected<cv::Mat> grid = TableGridFrame(calibration);
   if (!grid.ok() || grid->size() != projector_->size()) {
     ST_LOG(kWarning) << "self-calibration: no display frame: "

@@ -43,6 +43,7 @@
 #include "node/devices/camera_input.h"
 #include "node/devices/projector_output.h"
 #include "node/net/node_runtime.h"
+#include "node/render/render_loop.h"
 #include "proto/envelope.pb.h"
 
 namespace sandtable::node {
@@ -111,6 +112,10 @@ class SelfCalibrationService : public NodeService {
 
   // The camera, once opened (on a worker at start).
   void SetCamera(std::unique_ptr<CameraInput> camera);
+  // The node's renderer (node/render/render_loop.h): once calibrated the unit shows the
+  // renderer's frames (not the table grid), blanks through its mask during a neighbour's join,
+  // and suspends it whenever calibration needs the projector. Set before the runtime starts.
+  void SetRenderLoop(RenderLoop* loop) { render_loop_ = loop; }
 
   // A calibration saved by an earlier run (this unit's, with its table pose): checked with two
   // frames (calibration_check.h) once the camera is open and no lower-id unit is checking its
@@ -163,6 +168,7 @@ class SelfCalibrationService : public NodeService {
 
   UnitCalibration factory_;
   ProjectorOutput* projector_;
+  RenderLoop* render_loop_ = nullptr;
   std::unique_ptr<CameraInput> camera_;
   std::shared_ptr<const Scene> model_;
   SelfCalibrationOptions options_;

@@ -11,6 +11,7 @@ bool EventStateService::ServesCoordinator(wire::Envelope::BodyCase body) const {
     case wire::Envelope::kTimelineClock:
     case wire::Envelope::kTrackerPose:
     case wire::Envelope::kCursor:
+    case wire::Envelope::kTestPatternState:
       return true;
     default:
       return false;
@@ -37,9 +38,24 @@ void EventStateService::OnCoordinatorMessage(const wire::Envelope& message, Node
       cursor_ = message.cursor();
       ++counters_.cursors;
       break;
+    case wire::Envelope::kTestPatternState:
+      // Older states (a reordered or repeated event) never replace newer ones.
+      if (!test_patterns_ ||
+          message.test_pattern_state().change_count() >= test_patterns_->change_count()) {
+        test_patterns_ = message.test_pattern_state();
+      }
+      ++counters_.test_pattern_states;
+      break;
     default:
       break;
   }
+}
+
+std::string EventStateService::TestPatternFor(NodeId node) const {
+  if (!test_patterns_) return "none";
+  auto own = test_patterns_->node_patterns().find(node);
+  if (own != test_patterns_->node_patterns().end()) return own->second;
+  return test_patterns_->site_pattern().empty() ? "none" : test_patterns_->site_pattern();
 }
 
 void EventStateService::OnRegistered(NodeRuntime& node) {

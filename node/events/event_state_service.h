@@ -17,6 +17,8 @@
 //   coordinator time with the node's clock offset estimate and extrapolates the clock, so
 //   every node evaluates the same media time for the same instant.
 // - Tracker: the last TrackerPose per sensor and the last Cursor.
+// - Test patterns: the last TestPatternState (a newer change_count replaces it); the pattern for
+//   a node is its own, else the site's (names as in node/render/render_content.h).
 // Network thread only.
 #pragma once
 
@@ -45,6 +47,7 @@ struct EventStateCounters {
   uint64_t timeline_clocks = 0;
   uint64_t tracker_poses = 0;
   uint64_t cursors = 0;
+  uint64_t test_pattern_states = 0;
 };
 
 // Largest snapshot a node assembles from chunks (its memory while catching up): 1 GiB.
@@ -68,6 +71,8 @@ class EventStateService : public NodeService {
   const std::map<uint32_t, wire::TrackerPose>& tracker_poses() const { return poses_; }
   const std::optional<wire::Cursor>& cursor() const { return cursor_; }
   const EventStateCounters& counters() const { return counters_; }
+  // "none" until the coordinator published a state.
+  std::string TestPatternFor(NodeId node) const;
 
  private:
   void OnAnnotationEvent(const wire::AnnotationEvent& event, NodeRuntime& node);
@@ -89,6 +94,7 @@ class EventStateService : public NodeService {
   std::optional<wire::TimelineClock> timeline_;
   std::map<uint32_t, wire::TrackerPose> poses_;
   std::optional<wire::Cursor> cursor_;
+  std::optional<wire::TestPatternState> test_patterns_;
   EventStateCounters counters_;
 };
 

@@ -110,6 +110,9 @@ void WorldServer::HandleMessage(net::Incoming message) {
     case wire::Envelope::kGroundTruthRequest:
       Reply(routing_id, GroundTruth(in.ground_truth_request()));
       break;
+    case wire::Envelope::kTopViewRequest:
+      Reply(routing_id, TopView(in.top_view_request()));
+      break;
     default:
       counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kWrongType);
       ++stats_.rejected;
@@ -274,6 +277,46 @@ wire::Envelope WorldServer::GroundTruth(const wire::GroundTruthRequest& request)
   }
   ++stats_.truth_queries;
   reply->set_ok(true);
+  return envelope;
+}
+
+wire::Envelope WorldServer::TopView(const wire::TopViewRequest& request) {
+  wire::Envelope envelope;
+  wire::TopViewReply* reply = envelope.mutable_top_view_reply();
+  auto fail = [&](const std::string& message) {
+    ++stats_.bad_requests;
+    counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kInvalidContent);
+    reply->set_ok(false);
+    reply->set_message("top_view: " + message);
+    return envelope;
+  };
+  if (request.width_px() < 16 || request.width_px() > 4096) {
+    return fail("width_px " + std::to_string(request.width_px()) + " is outside 16..4096");
+  }
+  if (request.projector_ids_size() > static_cast<int>(kMaxSiteUnits)) {
+    return fail("more projectors than a site holds");
+  }
+  std::vector<NodeId> lit(request.projector_ids().begin(), request.projector_ids().end());
+  for (NodeId id : lit) {
+    if (!world_->site().FindUnit(id)) {
+      return fail("no projector " + std::to_string(id) + " in site '" + world_->site().name + "'");
+    }
+  }
+  Expected<View> view =
+      View::TopOver(world_->scene().Bounds(), static_cast<int>(request.width_px()), 0);
+  if (!view.ok()) return fail(view.status().message());
+  Expected<std::vector<float>> luminance = world_->RenderLuminanceLit(*view, lit);
+  if (!luminance.ok()) return fail(luminance.status().message());
+  const Eigen::AlignedBox3d bounds = world_->scene().Bounds();
+  reply->set_ok(true);
+  reply->set_width_px(static_cast<uint32_t>(view->width_px()));
+  reply->set_height_px(static_cast<uint32_t>(view->height_px()));
+  reply->mutable_area_min_in_table_m()->set_x(bounds.min().x());
+  reply->mutable_area_min_in_table_m()->set_y(bounds.min().y());
+  reply->mutable_area_max_in_table_m()->set_x(bounds.max().x());
+  reply->mutable_area_max_in_table_m()->set_y(bounds.max().y());
+  reply->set_luminance(std::string(reinterpret_cast<const char*>(luminance->data()),
+                                   luminance->size() * sizeof(float)));
   return envelope;
 }
 

@@ -7,6 +7,7 @@
 //   SetFrameRequest    -> SetFrameReply      (GRAY8 or RGB8 frame at the projector's size)
 //   CaptureRequest     -> CaptureReply       (GRAY8 for bit_depth <= 8, else GRAY16 LE)
 //   GroundTruthRequest -> GroundTruthReply   (per point: true pixel, lit, luminance)
+//   TopViewRequest -> TopViewReply           (the lab's top view with some projectors lit)
 //   anything else      -> Rejected           (counted wrong_type)
 // Bad requests never crash the server: an unknown projector or camera, a frame of the wrong
 // size or encoding, pixels that do not match the announced size, non-finite points all get
@@ -100,6 +101,7 @@ class WorldServer {
   wire::Envelope SetFrame(const wire::SetFrameRequest& request);
   wire::Envelope Capture(const wire::CaptureRequest& request);
   wire::Envelope GroundTruth(const wire::GroundTruthRequest& request);
+  wire::Envelope TopView(const wire::TopViewRequest& request);
 
   std::unique_ptr<World> world_;
   std::ofstream frame_log_;

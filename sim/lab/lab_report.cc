@@ -184,6 +184,7 @@ json LabReportJson(const LabResult& r) {
     calibration["failures"] = failures;
   }
   out["calibration"] = calibration;
+  if (!r.render.empty()) out["render"] = r.render;
   if (r.model_offset_measured || sc.contains("runner_report")) {
     json registration = json::object();
     if (r.model_offset_measured) {
@@ -438,6 +439,38 @@ std::string LabReportMarkdown(const LabResult& r) {
     md << "| " << p.name << " | " << p.role << " | " << p.pid << " | " << p.exit_text << " |\n";
   }
   md << "\nLogs: `logs/<name>.log`.\n";
+  if (!r.render.empty()) {
+    const json& rd = r.render;
+    md << "## The show (docs/render.md)\n\n";
+    if (rd.contains("frame_ms_p50")) {
+      md << "Frame time per node (1280x800 unless the site says otherwise; all nodes share this "
+            "machine's cores with the world): p50 "
+         << Fixed(rd.value("frame_ms_p50", 0.0), 1) << " ms (median of the nodes), p99 "
+         << Fixed(rd.value("frame_ms_p99", 0.0), 1) << " ms (worst node); the floor (one "
+         << "full-screen textured pass) " << Fixed(rd.value("floor_ms", 0.0), 1) << " ms; "
+         << rd.value("context", std::string()) << ".\n\n";
+    }
+    if (rd.contains("timeline_skew") && rd["timeline_skew"].contains("p99_ms")) {
+      const json& k = rd["timeline_skew"];
+      md << "Timeline skew between nodes (media time at the same instant): p50 "
+         << Fixed(k.value("p50_ms", 0.0), 3) << " ms, p99 " << Fixed(k.value("p99_ms", 0.0), 3)
+         << " ms, max " << Fixed(k.value("max_ms", 0.0), 3) << " ms over " << k.value("instants", 0)
+         << " instants.\n\n";
+    }
+    if (rd.contains("grid") && rd["grid"].contains("rms_mm")) {
+      const json& g = rd["grid"];
+      md << "Table grid seen from above, lines of overlapping projectors against each other: rms "
+         << Fixed(g.value("rms_mm", 0.0), 2) << " mm, p99 " << Fixed(g.value("p99_mm", 0.0), 2)
+         << " mm, max " << Fixed(g.value("max_mm", 0.0), 2) << " mm over " << g.value("patches", 0)
+         << " patches.\n\n";
+    }
+    if (rd.contains("grid_top_png")) {
+      md << "![table grid from above](" << rd["grid_top_png"].get<std::string>() << ")\n\n";
+    }
+    if (rd.contains("show_top_png")) {
+      md << "![the show from above](" << rd["show_top_png"].get<std::string>() << ")\n\n";
+    }
+  }
   return md.str();
 }
 

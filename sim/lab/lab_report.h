@@ -75,6 +75,9 @@ struct LabResult {
   nlohmann::json self_calibration = nlohmann::json::object();
   nlohmann::json join;  // --join-late: the late unit's join (null when none)
   nlohmann::json kill;  // --kill-unit: what the others did (null when none)
+  // The show (docs/render.md): frame times, the floor, timeline skew, grid coincidence, and
+  // per-unit summaries; empty when the nodes did not render.
+  nlohmann::json render = nlohmann::json::object();
   std::map<NodeId, std::string> unit_failures;
   bool model_offset_measured = false;
   // The nodes found no placement of the model: the registration was measured with the true one

@@ -22,12 +22,15 @@
 #include "common/io/mpcdi.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/gltf_loader.h"
+#include "common/scene/ray_caster.h"
+#include "net/channel.h"
 #include "net/curve.h"
 #include "sim/lab/lab_images.h"
 #include "sim/lab/lab_inputs.h"
 #include "sim/lab/lab_report.h"
 #include "sim/lab/progress.h"
 #include "sim/lab/registration_metric.h"
+#include "sim/lab/render_metrics.h"
 #include "sim/lab/supervisor.h"
 #include "sim/site/site_json.h"
 #include "sim/transport/world.h"
@@ -100,7 +103,7 @@ class LabRun {
     result_.metric_options.seed = options_.seed;
     if (int usage = Prepare(); usage != kExitOk) return usage;
     const bool ok = StartWorld() && StartCoordinator() && StartNodes() && Calibrate() && Join() &&
-                    Hold() && Measure();
+                    Show() && Hold() && Measure();
     (void)ok;  // a failure is in result_.failure
     return Finish();
   }
@@ -129,6 +132,18 @@ class LabRun {
         return kExitFailure;
       }
       curve_keys_path_ = key_path;
+      site_keys_ = *keys;
+    }
+    // The personnel tracks the coordinator replays and the nodes draw (docs/render.md).
+    tracks_path_ = fs::absolute(fs::path(options_.out_dir) / "tracks.csv").string();
+    const double table_radius_m = inputs_.site.table.is_disc
+                                      ? 0.5 * inputs_.site.table.diameter_m
+                                      : 0.5 * inputs_.site.table.size_m.minCoeff();
+    if (Status tracks = WriteLabTracks(tracks_path_, 4, 120.0, 0.8 * table_radius_m);
+        !tracks.ok()) {
+      progress_.End("failed");
+      err_ << "sandtable-lab run: " << tracks.ToString() << "\n";
+      return kExitFailure;
     }
     result_.site_name = inputs_.site.name;
     result_.num_units = static_cast<int>(inputs_.site.units.size());
@@ -184,9 +199,10 @@ class LabRun {
 
   bool StartCoordinator() {
     Phase("start coordinator", 1);
-    ChildProcess* coordinator = StartChild(
-        "coordinator", "coordinator",
-        {coordinator_bin_, "--requests", "tcp://127.0.0.1:*", "--events", "tcp://127.0.0.1:*"});
+    ChildProcess* coordinator =
+        StartChild("coordinator", "coordinator",
+                   {coordinator_bin_, "--requests", "tcp://127.0.0.1:*", "--events",
+                    "tcp://127.0.0.1:*", "--timeline", tracks_path_});
     if (!coordinator) return false;
     return Wait(
         "start coordinator", [&] { return !coordinator_events_.empty(); },
@@ -323,10 +339,20 @@ class LabRun {
                                        inputs_.factory_paths.at(unit.id),
                                        "--export-dir",
                                        export_dir};
+      // The model: self-calibration finds where it stands; the renderer draws it there.
+      argv.insert(argv.end(), {"--model", inputs_.model_path});
+      if (options_.render == "off") {
+        argv.insert(argv.end(), {"--render", "off"});
+      } else {
+        argv.insert(argv.end(),
+                    {"--timeline", tracks_path_, "--render-max-fps",
+                     std::to_string(options_.render_max_fps), "--render-log",
+                     fs::absolute(fs::path(options_.out_dir) / "logs" / ("render-" + id + ".csv"))
+                         .string()});
+      }
       if (TruePoseMode()) {
         argv.insert(argv.end(), {"--true-pose", inputs_.true_pose_paths.at(unit.id)});
       } else {
-        argv.insert(argv.end(), {"--model", inputs_.model_path});
         argv.insert(argv.end(), {"--calibration-path", options_.calibration_path});
         if (!options_.saved_calibration.empty()) {
           const std::filesystem::path saved =
@@ -422,6 +448,221 @@ class LabRun {
           for (const auto& [id, line] : calibrated_) have.insert(id);
           return Missing(have);
         });
+  }
+
+  // ---- the show (docs/render.md) ----
+
+  // A request to the coordinator or the world from the lab's own DEALER; the reply whose body
+  // is `reply_case`, within `timeout`.
+  Expected<wire::Envelope> Call(const std::string& endpoint, wire::Envelope request,
+                                wire::Envelope::BodyCase reply_case, milliseconds timeout) {
+    net::SocketOptions socket_options;
+    if (site_keys_) socket_options.curve = net::ClientCurve(*site_keys_);
+    Expected<std::unique_ptr<net::Socket>> socket =
+        net::Socket::Create(&zmq_context_, net::SocketType::kDealer, socket_options);
+    if (!socket.ok()) return socket.status();
+    ST_RETURN_IF_ERROR((*socket)->Connect(endpoint));
+    net::Channel channel(std::move(*socket), kLabSenderId, ++lab_incarnation_, &lab_counters_);
+    ST_RETURN_IF_ERROR(channel.Send(std::move(request)));
+    const auto until = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < until) {
+      std::vector<bool> readable;
+      ST_RETURN_IF_ERROR(net::Socket::Poll({&channel.socket()}, milliseconds(50), &readable));
+      Expected<std::optional<net::Incoming>> in = channel.TryReceive();
+      if (in.ok() && *in && (*in)->envelope.body_case() == reply_case) {
+        return std::move((*in)->envelope);
+      }
+    }
+    return UnavailableError("no reply from " + endpoint + " within " +
+                            std::to_string(timeout.count()) + " ms");
+  }
+
+  // Runs `work` on a thread while the children are watched; false (failure recorded) when a
+  // child dies or the run is interrupted.
+  template <typename T>
+  bool Watched(const std::string& phase, std::function<T()> work, T* out) {
+    std::future<T> future = std::async(std::launch::async, std::move(work));
+    const auto ready = [&] {
+      return future.wait_for(std::chrono::seconds(0)) == std::future_status::ready;
+    };
+    const WaitOutcome outcome = supervisor_.WaitUntil(ready, ToMs(3600), stop_, Handler());
+    if (outcome != WaitOutcome::kDone) {
+      future.wait();
+      return Failed(phase, outcome, "", nullptr);
+    }
+    *out = future.get();
+    return true;
+  }
+
+  Status SetPattern(const std::string& pattern) {
+    wire::Envelope request;
+    request.mutable_test_pattern_request()->set_all_nodes(true);
+    request.mutable_test_pattern_request()->set_pattern(pattern);
+    Expected<wire::Envelope> reply = Call(coordinator_requests_, std::move(request),
+                                          wire::Envelope::kTestPatternReply, ToMs(10));
+    if (!reply.ok()) return reply.status();
+    if (!reply->test_pattern_reply().accepted()) {
+      return InvalidArgumentError("pattern refused: " + reply->test_pattern_reply().reason());
+    }
+    return OkStatus();
+  }
+
+  Expected<TopView> TopViewOf(const std::vector<NodeId>& lit) {
+    wire::Envelope request;
+    for (NodeId id : lit) request.mutable_top_view_request()->add_projector_ids(id);
+    request.mutable_top_view_request()->set_width_px(
+        static_cast<uint32_t>(options_.grid_view_width_px));
+    Expected<wire::Envelope> reply =
+        Call(world_endpoint_, std::move(request), wire::Envelope::kTopViewReply, ToMs(300));
+    if (!reply.ok()) return reply.status();
+    const wire::TopViewReply& r = reply->top_view_reply();
+    if (!r.ok()) return UnavailableError(r.message());
+    TopView view;
+    view.luminance =
+        cv::Mat(static_cast<int>(r.height_px()), static_cast<int>(r.width_px()), CV_32FC1);
+    if (r.luminance().size() != view.luminance.total() * sizeof(float)) {
+      return ParseError("top view: the luminance does not fill the image");
+    }
+    std::memcpy(view.luminance.data, r.luminance().data(), r.luminance().size());
+    view.area_min_m = Eigen::Vector2d(r.area_min_in_table_m().x(), r.area_min_in_table_m().y());
+    view.area_max_m = Eigen::Vector2d(r.area_max_in_table_m().x(), r.area_max_in_table_m().y());
+    return view;
+  }
+
+  // The top view's pixels whose surface seen from above is the table (the truth's scene, cast
+  // straight down): the grid is compared there.
+  cv::Mat TableMask(const std::map<NodeId, TopView>& views) const {
+    if (views.empty()) return cv::Mat();
+    const TopView& v = views.begin()->second;
+    Expected<std::unique_ptr<RayCaster>> caster =
+        RayCaster::Create(std::make_shared<const Scene>(scene_));
+    if (!caster.ok()) return cv::Mat();
+    cv::Mat mask(v.luminance.size(), CV_8UC1, cv::Scalar(0));
+    const Eigen::Vector2d span = v.area_max_m - v.area_min_m;
+    const double top_m = scene_.Bounds().max().z() + 1.0;
+    for (int y = 0; y < mask.rows; ++y) {
+      for (int x = 0; x < mask.cols; ++x) {
+        const Eigen::Vector2d xy =
+            v.area_min_m + Eigen::Vector2d((x + 0.5) / mask.cols * span.x(),
+                                           (1.0 - (y + 0.5) / mask.rows) * span.y());
+        const std::optional<RayHit> hit =
+            (*caster)->Intersect(Eigen::Vector3d(xy.x(), xy.y(), top_m), -Eigen::Vector3d::UnitZ());
+        if (hit && std::abs(hit->point_in_table_m.z()) < 1e-3) mask.at<uint8_t>(y, x) = 255;
+      }
+    }
+    return mask;
+  }
+
+  // Waits until every calibrated unit has shown `pattern`.
+  bool WaitForPattern(const std::string& pattern) {
+    return Wait(
+        "show",
+        [&] {
+          for (const auto& [id, line] : calibrated_) {
+            auto it = render_pattern_.find(id);
+            if (it == render_pattern_.end() || it->second != pattern) return false;
+          }
+          return true;
+        },
+        ToMs(60), "not every calibrated node showed the pattern '" + pattern + "'", nullptr);
+  }
+
+  bool Show() {
+    if (options_.render == "off" || calibrated_.empty()) return true;
+    Phase("show", 0);
+    const fs::path dir(options_.out_dir);
+    // 1. The table grid on every projector, seen from above one projector at a time.
+    Status set = SetPattern("grid");
+    if (!set.ok()) return FailedWith("show", "test pattern: " + set.ToString());
+    if (!WaitForPattern("grid")) return false;
+    std::vector<NodeId> units;
+    for (const auto& [id, line] : calibrated_) units.push_back(id);
+    struct Views {
+      std::map<NodeId, TopView> each;
+      std::optional<TopView> all;
+      std::string error;
+    };
+    Views views;
+    if (!Watched<Views>(
+            "show",
+            [this, units] {
+              Views v;
+              for (NodeId id : units) {
+                Expected<TopView> view = TopViewOf({id});
+                if (!view.ok()) {
+                  v.error = view.status().ToString();
+                  return v;
+                }
+                v.each[id] = std::move(*view);
+              }
+              if (Expected<TopView> all = TopViewOf({}); all.ok()) v.all = std::move(*all);
+              return v;
+            },
+            &views)) {
+      return false;
+    }
+    if (!views.error.empty()) return FailedWith("show", "top view: " + views.error);
+    Expected<GridCoincidence> grid = MeasureGridCoincidence(views.each, TableMask(views.each));
+    result_.render["grid"] =
+        grid.ok() ? grid->ToJson() : nlohmann::json{{"error", grid.status().message()}};
+    if (views.all) {
+      if (io::WritePngFile((dir / "show_grid_top.png").string(),
+                           LuminancePicture(views.all->luminance))
+              .ok()) {
+        result_.render["grid_top_png"] = "show_grid_top.png";
+      }
+    }
+    // 2. The show: the lab's personnel tracks play for show_s.
+    set = SetPattern("none");
+    if (!set.ok()) return FailedWith("show", "test pattern: " + set.ToString());
+    if (!WaitForPattern("none")) return false;
+    wire::Envelope play;
+    play.mutable_play();
+    Expected<wire::Envelope> played =
+        Call(coordinator_requests_, std::move(play), wire::Envelope::kTimelineReply, ToMs(10));
+    if (!played.ok() || !played->timeline_reply().accepted()) {
+      return FailedWith("show", "timeline play: " + (played.ok() ? played->timeline_reply().reason()
+                                                                 : played.status().ToString()));
+    }
+    const WaitOutcome outcome =
+        supervisor_.WaitUntil([] { return false; }, ToMs(options_.show_s), stop_, Handler());
+    if (outcome != WaitOutcome::kDeadline) return Failed("show", outcome, "", nullptr);
+    Views shown;
+    if (!Watched<Views>(
+            "show",
+            [this] {
+              Views v;
+              Expected<TopView> all = TopViewOf({});
+              if (all.ok()) {
+                v.all = std::move(*all);
+              } else {
+                v.error = all.status().ToString();
+              }
+              return v;
+            },
+            &shown)) {
+      return false;
+    }
+    if (shown.all &&
+        io::WritePngFile((dir / "show_top.png").string(), LuminancePicture(shown.all->luminance))
+            .ok()) {
+      result_.render["show_top_png"] = "show_top.png";
+    }
+    wire::Envelope pause;
+    pause.mutable_pause();
+    (void)Call(coordinator_requests_, std::move(pause), wire::Envelope::kTimelineReply, ToMs(10));
+    std::map<NodeId, std::string> logs;
+    for (NodeId id : units) {
+      logs[id] = (dir / "logs" / ("render-" + std::to_string(id) + ".csv")).string();
+    }
+    // The logs are flushed once a second: wait for the last frames of the show.
+    (void)supervisor_.WaitUntil([] { return false; }, ToMs(1.2), stop_, Handler());
+    Expected<TimelineSkew> skew = MeasureTimelineSkew(logs);
+    result_.render["timeline_skew"] =
+        skew.ok() ? skew->ToJson() : nlohmann::json{{"error", skew.status().message()}};
+    if (skew.ok()) result_.render["timeline_skew_ms_p99"] = skew->p99_ms;
+    progress_.End();
+    return true;
   }
 
   bool Hold() {
@@ -653,9 +894,36 @@ class LabRun {
     }
   }
 
+  // The nodes' render summaries (their last lines, printed at exit) into the report: the
+  // median p50 and floor, the worst p99.
+  void CollectRender() {
+    if (render_summary_.empty()) return;
+    std::vector<double> p50, p99, floor;
+    json units = json::object();
+    for (const auto& [id, line] : render_summary_) {
+      units[std::to_string(id)] = line;
+      if (line.value("frames", 0) > 0) {
+        p50.push_back(line.value("frame_ms_p50", 0.0));
+        p99.push_back(line.value("frame_ms_p99", 0.0));
+        floor.push_back(line.value("floor_ms", 0.0));
+      }
+    }
+    result_.render["units"] = units;
+    if (p50.empty()) return;
+    auto median = [](std::vector<double> v) {
+      std::sort(v.begin(), v.end());
+      return v[v.size() / 2];
+    };
+    result_.render["frame_ms_p50"] = median(p50);
+    result_.render["frame_ms_p99"] = *std::max_element(p99.begin(), p99.end());
+    result_.render["floor_ms"] = median(floor);
+    result_.render["context"] = render_summary_.begin()->second.value("context", std::string());
+  }
+
   int Finish() {
     Phase("teardown", 0);
     const std::vector<std::string> killed = supervisor_.TearDown(ToMs(options_.teardown_grace_s));
+    CollectRender();
     progress_.End(killed.empty() ? "ok" : "killed " + std::to_string(killed.size()));
     for (const auto& child : supervisor_.children()) {
       result_.processes.push_back(
@@ -745,6 +1013,14 @@ class LabRun {
             line.value("reason", std::string("(no reason given)"));
         if (progress_phase_ == "calibration held") {
           progress_.Update(static_cast<int>(calibrated_.size() + calibration_failed_.size()));
+        }
+      } else if (child.spec().role == "node" && line.contains("render") &&
+                 line["render"].is_number_unsigned()) {
+        const NodeId id = line["render"].get<NodeId>();
+        if (line.contains("pattern") && line["pattern"].is_string()) {
+          render_pattern_[id] = line["pattern"].get<std::string>();
+        } else if (line.contains("frames")) {
+          render_summary_[id] = line;
         }
       } else if (child.spec().role == "node" && line.contains("verification") &&
                  line["verification"].is_number_unsigned()) {
@@ -842,6 +1118,13 @@ class LabRun {
   LabResult result_;
   std::string world_bin_, coordinator_bin_, node_bin_;
   std::string curve_keys_path_;  // --curve: the run's site key file
+  std::optional<net::CurveKeyPair> site_keys_;
+  std::string tracks_path_;
+  std::map<NodeId, std::string> render_pattern_;  // the last pattern each node showed
+  std::map<NodeId, json> render_summary_;         // each node's last render summary
+  zmq::context_t zmq_context_;
+  proto::MessageCounters lab_counters_;
+  uint64_t lab_incarnation_ = 0;
   std::string progress_phase_;
   std::string world_endpoint_, coordinator_requests_, coordinator_events_;
   std::set<NodeId> nodes_ready_;

@@ -12,6 +12,7 @@
 //                   --factory F --true-pose T --export-dir DIR/calibration
 //                   -> {"ready":"sandtable-node","id":N,...}            (k/N ready)
 //   calibration     -> {"calibrated":N,"source":..,"json":..,"yaml":..} (k/N held)
+//   show            the nodes' show: the table grid measured from above, the timeline played
 //   hold            optional: the site keeps running for hold_s (children watched)
 //   metrics         the registration metric (registration_metric.h) on the exported files
 //   report          report.json, report.md, pictures (lab_report.h, lab_images.h)
@@ -73,7 +74,14 @@ struct LabRunOptions {
   int kill_unit = -1;
   double kill_at_s = 0.0;
   bool kill_after_calibration = false;  // kill_at_s counted from the hold phase's start
-  std::string command_line;             // for the report
+  // The show (docs/render.md): once calibrated, every node shows the table grid (the lab
+  // measures how the projectors' lines coincide from above), then the show with the lab's
+  // personnel tracks playing for show_s (frame times, timeline skew). render "off": none.
+  std::string render = "on";
+  double show_s = 4.0;
+  double render_max_fps = 10.0;  // per node: the world takes every frame (~3 MB each)
+  int grid_view_width_px = 1600;
+  std::string command_line;  // for the report
   Status Check() const;
 };
 

@@ -93,6 +93,13 @@ static int Run(int argc, char** argv) {
                   "calibrated site (a live join; the report says whether any other unit was "
                   "recalibrated)")
       ->check(CLI::Range(0, 1 << 20));
+  run->add_option("--render", options.render,
+                  "the nodes' show: on (grid measured from above, tracks played) or off")
+      ->check(CLI::IsMember({"on", "off"}));
+  run->add_option("--show-s", options.show_s, "how long the show plays (s)")
+      ->check(CLI::Range(0.0, 3600.0));
+  run->add_option("--render-max-fps", options.render_max_fps, "frames a second per node at most")
+      ->check(CLI::Range(0.1, 240.0));
   run->add_option("--image-width", options.image_width_px, "Width of the report's pictures (px)")
       ->check(cli::Integer<int>(16, 8192));
   run->add_flag("--curve", options.curve,

@@ -100,6 +100,46 @@ Expected<std::vector<float>> World::RenderLuminance(const View& view) {
   return luminance;
 }
 
+Expected<std::vector<float>> World::RenderLuminanceLit(const View& view,
+                                                       const std::vector<NodeId>& lit) {
+  std::vector<const LinearFrame*> frames = CurrentFrames();
+  if (!lit.empty()) {
+    std::vector<bool> keep(frames.size(), false);
+    for (NodeId unit : lit) {
+      Expected<size_t> index = UnitIndex(unit);
+      if (!index.ok()) return index.status();
+      keep[*index] = true;
+    }
+    for (size_t i = 0; i < frames.size(); ++i) {
+      if (!keep[i]) frames[i] = nullptr;
+    }
+  }
+  // The view's identity: its size and the rays of its corners (any change of area or pose).
+  std::vector<double> key;
+  for (int y : {0, view.height_px() - 1}) {
+    for (int x : {0, view.width_px() - 1}) {
+      Eigen::Vector3d origin, direction;
+      if (view.Ray(x, y, &origin, &direction)) {
+        key.insert(key.end(), {origin.x(), origin.y(), origin.z(), direction.x(), direction.y(),
+                               direction.z()});
+      }
+    }
+  }
+  if (!lit_view_map_ || lit_view_width_px_ != view.width_px() ||
+      lit_view_height_px_ != view.height_px() || lit_view_key_ != key) {
+    Expected<TransportMap> map = BuildTransportMap(site_, *caster_, view, options_.transport);
+    if (!map.ok()) return map.status();
+    lit_view_map_ = std::move(*map);
+    lit_view_width_px_ = view.width_px();
+    lit_view_height_px_ = view.height_px();
+    lit_view_key_ = key;
+  }
+  std::vector<float> luminance;
+  ST_RETURN_IF_ERROR(
+      GatherLuminance(*lit_view_map_, frames, site_.ambient_luminance_nits, &luminance));
+  return luminance;
+}
+
 Expected<SurfaceTruth> World::TruthAlongRay(const Eigen::Vector3d& origin,
                                             const Eigen::Vector3d& direction) const {
   const std::optional<RayHit> hit = caster_->Intersect(origin, direction);

@@ -68,6 +68,10 @@ class World {
   Expected<cv::Mat> Capture(NodeId unit, const CaptureNoise& noise, double exposure_s = 0.0);
   // Surface luminance (nits) a view sees under the current frames; builds a map each call.
   Expected<std::vector<float>> RenderLuminance(const View& view);
+  // The same with only the `lit` projectors on (empty: all that are on), reusing the map of the
+  // last view asked for here when the view is the same (an orthographic top view of the same
+  // area and size: the lab's repeated top views). INVALID_ARGUMENT for an unknown projector.
+  Expected<std::vector<float>> RenderLuminanceLit(const View& view, const std::vector<NodeId>& lit);
 
   // Ground truth at the first surface hit along a ray (e.g. a projector's TRUE ray through an
   // estimated pixel, or a vertical ray above a table point). NOT_FOUND if the ray hits nothing.
@@ -98,7 +102,11 @@ class World {
   std::vector<LinearFrame> frames_;  // per unit
   std::vector<bool> on_;
   std::map<NodeId, TransportMap> camera_maps_;
-  std::vector<float> luminance_scratch_;  // reused by Capture (no allocation per frame)
+  std::vector<float> luminance_scratch_;
+  // RenderLuminanceLit's cached map and the view it was built for.
+  std::optional<TransportMap> lit_view_map_;
+  int lit_view_width_px_ = 0, lit_view_height_px_ = 0;
+  std::vector<double> lit_view_key_;  // reused by Capture (no allocation per frame)
 };
 
 // Tone-maps luminance for a person: v = 255 (L / white_nits)^(1/2.2), clamped. CV_8UC1.

@@ -117,6 +117,12 @@ constexpr double kAcceptanceMax_mm = 1.5;
 constexpr double kAcceptanceModelOffset_mm = 0.3;
 constexpr double kAcceptanceModelOffset_deg = 0.05;
 constexpr double kAcceptanceVerifyTime_s = 0.2;  // modeled projection of the restart check
+// The show (docs/render.md): two projectors' grid lines differ by both registration errors; the
+// top view's 1 mm pixels are matched to about a tenth of a pixel.
+constexpr double kGridMatch_mm = 0.1;
+// Every node evaluates the coordinator's timeline at the same instant to within (one machine,
+// clock offsets estimated over localhost).
+constexpr double kTimelineSkew_ms = 5.0;
 
 // Also the restart: the saved calibrations checked and kept, then one unit moved and the site
 // calibrated again.
@@ -167,6 +173,30 @@ TEST_F(LabRunTest, Sandtable3SelfCalibratesAndFindsTheModel) {
   EXPECT_TRUE(std::filesystem::exists(dir_ / "model.gltf"));
   EXPECT_TRUE(std::filesystem::exists(dir_ / "calibration" / "self_calibration_report.json"));
   EXPECT_TRUE(AllProcessesGone(ReadJson("processes.json")));
+
+  // The show: every node rendered without a failed frame; the table grid's lines of overlapping
+  // projectors, seen from above through the world, coincide within the two projectors'
+  // registration errors; all nodes drew the same media time.
+  const json& render = report["render"];
+  ASSERT_TRUE(render.contains("frame_ms_p50")) << render.dump();
+  EXPECT_GT(render["frame_ms_p50"].get<double>(), 0.0);
+  EXPECT_GT(render["floor_ms"].get<double>(), 0.0);
+  for (const char* id : {"0", "1", "2"}) {
+    EXPECT_GT(render["units"][id]["frames"].get<int>(), 1) << id;
+    EXPECT_EQ(render["units"][id]["failed"].get<int>(), 0) << id;
+  }
+  const json& grid = render["grid"];
+  ASSERT_TRUE(grid.contains("rms_mm")) << grid.dump();
+  EXPECT_GT(grid["patches"].get<int>(), 100);
+  EXPECT_LE(grid["rms_mm"].get<double>(),
+            2.0 * calibration["table"]["rms_mm"].get<double>() + kGridMatch_mm);
+  EXPECT_LE(grid["p99_mm"].get<double>(),
+            2.0 * calibration["table"]["p99_mm"].get<double>() + kGridMatch_mm);
+  ASSERT_TRUE(render.contains("timeline_skew_ms_p99")) << render["timeline_skew"].dump();
+  EXPECT_LT(render["timeline_skew_ms_p99"].get<double>(), kTimelineSkew_ms);
+  EXPECT_GT(render["timeline_skew"]["instants"].get<int>(), 50);
+  EXPECT_TRUE(std::filesystem::exists(dir_ / "show_grid_top.png"));
+  EXPECT_TRUE(std::filesystem::exists(dir_ / "show_top.png"));
 
   // Restart with the saved calibrations: each checked in two frames, no round, the same figures.
   const std::string saved = (dir_ / "calibration").string();

@@ -1,0 +1,329 @@
+#include "node/render/render_loop.h"
+
+#include <algorithm>
+
+#include "common/base/log.h"
+#include "node/render/gl_context.h"
+
+namespace sandtable::node {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr size_t kKeptFrames = 2000;  // frame times kept for the percentiles
+
+int64_t NowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch())
+      .count();
+}
+
+double Percentile(const std::deque<double>& values, double p) {
+  if (values.empty()) return 0.0;
+  std::vector<double> v(values.begin(), values.end());
+  const size_t i =
+      std::min(v.size() - 1, static_cast<size_t>(std::ceil(p * static_cast<double>(v.size()))) - 1);
+  std::nth_element(v.begin(), v.begin() + static_cast<long>(i), v.end());
+  return v[i];
+}
+
+void Keep(std::deque<double>* values, double v) {
+  values->push_back(v);
+  if (values->size() > kKeptFrames) values->pop_front();
+}
+
+}  // namespace
+
+Status RenderLoopOptions::Check() const {
+  if (!(max_fps > 0.0 && max_fps <= 1000.0)) {
+    return InvalidArgumentError("render loop: max_fps must be in (0, 1000]");
+  }
+  if (floor_samples < 0) return InvalidArgumentError("render loop: floor_samples must be >= 0");
+  return renderer.Check();
+}
+
+double TimelineView::MediaTimeAt(int64_t node_ns) const {
+  if (!known) return 0.0;
+  double t = media_time_s;
+  if (playing) {
+    t += rate * 1e-9 *
+         static_cast<double>(node_ns + coordinator_minus_node_ns - anchor_coordinator_ns);
+  }
+  return std::clamp(t, 0.0, std::max(0.0, duration_s));
+}
+
+Scene RenderLoop::SceneFor(const Scene* model, const UnitCalibration& calibration) {
+  if (model && model->NumTriangles() > 0 && calibration.table_from_model) {
+    return MovedScene(*model, *calibration.table_from_model);
+  }
+  // No placement: the table plane alone (3 x 3 m), so patterns and strokes still have a surface.
+  Scene plane;
+  plane.materials.resize(1);
+  plane.materials[0].name = "table";
+  const float h = 1.5f;
+  plane.positions_in_table_m = {{-h, -h, 0}, {h, -h, 0}, {h, h, 0}, {-h, h, 0}};
+  plane.triangles = {{0, 1, 2}, {0, 2, 3}};
+  plane.triangle_material = {0, 0};
+  return plane;
+}
+
+Expected<std::unique_ptr<RenderLoop>> RenderLoop::Start(ProjectorOutput* projector,
+                                                        std::shared_ptr<const Scene> model,
+                                                        const RenderLoopOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
+  std::unique_ptr<RenderLoop> loop(new RenderLoop(projector, std::move(model), options));
+  std::promise<Status> started;
+  std::future<Status> result = started.get_future();
+  loop->thread_ = std::thread([raw = loop.get(), &started] { raw->Run(&started); });
+  Status status = result.get();
+  if (!status.ok()) {
+    loop->thread_.join();
+    return status;
+  }
+  return loop;
+}
+
+RenderLoop::~RenderLoop() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stop_ = true;
+  }
+  changed_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+void RenderLoop::SetInputs(ShowInputs inputs) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    inputs_ = std::move(inputs);
+    ++inputs_version_;
+  }
+  changed_.notify_all();
+}
+
+void RenderLoop::SetTimeline(const TimelineView& timeline) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const bool changed =
+        timeline.known != timeline_.known || timeline.playing != timeline_.playing ||
+        timeline.media_time_s != timeline_.media_time_s || timeline.rate != timeline_.rate;
+    timeline_ = timeline;
+    if (changed) ++inputs_version_;
+  }
+  changed_.notify_all();
+}
+
+Status RenderLoop::ShowCalibration(const UnitCalibration& calibration,
+                                   std::chrono::milliseconds timeout) {
+  if (!calibration.table_from_projector) {
+    return InvalidArgumentError("render: the calibration has no table_from_projector");
+  }
+  Scene scene = SceneFor(model_.get(), calibration);
+  Expected<ProjectorView> view = PrepareProjectorView(
+      calibration.projector, calibration.table_from_projector->Inverse(), scene.Bounds());
+  if (!view.ok()) return view.status();
+  if (view->projector.width_px != projector_->size().width ||
+      view->projector.height_px != projector_->size().height) {
+    return InvalidArgumentError(
+        "render: the calibration's projector is " + std::to_string(view->projector.width_px) + "x" +
+        std::to_string(view->projector.height_px) + " px, the output " +
+        std::to_string(projector_->size().width) + "x" + std::to_string(projector_->size().height));
+  }
+  uint64_t generation = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    pending_view_ = std::move(*view);
+    pending_scene_ = std::move(scene);
+    suspended_ = false;
+    generation = ++generation_;
+    summary_.calibrated = true;
+  }
+  changed_.notify_all();
+  return WaitForShown(generation, timeout);
+}
+
+Status RenderLoop::ShowMask(const cv::Mat& mask, std::chrono::milliseconds timeout) {
+  uint64_t generation = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    pending_mask_ = mask.clone();
+    generation = ++generation_;
+  }
+  changed_.notify_all();
+  return WaitForShown(generation, timeout);
+}
+
+Status RenderLoop::WaitForShown(uint64_t generation, std::chrono::milliseconds timeout) {
+  std::unique_lock<std::mutex> lock(mutex_);
+  if (!shown_cv_.wait_for(lock, timeout,
+                          [&] { return shown_generation_ >= generation || stop_; })) {
+    return UnavailableError("render: no frame shown within " + std::to_string(timeout.count()) +
+                            " ms");
+  }
+  return OkStatus();
+}
+
+void RenderLoop::Suspend() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    suspended_ = true;
+  }
+  std::lock_guard<std::mutex> showing(show_mutex_);  // a frame being shown finishes first
+}
+
+void RenderLoop::Resume() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    suspended_ = false;
+    ++inputs_version_;
+  }
+  changed_.notify_all();
+}
+
+RenderSummary RenderLoop::Summary() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  RenderSummary s = summary_;
+  s.frame_ms_p50 = Percentile(frame_ms_, 0.5);
+  s.frame_ms_p99 = Percentile(frame_ms_, 0.99);
+  s.show_ms_p50 = Percentile(show_ms_, 0.5);
+  return s;
+}
+
+void RenderLoop::Run(std::promise<Status>* started) {
+  Expected<std::unique_ptr<GlContext>> context = CreateEglContext(projector_->size());
+  if (!context.ok()) {
+    started->set_value(context.status().WithContext("render"));
+    return;
+  }
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    summary_.context = (*context)->description();
+  }
+  started->set_value(OkStatus());
+  std::ofstream log;
+  if (!options_.frame_log_path.empty()) {
+    log.open(options_.frame_log_path);
+    log << "node_steady_ns,media_time_s,playing,frame_ms,rate\n";
+  }
+  std::unique_ptr<Renderer> renderer;
+  uint64_t drawn_version = ~uint64_t{0};
+  uint64_t drawn_generation = 0;
+  Clock::time_point last_frame{};
+  Clock::time_point last_flush = Clock::now();
+  const auto period = std::chrono::duration<double>(1.0 / options_.max_fps);
+  while (true) {
+    ShowInputs inputs;
+    TimelineView timeline;
+    uint64_t version = 0, generation = 0;
+    std::optional<ProjectorView> view;
+    std::optional<Scene> scene;
+    std::optional<cv::Mat> mask;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      changed_.wait_for(lock, std::chrono::milliseconds(20), [&] {
+        return stop_ || (!suspended_ &&
+                         (pending_view_ || pending_mask_ ||
+                          (renderer && (inputs_version_ != drawn_version || timeline_.playing))));
+      });
+      if (stop_) break;
+      if (suspended_ || (!pending_view_ && !renderer)) continue;
+      view = std::move(pending_view_);
+      scene = std::move(pending_scene_);
+      mask = std::move(pending_mask_);
+      pending_view_.reset();
+      pending_scene_.reset();
+      pending_mask_.reset();
+      inputs = inputs_;
+      timeline = timeline_;
+      version = inputs_version_;
+      generation = generation_;
+      if (!view && !mask && version == drawn_version && !timeline.playing) continue;
+    }
+    // At most max_fps.
+    const Clock::time_point next = last_frame + std::chrono::duration_cast<Clock::duration>(period);
+    if (Clock::now() < next) std::this_thread::sleep_until(next);
+
+    Status status = OkStatus();
+    if (scene) {
+      Expected<std::unique_ptr<Renderer>> made =
+          Renderer::Create(context->get(), *scene, options_.renderer);
+      if (!made.ok()) {
+        ST_LOG(kError) << "render: " << made.status().ToString();
+        std::lock_guard<std::mutex> lock(mutex_);
+        ++summary_.frames_failed;
+        continue;
+      }
+      renderer = std::move(*made);
+      if (options_.floor_samples > 0) {
+        std::vector<double> floor;
+        for (int i = 0; i < options_.floor_samples; ++i) {
+          Expected<double> ms = renderer->RenderFloor();
+          if (ms.ok()) floor.push_back(*ms);
+        }
+        std::lock_guard<std::mutex> lock(mutex_);
+        summary_.floor_ms = Percentile(std::deque<double>(floor.begin(), floor.end()), 0.5);
+      }
+    }
+    if (view) status = renderer->SetView(*view);
+    if (status.ok() && mask) status = renderer->SetMask(*mask);
+    const int64_t draw_ns = NowNs();
+    const double media_time_s = timeline.MediaTimeAt(draw_ns);
+    Expected<FrameStats> stats = status.ok() ? renderer->Render(BuildContent(inputs, media_time_s))
+                                             : Expected<FrameStats>(status);
+    Expected<cv::Mat> frame =
+        stats.ok() ? (*context)->ReadOutput() : Expected<cv::Mat>(stats.status());
+    last_frame = Clock::now();
+    drawn_version = version;
+    bool shown = false;
+    const Clock::time_point show_start = Clock::now();
+    if (frame.ok()) {
+      std::lock_guard<std::mutex> showing(show_mutex_);
+      bool suspended = false;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        suspended = suspended_;
+      }
+      if (!suspended) {
+        Expected<ShownFrame> done = projector_->Show(*frame);
+        if (!done.ok()) {
+          status = done.status();
+        } else {
+          shown = true;
+        }
+      }
+    } else {
+      status = frame.status();
+    }
+    const double show_ms =
+        std::chrono::duration<double, std::milli>(Clock::now() - show_start).count();
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!status.ok()) {
+        ++summary_.frames_failed;
+        ST_LOG(kWarning) << "render: frame not shown: " << status.ToString();
+      }
+      if (shown) {
+        ++summary_.frames_shown;
+        Keep(&frame_ms_, stats->frame_ms);
+        Keep(&show_ms_, show_ms);
+        for (int p = 0; p < kPassCount; ++p) summary_.pass_runs[p] += stats->ran[p] ? 1 : 0;
+        summary_.groups_culled += static_cast<uint64_t>(stats->groups_culled);
+        summary_.pattern = TestPatternName(inputs.pattern);
+        drawn_generation = generation;
+        shown_generation_ = std::max(shown_generation_, drawn_generation);
+      }
+    }
+    if (shown) {
+      shown_cv_.notify_all();
+      if (log.is_open()) {
+        log << draw_ns << "," << media_time_s << "," << (timeline.playing ? 1 : 0) << ","
+            << stats->frame_ms << "," << timeline.rate << "\n";
+        if (Clock::now() - last_flush > std::chrono::seconds(1)) {
+          log.flush();
+          last_flush = Clock::now();
+        }
+      }
+    }
+  }
+  renderer.reset();  // GL objects go while the context is current
+}
+
+}  // namespace sandtable::node

@@ -1,0 +1,140 @@
+// RenderLoop: the node's renderer running continuously on its own thread (docs/render.md).
+// It owns a headless GL context (EGL; Mesa's llvmpipe without a GPU), renders what the show puts
+// on the model (show_content.h) at each frame's media time, reads the frame back and gives it to
+// the node's projector through ProjectorOutput (the world, or a window), so any projector the
+// node drives shows it.
+//
+// Frames are drawn only when something changed: the calibration or mask, the inputs (pattern,
+// strokes, cursor), or the media time while the timeline plays; a static show costs nothing
+// after its first frame. At most max_fps frames a second.
+//
+// Calibration and masks swap in between frames: ShowCalibration prepares the projector view
+// (the distortion map, ~0.1 s) on the calling thread, hands it over and waits until a frame
+// drawn with it is shown. Self-calibration takes the projector with Suspend() (returns once no
+// frame is being shown; none is until the next ShowCalibration or Resume).
+//
+// Media time: the timeline clock the coordinator publishes, converted to this node's steady
+// clock with the node's offset estimate, evaluated at the moment the frame is drawn; every
+// shown frame's (steady time, media time) goes to frame_log_path when set (the lab's skew).
+// Threading: every public method may be called from any thread.
+#pragma once
+
+#include <array>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <fstream>
+#include <future>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include "common/io/unit_calibration_file.h"
+#include "common/scene/scene.h"
+#include "node/devices/projector_output.h"
+#include "node/render/renderer.h"
+#include "node/render/show_content.h"
+
+namespace sandtable::node {
+
+struct RenderLoopOptions {
+  double max_fps = 30.0;
+  RendererOptions renderer;
+  std::string frame_log_path;  // CSV of shown frames (empty: none)
+  int floor_samples = 30;      // full-screen passes timed once at start (the floor)
+  Status Check() const;
+};
+
+// The coordinator's timeline as this node sees it.
+struct TimelineView {
+  bool known = false;
+  double media_time_s = 0.0;  // at anchor_coordinator_ns
+  double rate = 0.0;
+  bool playing = false;
+  int64_t anchor_coordinator_ns = 0;
+  double duration_s = 0.0;
+  int64_t coordinator_minus_node_ns = 0;  // the node's clock offset estimate
+  // Media time at node steady time `node_ns` (clamped to [0, duration]).
+  double MediaTimeAt(int64_t node_ns) const;
+};
+
+struct RenderSummary {
+  std::string context;  // the GL context's description
+  uint64_t frames_shown = 0;
+  uint64_t frames_failed = 0;                     // render or show errors (logged)
+  double frame_ms_p50 = 0.0, frame_ms_p99 = 0.0;  // rendering, GL work finished
+  double show_ms_p50 = 0.0;                       // read back and projector's Show
+  double floor_ms = 0.0;                          // one full-screen textured pass (median)
+  std::array<uint64_t, kPassCount> pass_runs{};
+  uint64_t groups_culled = 0;
+  std::string pattern = "none";
+  bool calibrated = false;
+};
+
+class RenderLoop {
+ public:
+  // `projector` outlives the loop. `model`: the glTF model in its own frame (placed with each
+  // calibration's table_from_model; without a placement only a table plane is drawn); may be
+  // null. UNAVAILABLE when no GL context can be made.
+  static Expected<std::unique_ptr<RenderLoop>> Start(ProjectorOutput* projector,
+                                                     std::shared_ptr<const Scene> model,
+                                                     const RenderLoopOptions& options);
+  ~RenderLoop();
+  RenderLoop(const RenderLoop&) = delete;
+  RenderLoop& operator=(const RenderLoop&) = delete;
+
+  void SetInputs(ShowInputs inputs);
+  void SetTimeline(const TimelineView& timeline);
+
+  // Swaps the calibration in, resumes, and waits (up to `timeout`) until a frame drawn with it
+  // is shown. Errors: the calibration's (no table_from_projector, a projector of another size),
+  // UNAVAILABLE when no frame was shown in time.
+  Status ShowCalibration(const UnitCalibration& calibration,
+                         std::chrono::milliseconds timeout = std::chrono::seconds(10));
+  // Multiplies the frame by `mask` (renderer.h SetMask; empty: none) and waits until it is
+  // shown.
+  Status ShowMask(const cv::Mat& mask,
+                  std::chrono::milliseconds timeout = std::chrono::seconds(10));
+  void Suspend();
+  void Resume();
+
+  RenderSummary Summary() const;
+  // The scene the loop draws for `calibration` (the model placed, or a table plane).
+  static Scene SceneFor(const Scene* model, const UnitCalibration& calibration);
+
+ private:
+  RenderLoop(ProjectorOutput* projector, std::shared_ptr<const Scene> model,
+             const RenderLoopOptions& options)
+      : projector_(projector), model_(std::move(model)), options_(options) {}
+  void Run(std::promise<Status>* started);
+  Status WaitForShown(uint64_t generation, std::chrono::milliseconds timeout);
+
+  ProjectorOutput* projector_;
+  std::shared_ptr<const Scene> model_;
+  RenderLoopOptions options_;
+  std::thread thread_;
+
+  mutable std::mutex mutex_;
+  std::condition_variable changed_;   // to the render thread
+  std::condition_variable shown_cv_;  // to waiters
+  bool stop_ = false;
+  bool suspended_ = false;
+  uint64_t generation_ = 0;        // bumped by every change a waiter waits for
+  uint64_t shown_generation_ = 0;  // the generation of the last shown frame
+  ShowInputs inputs_;
+  uint64_t inputs_version_ = 0;
+  TimelineView timeline_;
+  std::optional<ProjectorView> pending_view_;
+  std::optional<Scene> pending_scene_;
+  std::optional<cv::Mat> pending_mask_;
+  std::mutex show_mutex_;  // held while a frame is given to the projector
+
+  // Stats (under mutex_).
+  RenderSummary summary_;
+  std::deque<double> frame_ms_, show_ms_;
+};
+
+}  // namespace sandtable::node

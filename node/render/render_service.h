@@ -1,0 +1,66 @@
+// RenderService: the node's show (docs/render.md), a NodeService that feeds the render loop
+// what the coordinator publishes. Every step it hands the loop the operator's test pattern for
+// this node, the annotation strokes (rebuilt when their sequence moves), the wand's cursor, the
+// personnel tracks draped on the model, and the timeline clock converted with the node's clock
+// offset. It prints a JSON line (common/base/ready_line.h) each time a new test pattern is first
+// shown, {"render":ID,"pattern":"grid"}, and a summary every summary_period:
+//   {"render":ID,"frames":N,"frame_ms_p50":..,"frame_ms_p99":..,"floor_ms":..,"show_ms_p50":..,
+//    "failed":N,"passes":{"shadow":N,...},"context":"..."}
+// Network thread only (the loop has its own thread).
+#pragma once
+
+#include <chrono>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "cluster/personnel_tracks.h"
+#include "node/events/event_state_service.h"
+#include "node/net/node_service.h"
+#include "node/render/render_loop.h"
+
+namespace sandtable::node {
+
+struct RenderServiceOptions {
+  SunOptions sun;
+  std::chrono::milliseconds summary_period{2000};
+};
+
+class RenderService : public NodeService {
+ public:
+  // `events`, `loop` outlive the service; `tracks` and `model` may be null. `print` writes one
+  // JSON line (stdout in the program).
+  RenderService(const EventStateService* events, RenderLoop* loop,
+                std::shared_ptr<const cluster::PersonnelTracks> tracks,
+                std::shared_ptr<const Scene> model, RenderServiceOptions options,
+                std::function<void(const nlohmann::json&)> print);
+
+  const char* name() const override { return "render"; }
+  Status OnStep(NodeRuntime& node) override;
+
+  // The unit's calibration changed: the tracks are draped again on the model where it stands
+  // (on a worker; the traces follow once done).
+  void OnCalibration(const UnitCalibration& calibration, NodeRuntime& node);
+
+  nlohmann::json SummaryJson(NodeId id) const;
+
+ private:
+  const EventStateService* events_;
+  RenderLoop* loop_;
+  std::shared_ptr<const cluster::PersonnelTracks> tracks_;
+  std::shared_ptr<const Scene> model_;
+  RenderServiceOptions options_;
+  std::function<void(const nlohmann::json&)> print_;
+
+  ShowInputs inputs_;
+  bool inputs_sent_ = false;
+  SequenceNumber strokes_sequence_ = kInvalidSequenceNumber;
+  std::string announced_pattern_;
+  uint64_t frames_at_pattern_change_ = 0;
+  std::chrono::steady_clock::time_point last_summary_{};
+};
+
+}  // namespace sandtable::node

@@ -1,0 +1,179 @@
+// What the show puts on the model at a media time (node/render/show_content.h) and the render
+// loop driving a projector (node/render/render_loop.h) on llvmpipe.
+#include "node/render/show_content.h"
+
+#include <gtest/gtest.h>
+
+#include "common/scene/procedural_scene.h"
+#include "node/render/render_loop.h"
+#include "tests/node/render/render_test_scene.h"
+
+namespace sandtable::node {
+namespace {
+
+constexpr double kTolerance_m = 1e-9;
+
+// Track 7 walks along y = 0.05 from x = 0 to 1 m in 10 s, a sample a second.
+cluster::PersonnelTracks Walker() {
+  std::string csv = "track_id,t_s,x_m,y_m,z_m\n";
+  for (int t = 0; t <= 10; ++t)
+    csv += "7," + std::to_string(t) + "," + std::to_string(0.1 * t) + ",0.05,0\n";
+  Expected<cluster::PersonnelTracks> tracks = cluster::PersonnelTracks::Parse(csv, "walker.csv");
+  EXPECT_TRUE(tracks.ok()) << tracks.status().ToString();
+  return *tracks;
+}
+
+TEST(ShowContentTest, TracesRunUpToTheMediaTimeAndAreDrapedOnRoofs) {
+  // A box 0.2 m tall over x in [0.4, 0.6]: the walker crosses its roof.
+  Scene scene =
+      MakeBoxMesh(Eigen::Vector3d(0.5, 0.05, 0.0), Eigen::Vector3d(0.2, 0.2, 0.2), 0.0, 0);
+  scene.materials.resize(1);
+  const std::vector<DrapedTrack> draped = DrapeTracks(Walker(), &scene, 0.0);
+  ASSERT_EQ(draped.size(), 1u);
+  ShowInputs inputs;
+  inputs.tracks = std::make_shared<const std::vector<DrapedTrack>>(draped);
+  inputs.sun.enabled = false;
+  // At 5 s the head is half way, over the box: on its roof.
+  RenderContent at5 = BuildContent(inputs, 5.0);
+  ASSERT_EQ(at5.traces.size(), 1u);
+  ASSERT_EQ(at5.markers.size(), 1u);
+  EXPECT_NEAR(at5.markers[0].position_in_table_m.x(), 0.5, kTolerance_m);
+  EXPECT_NEAR(at5.markers[0].position_in_table_m.z(), 0.2, 1e-6);
+  // Samples 0..5 (the head is sample 5), draped: on the table before the box, on its roof after.
+  ASSERT_EQ(at5.traces[0].points_in_table_m.size(), 7u);
+  EXPECT_NEAR(at5.traces[0].points_in_table_m[2].z(), 0.0, 1e-6);
+  EXPECT_FALSE(at5.sun_direction_in_table.has_value());
+  // Later, the trace is longer and the overlay's version changes; the same time, the same one.
+  RenderContent at9 = BuildContent(inputs, 9.0);
+  EXPECT_NE(at9.overlay_version, at5.overlay_version);
+  EXPECT_EQ(BuildContent(inputs, 9.0).overlay_version, at9.overlay_version);
+  // Before the track starts: nothing drawn.
+  EXPECT_TRUE(BuildContent(inputs, -1.0).traces.empty());
+}
+
+TEST(ShowContentTest, SunFollowsTheTimeOfDay) {
+  ShowInputs inputs;
+  inputs.sun.start_hour = 6.0;
+  inputs.sun.hours_per_media_s = 1.0;
+  // 12 h: due south (-y), at the highest elevation; 18 h: west, on the horizon.
+  const Eigen::Vector3d noon = *BuildContent(inputs, 6.0).sun_direction_in_table;
+  EXPECT_NEAR(noon.x(), 0.0, 1e-9);
+  EXPECT_LT(noon.y(), 0.0);
+  EXPECT_NEAR(std::asin(noon.z()) * 180.0 / M_PI, inputs.sun.max_elevation_deg, 1e-9);
+  const Eigen::Vector3d dusk = *BuildContent(inputs, 12.0).sun_direction_in_table;
+  EXPECT_NEAR(dusk.x(), -1.0, 1e-9);
+  EXPECT_NEAR(dusk.z(), 0.0, 1e-9);
+}
+
+// A projector that keeps what it is shown (the world's and the window's outputs are tested in
+// node/devices; here only what the loop gives them matters).
+class KeptFrames : public ProjectorOutput {
+ public:
+  explicit KeptFrames(cv::Size size) : size_(size) {}
+  cv::Size size() const override { return size_; }
+  std::string description() const override { return "kept frames"; }
+  Expected<ShownFrame> Show(const cv::Mat& frame) override {
+    ST_RETURN_IF_ERROR(CheckProjectorFrame(frame, size_, description()));
+    std::lock_guard<std::mutex> lock(mutex_);
+    last_ = frame.clone();
+    ShownFrame shown;
+    shown.frame_index = ++count_;
+    shown.shown_time = DeviceClock::now();
+    return shown;
+  }
+  uint64_t count() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return count_;
+  }
+  cv::Mat last() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return last_.clone();
+  }
+
+ private:
+  cv::Size size_;
+  std::mutex mutex_;
+  cv::Mat last_;
+  uint64_t count_ = 0;
+};
+
+UnitCalibration TestCalibration() {
+  UnitCalibration c;
+  c.projector = testing::RenderTestProjector(320, 200, true);
+  c.camera = c.projector;
+  c.table_from_projector = testing::RenderTestProjectorFromTable().Inverse();
+  c.table_from_model = Rigid3d::Identity();
+  return c;
+}
+
+TEST(RenderLoopTest, DrawsOnChangeOnlyAndStepsAsideForCalibration) {
+  KeptFrames projector(cv::Size(320, 200));
+  auto model = std::make_shared<const Scene>(testing::RenderTestScene());
+  RenderLoopOptions options;
+  options.max_fps = 200.0;
+  options.floor_samples = 3;
+  Expected<std::unique_ptr<RenderLoop>> loop = RenderLoop::Start(&projector, model, options);
+  ASSERT_TRUE(loop.ok()) << loop.status().ToString();
+  // Nothing before a calibration.
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  EXPECT_EQ(projector.count(), 0u);
+  ASSERT_TRUE((*loop)->ShowCalibration(TestCalibration()).ok());
+  EXPECT_GE(projector.count(), 1u);
+  // A static show is not drawn again.
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  const uint64_t settled = projector.count();
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  EXPECT_EQ(projector.count(), settled);
+  // A pattern change is drawn: raw white.
+  ShowInputs inputs;
+  inputs.pattern = TestPattern::kRawWhite;
+  (*loop)->SetInputs(inputs);
+  for (int i = 0; i < 100 && projector.count() == settled; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_GT(projector.count(), settled);
+  cv::Mat white = projector.last();
+  EXPECT_EQ(cv::countNonZero(white.reshape(1) != 255), 0);
+  // A playing timeline draws continuously; suspended, nothing is shown.
+  TimelineView playing;
+  playing.known = true;
+  playing.playing = true;
+  playing.rate = 1.0;
+  playing.duration_s = 100.0;
+  inputs.pattern = TestPattern::kNone;
+  (*loop)->SetInputs(inputs);
+  (*loop)->SetTimeline(playing);
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));
+  const uint64_t before = projector.count();
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_GT(projector.count(), before + 1);
+  (*loop)->Suspend();
+  const uint64_t suspended = projector.count();
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_EQ(projector.count(), suspended);
+  // A mask (a neighbour's join blanking the left half) is shown once the loop resumes.
+  (*loop)->Resume();
+  cv::Mat mask(200, 320, CV_8UC1, cv::Scalar(255));
+  mask.colRange(0, 160).setTo(0);
+  ASSERT_TRUE((*loop)->ShowMask(mask).ok());
+  const cv::Mat blanked = projector.last();
+  EXPECT_EQ(cv::countNonZero(blanked.colRange(0, 160).reshape(1)), 0);
+  EXPECT_GT(cv::countNonZero(blanked.colRange(160, 320).reshape(1)), 0);
+  const RenderSummary summary = (*loop)->Summary();
+  EXPECT_GT(summary.frames_shown, 3u);
+  EXPECT_EQ(summary.frames_failed, 0u);
+  EXPECT_GT(summary.floor_ms, 0.0);
+  EXPECT_GT(summary.frame_ms_p50, 0.0);
+}
+
+TEST(RenderLoopTest, RefusesACalibrationOfAnotherSize) {
+  KeptFrames projector(cv::Size(640, 400));
+  Expected<std::unique_ptr<RenderLoop>> loop = RenderLoop::Start(&projector, nullptr, {});
+  ASSERT_TRUE(loop.ok());
+  const Status refused = (*loop)->ShowCalibration(TestCalibration());
+  EXPECT_EQ(refused.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.message().find("320x200"), std::string::npos) << refused.message();
+}
+
+}  // namespace
+}  // namespace sandtable::node
