@@ -8,6 +8,8 @@
 // The renderer draws its last pass into output_framebuffer() (size() px) and calls Present().
 // Threading: a context is current on one thread at a time; MakeCurrent() on the thread that
 // renders before any GL call (the EGL context may be created on one thread and used on another).
+// An EGL context cannot be made current on a thread that holds a window's (GLX) context: glvnd
+// answers EGL_BAD_ACCESS (MakeCurrent returns UNAVAILABLE); the render loop has its own thread.
 #pragma once
 
 #include <memory>
