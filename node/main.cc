@@ -282,7 +282,7 @@ static int Run(int argc, char** argv) {
     render_options.max_fps = render_max_fps;
     render_options.frame_log_path = render_log;
     Expected<std::unique_ptr<node::RenderLoop>> started =
-        node::RenderLoop::Start(projector.get(), model, render_options);
+        node::RenderLoop::Start(projector.get(), model, render_options, tracks);
     if (!started.ok()) {
       if (render_mode == "on") {
         std::cerr << "sandtable-node: render: " << started.status().message() << "\n";
@@ -311,7 +311,7 @@ static int Run(int argc, char** argv) {
     node::RenderServiceOptions render_service_options;
     render_service_options.sun = sun_options;
     render_service = std::make_unique<node::RenderService>(
-        &events, render_loop.get(), tracks, model, render_service_options,
+        &events, render_loop.get(), render_service_options,
         [](const nlohmann::json& line) { WriteJsonLine(std::cout, line); });
     runtime.AddService(render_service.get());
   }
@@ -326,7 +326,6 @@ static int Run(int argc, char** argv) {
         *calibration, projector.get(), model, sc,
         [&, id = options.id](const node::SelfCalibrationOutcome& outcome) {
           calibration = outcome.calibration;
-          if (render_service) render_service->OnCalibration(outcome.calibration, runtime);
           if (export_dir.empty()) return;
           Expected<nlohmann::json> line = node::ExportSelfCalibration(outcome, id, export_dir);
           if (!line.ok()) {
@@ -402,7 +401,6 @@ static int Run(int argc, char** argv) {
   }
   if (calibration && render_loop && !self_calibration && calibration->table_from_projector) {
     // A unit that starts calibrated (the lab's true-pose mode) shows at once.
-    render_service->OnCalibration(*calibration, runtime);
     runtime.workers().Run<Status>(
         [loop = render_loop.get(), c = *calibration] { return loop->ShowCalibration(c); },
         [](Status shown) {

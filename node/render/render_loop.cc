@@ -1,6 +1,7 @@
 #include "node/render/render_loop.h"
 
 #include <algorithm>
+#include <cstring>
 
 #include "common/base/log.h"
 #include "node/render/gl_context.h"
@@ -23,6 +24,24 @@ double Percentile(const std::deque<double>& values, double p) {
       std::min(v.size() - 1, static_cast<size_t>(std::ceil(p * static_cast<double>(v.size()))) - 1);
   std::nth_element(v.begin(), v.begin() + static_cast<long>(i), v.end());
   return v[i];
+}
+
+// A 64-bit hash of a frame's bytes (8 at a time): frames equal to the last shown are not
+// shown again.
+uint64_t FrameHash(const cv::Mat& frame) {
+  const cv::Mat packed = frame.isContinuous() ? frame : frame.clone();
+  const size_t bytes = packed.total() * packed.elemSize();
+  const auto* data = packed.data;
+  uint64_t h = 0x9e3779b97f4a7c15ull ^ bytes;
+  size_t i = 0;
+  for (; i + 8 <= bytes; i += 8) {
+    uint64_t word;
+    std::memcpy(&word, data + i, 8);
+    h = (h ^ word) * 0x100000001b3ull;
+    h ^= h >> 29;
+  }
+  for (; i < bytes; ++i) h = (h ^ data[i]) * 0x100000001b3ull;
+  return h;
 }
 
 void Keep(std::deque<double>* values, double v) {
@@ -65,11 +84,12 @@ Scene RenderLoop::SceneFor(const Scene* model, const UnitCalibration& calibratio
   return plane;
 }
 
-Expected<std::unique_ptr<RenderLoop>> RenderLoop::Start(ProjectorOutput* projector,
-                                                        std::shared_ptr<const Scene> model,
-                                                        const RenderLoopOptions& options) {
+Expected<std::unique_ptr<RenderLoop>> RenderLoop::Start(
+    ProjectorOutput* projector, std::shared_ptr<const Scene> model,
+    const RenderLoopOptions& options, std::shared_ptr<const cluster::PersonnelTracks> tracks) {
   ST_RETURN_IF_ERROR(options.Check());
-  std::unique_ptr<RenderLoop> loop(new RenderLoop(projector, std::move(model), options));
+  std::unique_ptr<RenderLoop> loop(
+      new RenderLoop(projector, std::move(model), options, std::move(tracks)));
   std::promise<Status> started;
   std::future<Status> result = started.get_future();
   loop->thread_ = std::thread([raw = loop.get(), &started] { raw->Run(&started); });
@@ -127,11 +147,16 @@ Status RenderLoop::ShowCalibration(const UnitCalibration& calibration,
         std::to_string(view->projector.height_px) + " px, the output " +
         std::to_string(projector_->size().width) + "x" + std::to_string(projector_->size().height));
   }
+  // The traces lie on the model where this calibration places it, from the first frame on.
+  std::shared_ptr<const std::vector<DrapedTrack>> draped;
+  if (tracks_)
+    draped = std::make_shared<const std::vector<DrapedTrack>>(DrapeTracks(*tracks_, &scene));
   uint64_t generation = 0;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     pending_view_ = std::move(*view);
     pending_scene_ = std::move(scene);
+    pending_tracks_ = std::move(draped);
     suspended_ = false;
     generation = ++generation_;
     summary_.calibrated = true;
@@ -225,6 +250,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
       });
       if (stop_) break;
       if (suspended_ || (!pending_view_ && !renderer)) continue;
+      if (pending_view_) draped_tracks_ = std::move(pending_tracks_);
       view = std::move(pending_view_);
       scene = std::move(pending_scene_);
       mask = std::move(pending_mask_);
@@ -232,6 +258,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
       pending_scene_.reset();
       pending_mask_.reset();
       inputs = inputs_;
+      if (draped_tracks_) inputs.tracks = draped_tracks_;
       timeline = timeline_;
       version = inputs_version_;
       generation = generation_;
@@ -272,7 +299,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
         stats.ok() ? (*context)->ReadOutput() : Expected<cv::Mat>(stats.status());
     last_frame = Clock::now();
     drawn_version = version;
-    bool shown = false;
+    bool shown = false, unchanged = false;
     const Clock::time_point show_start = Clock::now();
     if (frame.ok()) {
       std::lock_guard<std::mutex> showing(show_mutex_);
@@ -281,12 +308,20 @@ void RenderLoop::Run(std::promise<Status>* started) {
         std::lock_guard<std::mutex> lock(mutex_);
         suspended = suspended_;
       }
-      if (!suspended) {
+      const uint64_t hash = FrameHash(*frame);
+      if (suspended) {
+        last_shown_hash_.reset();  // calibration shows its own frames meanwhile
+      } else if (last_shown_hash_ == hash) {
+        shown = true;  // the projector already shows exactly this
+        unchanged = true;
+      } else {
         Expected<ShownFrame> done = projector_->Show(*frame);
         if (!done.ok()) {
           status = done.status();
+          last_shown_hash_.reset();
         } else {
           shown = true;
+          last_shown_hash_ = hash;
         }
       }
     } else {
@@ -300,19 +335,22 @@ void RenderLoop::Run(std::promise<Status>* started) {
         ++summary_.frames_failed;
         ST_LOG(kWarning) << "render: frame not shown: " << status.ToString();
       }
-      if (shown) {
+      if (unchanged) ++summary_.frames_unchanged;
+      if (shown && !unchanged) {
         ++summary_.frames_shown;
         Keep(&frame_ms_, stats->frame_ms);
         Keep(&show_ms_, show_ms);
         for (int p = 0; p < kPassCount; ++p) summary_.pass_runs[p] += stats->ran[p] ? 1 : 0;
         summary_.groups_culled += static_cast<uint64_t>(stats->groups_culled);
+      }
+      if (shown) {
         summary_.pattern = TestPatternName(inputs.pattern);
         drawn_generation = generation;
         shown_generation_ = std::max(shown_generation_, drawn_generation);
       }
     }
-    if (shown) {
-      shown_cv_.notify_all();
+    if (shown) shown_cv_.notify_all();
+    if (shown && !unchanged) {
       if (log.is_open()) {
         log << draw_ns << "," << media_time_s << "," << (timeline.playing ? 1 : 0) << ","
             << stats->frame_ms << "," << timeline.rate << "\n";

@@ -6,7 +6,8 @@
 //
 // Frames are drawn only when something changed: the calibration or mask, the inputs (pattern,
 // strokes, cursor), or the media time while the timeline plays; a static show costs nothing
-// after its first frame. At most max_fps frames a second.
+// after its first frame. At most max_fps frames a second. A drawn frame equal (byte for byte,
+// by a 64-bit hash) to the one the projector shows is not sent again.
 //
 // Calibration and masks swap in between frames: ShowCalibration prepares the projector view
 // (the distortion map, ~0.1 s) on the calling thread, hands it over and waits until a frame
@@ -64,7 +65,8 @@ struct TimelineView {
 struct RenderSummary {
   std::string context;  // the GL context's description
   uint64_t frames_shown = 0;
-  uint64_t frames_failed = 0;                     // render or show errors (logged)
+  uint64_t frames_failed = 0;     // render or show errors (logged)
+  uint64_t frames_unchanged = 0;  // drawn, equal to what the projector shows: not sent again
   double frame_ms_p50 = 0.0, frame_ms_p99 = 0.0;  // rendering, GL work finished
   double show_ms_p50 = 0.0;                       // read back and projector's Show
   double floor_ms = 0.0;                          // one full-screen textured pass (median)
@@ -78,10 +80,13 @@ class RenderLoop {
  public:
   // `projector` outlives the loop. `model`: the glTF model in its own frame (placed with each
   // calibration's table_from_model; without a placement only a table plane is drawn); may be
-  // null. UNAVAILABLE when no GL context can be made.
-  static Expected<std::unique_ptr<RenderLoop>> Start(ProjectorOutput* projector,
-                                                     std::shared_ptr<const Scene> model,
-                                                     const RenderLoopOptions& options);
+  // null. `tracks` (may be null): the personnel tracks, draped on the placed model with each
+  // calibration before its first frame (show_content.h). UNAVAILABLE when no GL context can be
+  // made.
+  static Expected<std::unique_ptr<RenderLoop>> Start(
+      ProjectorOutput* projector, std::shared_ptr<const Scene> model,
+      const RenderLoopOptions& options,
+      std::shared_ptr<const cluster::PersonnelTracks> tracks = nullptr);
   ~RenderLoop();
   RenderLoop(const RenderLoop&) = delete;
   RenderLoop& operator=(const RenderLoop&) = delete;
@@ -107,13 +112,18 @@ class RenderLoop {
 
  private:
   RenderLoop(ProjectorOutput* projector, std::shared_ptr<const Scene> model,
-             const RenderLoopOptions& options)
-      : projector_(projector), model_(std::move(model)), options_(options) {}
+             const RenderLoopOptions& options,
+             std::shared_ptr<const cluster::PersonnelTracks> tracks)
+      : projector_(projector),
+        model_(std::move(model)),
+        tracks_(std::move(tracks)),
+        options_(options) {}
   void Run(std::promise<Status>* started);
   Status WaitForShown(uint64_t generation, std::chrono::milliseconds timeout);
 
   ProjectorOutput* projector_;
   std::shared_ptr<const Scene> model_;
+  std::shared_ptr<const cluster::PersonnelTracks> tracks_;
   RenderLoopOptions options_;
   std::thread thread_;
 
@@ -129,8 +139,10 @@ class RenderLoop {
   TimelineView timeline_;
   std::optional<ProjectorView> pending_view_;
   std::optional<Scene> pending_scene_;
+  std::shared_ptr<const std::vector<DrapedTrack>> pending_tracks_, draped_tracks_;
   std::optional<cv::Mat> pending_mask_;
-  std::mutex show_mutex_;  // held while a frame is given to the projector
+  std::mutex show_mutex_;                    // held while a frame is given to the projector
+  std::optional<uint64_t> last_shown_hash_;  // render thread only
 
   // Stats (under mutex_).
   RenderSummary summary_;

@@ -5,30 +5,10 @@
 namespace sandtable::node {
 
 RenderService::RenderService(const EventStateService* events, RenderLoop* loop,
-                             std::shared_ptr<const cluster::PersonnelTracks> tracks,
-                             std::shared_ptr<const Scene> model, RenderServiceOptions options,
+                             RenderServiceOptions options,
                              std::function<void(const nlohmann::json&)> print)
-    : events_(events),
-      loop_(loop),
-      tracks_(std::move(tracks)),
-      model_(std::move(model)),
-      options_(options),
-      print_(std::move(print)) {
+    : events_(events), loop_(loop), options_(options), print_(std::move(print)) {
   inputs_.sun = options_.sun;
-}
-
-void RenderService::OnCalibration(const UnitCalibration& calibration, NodeRuntime& node) {
-  if (!tracks_) return;
-  const Scene placed = RenderLoop::SceneFor(model_.get(), calibration);
-  std::shared_ptr<const cluster::PersonnelTracks> tracks = tracks_;
-  node.workers().Run<std::shared_ptr<const std::vector<DrapedTrack>>>(
-      [tracks, placed] {
-        return std::make_shared<const std::vector<DrapedTrack>>(DrapeTracks(*tracks, &placed));
-      },
-      [this](std::shared_ptr<const std::vector<DrapedTrack>> draped) {
-        inputs_.tracks = std::move(draped);
-        inputs_sent_ = false;
-      });
 }
 
 Status RenderService::OnStep(NodeRuntime& node) {
@@ -111,6 +91,7 @@ nlohmann::json RenderService::SummaryJson(NodeId id) const {
   return {{"render", id},
           {"frames", s.frames_shown},
           {"failed", s.frames_failed},
+          {"unchanged", s.frames_unchanged},
           {"frame_ms_p50", s.frame_ms_p50},
           {"frame_ms_p99", s.frame_ms_p99},
           {"floor_ms", s.floor_ms},

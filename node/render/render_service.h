@@ -1,9 +1,10 @@
 // RenderService: the node's show (docs/render.md), a NodeService that feeds the render loop
 // what the coordinator publishes. Every step it hands the loop the operator's test pattern for
 // this node, the annotation strokes (rebuilt when their sequence moves), the wand's cursor, the
-// personnel tracks draped on the model, and the timeline clock converted with the node's clock
-// offset. It prints a JSON line (common/base/ready_line.h) each time a new test pattern is first
-// shown, {"render":ID,"pattern":"grid"}, and a summary every summary_period:
+// and the timeline clock converted with the node's clock
+// offset. (The tracks themselves are draped and drawn by the loop, render_loop.h.) It prints a JSON
+// line (common/base/ready_line.h) each time a new test pattern is first shown,
+// {"render":ID,"pattern":"grid"}, and a summary every summary_period:
 //   {"render":ID,"frames":N,"frame_ms_p50":..,"frame_ms_p99":..,"floor_ms":..,"show_ms_p50":..,
 //    "failed":N,"passes":{"shadow":N,...},"context":"..."}
 // Network thread only (the loop has its own thread).
@@ -31,27 +32,18 @@ struct RenderServiceOptions {
 
 class RenderService : public NodeService {
  public:
-  // `events`, `loop` outlive the service; `tracks` and `model` may be null. `print` writes one
-  // JSON line (stdout in the program).
-  RenderService(const EventStateService* events, RenderLoop* loop,
-                std::shared_ptr<const cluster::PersonnelTracks> tracks,
-                std::shared_ptr<const Scene> model, RenderServiceOptions options,
+  // `events`, `loop` outlive the service. `print` writes one JSON line (stdout in the program).
+  RenderService(const EventStateService* events, RenderLoop* loop, RenderServiceOptions options,
                 std::function<void(const nlohmann::json&)> print);
 
   const char* name() const override { return "render"; }
   Status OnStep(NodeRuntime& node) override;
-
-  // The unit's calibration changed: the tracks are draped again on the model where it stands
-  // (on a worker; the traces follow once done).
-  void OnCalibration(const UnitCalibration& calibration, NodeRuntime& node);
 
   nlohmann::json SummaryJson(NodeId id) const;
 
  private:
   const EventStateService* events_;
   RenderLoop* loop_;
-  std::shared_ptr<const cluster::PersonnelTracks> tracks_;
-  std::shared_ptr<const Scene> model_;
   RenderServiceOptions options_;
   std::function<void(const nlohmann::json&)> print_;
 

@@ -134,13 +134,18 @@ TEST(RenderLoopTest, DrawsOnChangeOnlyAndStepsAsideForCalibration) {
   ASSERT_GT(projector.count(), settled);
   cv::Mat white = projector.last();
   EXPECT_EQ(cv::countNonZero(white.reshape(1) != 255), 0);
-  // A playing timeline draws continuously; suspended, nothing is shown.
+  // A playing timeline draws continuously (the sun moves 30 degrees a second: every frame
+  // differs); suspended, nothing is shown.
   TimelineView playing;
   playing.known = true;
   playing.playing = true;
   playing.rate = 1.0;
   playing.duration_s = 100.0;
+  playing.anchor_coordinator_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                      std::chrono::steady_clock::now().time_since_epoch())
+                                      .count();
   inputs.pattern = TestPattern::kNone;
+  inputs.sun.hours_per_media_s = 2.0;
   (*loop)->SetInputs(inputs);
   (*loop)->SetTimeline(playing);
   std::this_thread::sleep_for(std::chrono::milliseconds(400));
