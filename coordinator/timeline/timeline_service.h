@@ -11,8 +11,8 @@
 #include <cstdint>
 
 #include "cluster/media_clock.h"
-#include "coordinator/membership/coordinator_server.h"
 #include "cluster/personnel_tracks.h"
+#include "coordinator/membership/coordinator_server.h"
 #include "proto/timeline.pb.h"
 
 namespace sandtable::coordinator {
