@@ -42,3 +42,26 @@ function(sandtable_add_benchmark name)
   add_executable(${name} ${ARG_SOURCES})
   target_link_libraries(${name} PRIVATE ${ARG_DEPS} benchmark::benchmark sandtable::options)
 endfunction()
+
+# sandtable_add_window_test(<name> SOURCES ... DEPS ...)
+#   A GoogleTest executable that needs an X display: CTest runs the whole binary under xvfb-run
+#   with a 24-bit screen (xvfb-run's default screen is 8 bits deep), label "window". Without
+#   xvfb-run it runs as is (its tests that need a display skip).
+function(sandtable_add_window_test name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
+  if(NOT SANDTABLE_BUILD_TESTS)
+    return()
+  endif()
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_DEPS} GTest::gtest GTest::gtest_main
+    sandtable::options)
+  find_program(XVFB_RUN xvfb-run)
+  if(XVFB_RUN)
+    add_test(NAME ${name}
+      COMMAND ${XVFB_RUN} -a -s "-screen 0 1280x1024x24" $<TARGET_FILE:${name}>)
+  else()
+    add_test(NAME ${name} COMMAND ${name})
+  endif()
+  set_tests_properties(${name} PROPERTIES LABELS window TIMEOUT 120
+    WORKING_DIRECTORY ${PROJECT_SOURCE_DIR})
+endfunction()

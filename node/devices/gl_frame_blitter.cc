@@ -12,27 +12,6 @@
 namespace sandtable::node {
 namespace {
 
-// A quad of two triangles (a strip) covering the window, positions from gl_VertexID: no vertex
-// buffer needed.
-constexpr const char* kVertexShader = R"(#version 330 core
-void main() {
-  vec2 corner = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1));
-  gl_Position = vec4(corner * 2.0 - 1.0, 0.0, 1.0);
-}
-)";
-
-// One texel per pixel: pixel centre (x + 0.5, y + 0.5) of window row y (0 = bottom) shows
-// frame texel (x, height - 1 - y) (frame row 0 = top).
-constexpr const char* kFragmentShader = R"(#version 330 core
-uniform sampler2D u_frame;
-out vec4 colour;
-void main() {
-  ivec2 size = textureSize(u_frame, 0);
-  ivec2 texel = ivec2(int(gl_FragCoord.x), size.y - 1 - int(gl_FragCoord.y));
-  colour = vec4(texelFetch(u_frame, texel, 0).rgb, 1.0);
-}
-)";
-
 GLuint MakeTexture(GLint internal_format, GLenum format, cv::Size size, bool gray) {
   GLuint texture = 0;
   glGenTextures(1, &texture);
@@ -62,11 +41,12 @@ Expected<std::unique_ptr<GlFrameBlitter>> GlFrameBlitter::Create(cv::Size size_p
 }
 
 Status GlFrameBlitter::Init() {
-  Expected<unsigned int> program = LinkProgram("frame blitter", kVertexShader, kFragmentShader);
+  Expected<unsigned int> program =
+      LinkProgram("frame blitter", kFullScreenQuadVertexShader, kTexelBlitFragmentShader);
   if (!program.ok()) return program.status();
   program_ = *program;
   glUseProgram(program_);
-  glUniform1i(glGetUniformLocation(program_, "u_frame"), 0);
+  glUniform1i(glGetUniformLocation(program_, "u_image"), 0);
   glGenVertexArrays(1, &vertex_array_);
   gray_texture_ = MakeTexture(GL_R8, GL_RED, size_px_, /*gray=*/true);
   rgb_texture_ = MakeTexture(GL_RGB8, GL_RGB, size_px_, /*gray=*/false);

@@ -29,6 +29,23 @@ Expected<GLuint> CompileShader(const std::string& name, GLenum type, const char*
 
 }  // namespace
 
+const char* const kFullScreenQuadVertexShader = R"(#version 330 core
+void main() {
+  vec2 corner = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1));
+  gl_Position = vec4(corner * 2.0 - 1.0, 0.0, 1.0);
+}
+)";
+
+const char* const kTexelBlitFragmentShader = R"(#version 330 core
+uniform sampler2D u_image;
+out vec4 o_colour;
+void main() {
+  ivec2 size = textureSize(u_image, 0);
+  ivec2 texel = ivec2(int(gl_FragCoord.x), size.y - 1 - int(gl_FragCoord.y));
+  o_colour = vec4(texelFetch(u_image, texel, 0).rgb, 1.0);
+}
+)";
+
 std::string GlErrorText(unsigned int error) {
   switch (error) {
     case GL_INVALID_ENUM:

@@ -9,6 +9,12 @@
 
 namespace sandtable::node {
 
+// A full-screen quad (a triangle strip of 4 vertices from gl_VertexID, no vertex buffer) and a
+// fragment shader that shows texture `u_image` one texel per pixel (texelFetch, no filtering),
+// its row 0 at the top of the output (GL's row 0 is the bottom).
+extern const char* const kFullScreenQuadVertexShader;
+extern const char* const kTexelBlitFragmentShader;
+
 // "GL_INVALID_OPERATION", ... for a glGetError() value.
 std::string GlErrorText(unsigned int error);
 

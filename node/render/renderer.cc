@@ -162,14 +162,6 @@ void main() {
 }
 )";
 
-// Full-screen triangle strip from gl_VertexID.
-constexpr const char* kQuadVertex = R"(#version 330 core
-void main() {
-  vec2 corner = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1));
-  gl_Position = vec4(corner * 2.0 - 1.0, 0.0, 1.0);
-}
-)";
-
 // Output pixel p shows the ideal image at u_source[p] (GL texture coordinates, negative: none),
 // times the mask (encoded on upload, or linear for float targets).
 constexpr const char* kWarpFragment = R"(
@@ -190,17 +182,6 @@ void main() {
   c *= texelFetch(u_mask, p, 0).r;
 #endif
   o_colour = vec4(c, 1.0);
-}
-)";
-
-// One texel per pixel, the texture's row 0 at the top of the output.
-constexpr const char* kBlitFragment = R"(#version 330 core
-uniform sampler2D u_image;
-out vec4 o_colour;
-void main() {
-  ivec2 size = textureSize(u_image, 0);
-  ivec2 texel = ivec2(int(gl_FragCoord.x), size.y - 1 - int(gl_FragCoord.y));
-  o_colour = vec4(texelFetch(u_image, texel, 0).rgb, 1.0);
 }
 )";
 
@@ -301,7 +282,7 @@ Status Renderer::Init(const Scene& scene) {
   Expected<unsigned int> program = LinkProgram("shadow", kShadowVertex, kShadowFragment);
   if (!program.ok()) return program.status();
   shadow_program_ = *program;
-  program = LinkProgram("blit", kQuadVertex, kBlitFragment);
+  program = LinkProgram("blit", kFullScreenQuadVertexShader, kTexelBlitFragmentShader);
   if (!program.ok()) return program.status();
   blit_program_ = *program;
 
@@ -803,7 +784,7 @@ Expected<unsigned int> Renderer::Variant(ProgramKind kind, int mode, bool textur
       fragment = defines + kOverlayFragment;
       break;
     case ProgramKind::kWarp:
-      vertex = kQuadVertex;
+      vertex = kFullScreenQuadVertexShader;
       fragment = defines + kWarpFragment;
       break;
   }

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "net/channel.h"
+#include "tests/coordinator/testing/service_fixture.h"
 #include "tests/net/test_wait.h"
 
 namespace sandtable::coordinator {
@@ -16,28 +17,9 @@ namespace {
 using namespace std::chrono_literals;
 constexpr auto kDeadline = 5s;
 
-class TestPatternServiceTest : public ::testing::Test {
+class TestPatternServiceTest : public testing::ServiceFixture {
  protected:
-  void SetUp() override {
-    CoordinatorOptions options;
-    options.step_period = 5ms;
-    server_ = std::make_unique<CoordinatorServer>(options);
-    server_->AddService(&service_);
-    ASSERT_TRUE(server_->Start().ok());
-    thread_ = std::thread([this] { (void)server_->Run(stop_); });
-    auto sub = net::Socket::Create(&context_, net::SocketType::kSub);
-    ASSERT_TRUE(sub.ok());
-    ASSERT_TRUE((*sub)->Connect(server_->event_endpoint()).ok());
-    sub_ = std::make_unique<net::Channel>(std::move(*sub), 901, 1, &counters_);
-    auto dealer = net::Socket::Create(&context_, net::SocketType::kDealer);
-    ASSERT_TRUE(dealer.ok());
-    ASSERT_TRUE((*dealer)->Connect(server_->request_endpoint()).ok());
-    dealer_ = std::make_unique<net::Channel>(std::move(*dealer), 902, 1, &counters_);
-  }
-  void TearDown() override {
-    stop_ = true;
-    if (thread_.joinable()) thread_.join();
-  }
+  void SetUp() override { StartWith(&service_); }
 
   std::optional<wire::TestPatternReply> Request(bool all, uint32_t node, const std::string& p) {
     wire::Envelope request;
@@ -64,12 +46,6 @@ class TestPatternServiceTest : public ::testing::Test {
   }
 
   TestPatternService service_{200ms};
-  std::unique_ptr<CoordinatorServer> server_;
-  std::atomic<bool> stop_{false};
-  std::thread thread_;
-  zmq::context_t context_;
-  proto::MessageCounters counters_;
-  std::unique_ptr<net::Channel> sub_, dealer_;
 };
 
 TEST_F(TestPatternServiceTest, SiteAndNodePatternsArePublished) {
