@@ -60,9 +60,27 @@ def lab_section(out):
                   "(`--calibration true-pose`): each node holds its factory intrinsics "
                   "(realistic errors) beside its TRUE pose, the baseline structured light "
                   "beats (docs/results.md).", ""]
+    show = out / "lab" / "report.json"
+    if show.exists():
+        rd = json.loads(show.read_text()).get("render", {})
+        if "frame_ms_p50" in rd:
+            g, k = rd.get("grid", {}), rd.get("timeline_skew", {})
+            lines += ["### The show (docs/render.md)", "",
+                      "| figure | value |", "| --- | --- |",
+                      f"| table grid from above: projectors' lines against each other, rms / p99 "
+                      f"(mm) | {fmt(g.get('rms_mm'))} / {fmt(g.get('p99_mm'))} |",
+                      f"| timeline skew across nodes, p99 (ms) | {fmt(k.get('p99_ms'))} |",
+                      f"| frame time p50 / p99 per node, llvmpipe, nodes sharing the cores (ms) "
+                      f"| {fmt(rd.get('frame_ms_p50'))} / {fmt(rd.get('frame_ms_p99'))} |",
+                      f"| the floor: one full-screen textured pass (ms) | {fmt(rd.get('floor_ms'))} |",
+                      ""]
     for png, caption in [("lab/top_white.png", "sandtable-3: the world from above, all white"),
                          ("lab/registration_error_top.png",
-                          "sandtable-3: registration error from above (worst projector)")]:
+                          "sandtable-3: registration error from above (worst projector)"),
+                         ("lab/show_grid_top.png",
+                          "sandtable-3: every node's table grid, seen from above"),
+                         ("lab/show_top.png",
+                          "sandtable-3: the show from above (tracks playing, virtual sun)")]:
         if (out / png).exists():
             lines += [f"![{caption}]({png})  ", f"*{caption}*", ""]
     return lines
