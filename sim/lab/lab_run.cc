@@ -553,18 +553,19 @@ class LabRun {
     return mask;
   }
 
-  // Waits until every calibrated unit has shown `pattern`.
+  // Waits until every calibrated unit has shown `pattern` (the phase goes on).
   bool WaitForPattern(const std::string& pattern) {
-    return Wait(
-        "show",
-        [&] {
-          for (const auto& [id, line] : calibrated_) {
-            auto it = render_pattern_.find(id);
-            if (it == render_pattern_.end() || it->second != pattern) return false;
-          }
-          return true;
-        },
-        ToMs(60), "not every calibrated node showed the pattern '" + pattern + "'", nullptr);
+    const auto done = [&] {
+      for (const auto& [id, line] : calibrated_) {
+        auto it = render_pattern_.find(id);
+        if (it == render_pattern_.end() || it->second != pattern) return false;
+      }
+      return true;
+    };
+    const WaitOutcome outcome = supervisor_.WaitUntil(done, ToMs(60), stop_, Handler());
+    if (outcome == WaitOutcome::kDone) return true;
+    return Failed("show", outcome, "not every calibrated node showed the pattern '" + pattern + "'",
+                  nullptr);
   }
 
   bool Show() {
