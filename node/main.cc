@@ -12,6 +12,7 @@
 //                  [--bind ENDPOINT] [--curve-keys FILE] [--heartbeat-ms N] [--workers N]
 //   (--world E is short for --projector world:E --camera world:E; node/devices/device_factory.h)
 //   sandtable-node calibrate-unit --poses DIR -o unit.json ...   (the unit's factory calibration)
+//   sandtable-node render-frame --calibration unit.json -o frame.png ...  (one frame of the show)
 //
 // On start it prints one JSON line on stdout (common/base/ready_line.h):
 //   {"ready":"sandtable-node","id":3,"peer":"tcp://127.0.0.1:40123"}
@@ -45,6 +46,7 @@
 #include "node/devices/device_factory.h"
 #include "node/events/event_state_service.h"
 #include "node/net/node_runtime.h"
+#include "node/render/render_frame_command.h"
 #include "node/render/render_loop.h"
 #include "node/render/render_service.h"
 
@@ -66,6 +68,10 @@ static int Run(int argc, char** argv) {
                          "(sandtable-node calibrate-unit --help)");
   calibrate->prefix_command();  // its own parser (node/calibration/calibrate_unit_command.h)
   calibrate->set_help_flag();
+  CLI::App* render_frame = app.add_subcommand(
+      "render-frame", "one frame of the unit's show to a PNG (sandtable-node render-frame --help)");
+  render_frame->prefix_command();  // its own parser (node/render/render_frame_command.h)
+  render_frame->set_help_flag();
 
   node::NodeOptions options;
   uint32_t id = 0;
@@ -144,6 +150,7 @@ static int Run(int argc, char** argv) {
                  "CSV of every shown frame: steady ns, media time (the lab's skew)");
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
   if (calibrate->parsed()) return node::RunCalibrateUnit(calibrate->remaining());
+  if (render_frame->parsed()) return node::RunRenderFrame(render_frame->remaining());
   auto usage = [&](const std::string& why) { return cli::UsageError(app, why); };
   if (app.count("--id") == 0) return usage("--id is required");
   if (coordinator.empty()) return usage("--coordinator is required");

@@ -139,7 +139,7 @@ class LabRun {
     const double table_radius_m = inputs_.site.table.is_disc
                                       ? 0.5 * inputs_.site.table.diameter_m
                                       : 0.5 * inputs_.site.table.size_m.minCoeff();
-    if (Status tracks = WriteLabTracks(tracks_path_, 4, 120.0, 0.8 * table_radius_m);
+    if (Status tracks = WriteLabTracks(tracks_path_, 4, 120.0, 0.65 * table_radius_m);
         !tracks.ok()) {
       progress_.End("failed");
       err_ << "sandtable-lab run: " << tracks.ToString() << "\n";
