@@ -25,7 +25,8 @@
 // tracks at the coordinator's media time, under a virtual sun, into its projector; it prints
 // {"render":ID,"pattern":NAME} when an operator's test pattern is first shown and a summary
 // {"render":ID,"frames":N,"frame_ms_p50":...} every 2 s. --render auto renders when there is a
-// projector and says so when no GL context can be made; on makes that an error.
+// projector and, when no GL context can be made, says so ({"render":ID,"unavailable":WHY}) and
+// runs without a show; --render on makes that an error (exit 1).
 // Exit status: 0 after SIGINT/SIGTERM (Goodbye said), 1 when it cannot start, 2 for a bad flag
 // or a bad input file.
 #include <csignal>
@@ -296,6 +297,8 @@ static int Run(int argc, char** argv) {
         return cli::kExitFailure;
       }
       ST_LOG(kWarning) << "no show (--render auto): " << started.status().message();
+      WriteJsonLine(std::cout,
+                    {{"render", options.id}, {"unavailable", started.status().message()}});
     } else {
       render_loop = std::move(*started);
       ST_LOG(kInfo) << "render: " << render_loop->Summary().context;

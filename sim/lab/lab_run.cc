@@ -570,6 +570,12 @@ class LabRun {
 
   bool Show() {
     if (options_.render == "off" || calibrated_.empty()) return true;
+    if (!render_unavailable_.empty()) {
+      // A node without GL runs without a show: the run goes on, the report says why.
+      const auto& [id, why] = *render_unavailable_.begin();
+      result_.render["error"] = "node-" + std::to_string(id) + " cannot render: " + why;
+      return true;
+    }
     Phase("show", 0);
     const fs::path dir(options_.out_dir);
     // 1. The table grid on every projector, seen from above one projector at a time.
@@ -1018,7 +1024,9 @@ class LabRun {
       } else if (child.spec().role == "node" && line.contains("render") &&
                  line["render"].is_number_unsigned()) {
         const NodeId id = line["render"].get<NodeId>();
-        if (line.contains("pattern") && line["pattern"].is_string()) {
+        if (line.contains("unavailable") && line["unavailable"].is_string()) {
+          render_unavailable_[id] = line["unavailable"].get<std::string>();
+        } else if (line.contains("pattern") && line["pattern"].is_string()) {
           render_pattern_[id] = line["pattern"].get<std::string>();
         } else if (line.contains("frames")) {
           render_summary_[id] = line;
@@ -1121,8 +1129,9 @@ class LabRun {
   std::string curve_keys_path_;  // --curve: the run's site key file
   std::optional<net::CurveKeyPair> site_keys_;
   std::string tracks_path_;
-  std::map<NodeId, std::string> render_pattern_;  // the last pattern each node showed
-  std::map<NodeId, json> render_summary_;         // each node's last render summary
+  std::map<NodeId, std::string> render_pattern_;      // the last pattern each node showed
+  std::map<NodeId, std::string> render_unavailable_;  // nodes that cannot render, and why
+  std::map<NodeId, json> render_summary_;             // each node's last render summary
   zmq::context_t zmq_context_;
   proto::MessageCounters lab_counters_;
   uint64_t lab_incarnation_ = 0;

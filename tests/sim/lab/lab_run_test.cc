@@ -438,6 +438,21 @@ TEST_F(LabRunTest, Sandtable3WritesTheReportAndLeavesNoProcess) {
   EXPECT_TRUE(AllProcessesGone(processes));
 }
 
+// A site whose nodes cannot render (no EGL vendor: glvnd is pointed at a file that is not
+// there) runs and measures its calibration without a show; the report says why.
+TEST_F(LabRunTest, NodesThatCannotRenderRunWithoutAShow) {
+  ASSERT_EQ(setenv("__EGL_VENDOR_LIBRARY_FILENAMES", "/nonexistent/egl_vendor.json", 1), 0);
+  json report;
+  const bool ran = RunToEnd(LabArgs({"--calibration", "true-pose"}), "", &report);
+  unsetenv("__EGL_VENDOR_LIBRARY_FILENAMES");
+  ASSERT_TRUE(ran);
+  EXPECT_EQ(report["status"], "ok");
+  EXPECT_TRUE(Finite(report["calibration"]["rms_mm"]));
+  ASSERT_TRUE(report["render"].contains("error")) << report["render"].dump();
+  EXPECT_NE(report["render"]["error"].get<std::string>().find("cannot render"), std::string::npos);
+  EXPECT_FALSE(report["render"].contains("grid"));
+}
+
 TEST_F(LabRunTest, NodeKilledDuringTheRunEndsItWithAReportAndNoOrphan) {
   ChildProcess lab(LabArgs({"--hold-s", "120", "--calibration", "true-pose"}));
   ASSERT_TRUE(ReadUntil(&lab, [](const json& j) { return j.value("phase", "") == "hold"; }));
