@@ -4,6 +4,7 @@
 #include <cstring>
 
 #include "common/base/log.h"
+#include "common/scene/procedural_scene.h"
 #include "node/render/gl_context.h"
 
 namespace sandtable::node {
@@ -74,13 +75,9 @@ Scene RenderLoop::SceneFor(const Scene* model, const UnitCalibration& calibratio
     return MovedScene(*model, *calibration.table_from_model);
   }
   // No placement: the table plane alone (3 x 3 m), so patterns and strokes still have a surface.
-  Scene plane;
+  Scene plane = MakeRectangleMesh(Eigen::Vector2d(3.0, 3.0), 0);
   plane.materials.resize(1);
   plane.materials[0].name = "table";
-  const float h = 1.5f;
-  plane.positions_in_table_m = {{-h, -h, 0}, {h, -h, 0}, {h, h, 0}, {-h, h, 0}};
-  plane.triangles = {{0, 1, 2}, {0, 2, 3}};
-  plane.triangle_material = {0, 0};
   return plane;
 }
 
@@ -210,6 +207,11 @@ RenderSummary RenderLoop::Summary() const {
   s.frame_ms_p99 = Percentile(frame_ms_, 0.99);
   s.show_ms_p50 = Percentile(show_ms_, 0.5);
   return s;
+}
+
+std::pair<uint64_t, std::string> RenderLoop::ShownPattern() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return {summary_.frames_shown, summary_.pattern};
 }
 
 void RenderLoop::Run(std::promise<Status>* started) {

@@ -106,7 +106,9 @@ class RenderLoop {
   void Suspend();
   void Resume();
 
-  RenderSummary Summary() const;
+  RenderSummary Summary() const;  // with percentiles over the kept frames (not per step)
+  // Frames shown and the last shown frame's pattern, cheaply (the service polls it every step).
+  std::pair<uint64_t, std::string> ShownPattern() const;
   // The scene the loop draws for `calibration` (the model placed, or a table plane).
   static Scene SceneFor(const Scene* model, const UnitCalibration& calibration);
 

@@ -71,13 +71,13 @@ Status RenderService::OnStep(NodeRuntime& node) {
   loop_->SetTimeline(timeline);
 
   // Lines for the lab: a new pattern's first frame, and the summary.
-  const RenderSummary summary = loop_->Summary();
-  if (summary.pattern != announced_pattern_ && summary.frames_shown > 0) {
-    announced_pattern_ = summary.pattern;
-    print_({{"render", node.id()}, {"pattern", summary.pattern}});
+  const auto [frames_shown, shown_pattern] = loop_->ShownPattern();
+  if (shown_pattern != announced_pattern_ && frames_shown > 0) {
+    announced_pattern_ = shown_pattern;
+    print_({{"render", node.id()}, {"pattern", shown_pattern}});
   }
   const auto now = std::chrono::steady_clock::now();
-  if (now - last_summary_ >= options_.summary_period && summary.frames_shown > 0) {
+  if (now - last_summary_ >= options_.summary_period && frames_shown > 0) {
     last_summary_ = now;
     print_(SummaryJson(node.id()));
   }

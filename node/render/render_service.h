@@ -51,7 +51,6 @@ class RenderService : public NodeService {
   bool inputs_sent_ = false;
   SequenceNumber strokes_sequence_ = kInvalidSequenceNumber;
   std::string announced_pattern_;
-  uint64_t frames_at_pattern_change_ = 0;
   std::chrono::steady_clock::time_point last_summary_{};
 };
 

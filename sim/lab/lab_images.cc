@@ -27,18 +27,20 @@ Expected<cv::Mat> TopViewWhite(World* world, int width_px) {
   if (!view.ok()) return view.status();
   Expected<std::vector<float>> luminance = world->RenderLuminance(*view);
   if (!luminance.ok()) return luminance.status();
+  return LuminanceToImage(*luminance, view->width_px(), view->height_px(),
+                          LitWhiteLevel(*luminance));
+}
+
+double LitWhiteLevel(const std::vector<float>& luminance_nits) {
   std::vector<float> positive;
-  for (float l : *luminance) {
+  for (float l : luminance_nits) {
     if (l > 0) positive.push_back(l);
   }
-  double white = 1.0;
-  if (!positive.empty()) {
-    const size_t k = static_cast<size_t>(0.99 * static_cast<double>(positive.size() - 1));
-    std::nth_element(positive.begin(), positive.begin() + static_cast<std::ptrdiff_t>(k),
-                     positive.end());
-    white = std::max(1e-6, static_cast<double>(positive[k]));
-  }
-  return LuminanceToImage(*luminance, view->width_px(), view->height_px(), white);
+  if (positive.empty()) return 1.0;
+  const size_t k = static_cast<size_t>(0.99 * static_cast<double>(positive.size() - 1));
+  std::nth_element(positive.begin(), positive.begin() + static_cast<std::ptrdiff_t>(k),
+                   positive.end());
+  return std::max(1e-6, static_cast<double>(positive[k]));
 }
 
 Expected<cv::Mat> RegistrationHeatmap(const World& world,

@@ -22,6 +22,10 @@
 
 namespace sandtable::sim {
 
+// The white level of a luminance picture: the 99th percentile of the lit (> 0) values (1 when
+// nothing is lit).
+double LitWhiteLevel(const std::vector<float>& luminance_nits);
+
 // Sets every projector of `world` to full white (the world's frames are changed).
 Expected<cv::Mat> TopViewWhite(World* world, int width_px);
 

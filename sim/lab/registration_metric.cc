@@ -28,16 +28,6 @@ Eigen::Vector3d Vertex(const Scene& scene, int triangle, int corner) {
   return scene.positions_in_table_m[scene.triangles[triangle][corner]].cast<double>();
 }
 
-// The q-quantile (nearest rank: the smallest value with at least q of the values at or below).
-double Quantile(std::vector<double> values, double q) {
-  if (values.empty()) return 0.0;
-  const size_t rank = static_cast<size_t>(std::ceil(q * static_cast<double>(values.size())));
-  const size_t index = std::clamp<size_t>(rank, 1, values.size()) - 1;
-  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(index),
-                   values.end());
-  return values[index];
-}
-
 struct Accumulator {
   std::vector<double> mm, px;
   void Add(const RegistrationSample& s) {
@@ -64,6 +54,15 @@ struct ErrorsAccumulator {
 };
 
 }  // namespace
+
+double Quantile(std::vector<double> values, double q) {
+  if (values.empty()) return 0.0;
+  const size_t rank = static_cast<size_t>(std::ceil(q * static_cast<double>(values.size())));
+  const size_t index = std::clamp<size_t>(rank, 1, values.size()) - 1;
+  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(index),
+                   values.end());
+  return values[index];
+}
 
 Status RegistrationMetricOptions::Check() const {
   if (num_samples < 1) return InvalidArgumentError("registration metric: num_samples must be >= 1");

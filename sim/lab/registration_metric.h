@@ -118,6 +118,10 @@ std::optional<RegistrationSample> RegistrationErrorAt(const ProjectorSpec& truth
                                                       const Eigen::Vector3d& point_in_table_m,
                                                       const Eigen::Vector3d& plane_normal_in_table);
 
+// The q-quantile of `values` (nearest rank: the smallest value with at least q of the values at
+// or below); 0 for none. Every percentile the lab reports.
+double Quantile(std::vector<double> values, double q);
+
 // The metric over the site for every estimate (site units without an estimate are skipped).
 Expected<RegistrationReport> MeasureRegistration(
     const World& world, const std::vector<EstimatedRegistration>& estimates,

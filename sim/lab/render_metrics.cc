@@ -7,6 +7,10 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "sim/lab/lab_images.h"
+#include "sim/lab/registration_metric.h"
+#include "sim/transport/world.h"
+
 namespace sandtable::sim {
 namespace {
 
@@ -14,12 +18,6 @@ constexpr int kPatch_px = 128;
 constexpr int kStep_px = 32;
 constexpr int kSearch_px = 16;     // the largest shift measured (a 1 mm top view: 16 mm)
 constexpr double kCoverage = 0.6;  // of a full patch's line pixels
-
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<size_t>(std::ceil(p * v.size())) - 1)];
-}
 
 // Line pixels: brighter than the image's dark level by half the lines' contrast.
 cv::Mat LineMask(const cv::Mat& luminance) {
@@ -125,7 +123,7 @@ Expected<GridCoincidence> MeasureGridCoincidence(const std::map<NodeId, TopView>
   double sum2 = 0.0;
   for (double s : shifts_mm) sum2 += s * s;
   out.rms_mm = std::sqrt(sum2 / shifts_mm.size());
-  out.p99_mm = Percentile(shifts_mm, 0.99);
+  out.p99_mm = Quantile(shifts_mm, 0.99);
   out.max_mm = *std::max_element(shifts_mm.begin(), shifts_mm.end());
   return out;
 }
@@ -189,8 +187,8 @@ Expected<TimelineSkew> MeasureTimelineSkew(const std::map<NodeId, std::string>& 
   }
   if (spreads_ms.empty()) return NotFoundError("timeline skew: the nodes never played together");
   out.instants = static_cast<int>(spreads_ms.size());
-  out.p50_ms = Percentile(spreads_ms, 0.5);
-  out.p99_ms = Percentile(spreads_ms, 0.99);
+  out.p50_ms = Quantile(spreads_ms, 0.5);
+  out.p99_ms = Quantile(spreads_ms, 0.99);
   out.max_ms = *std::max_element(spreads_ms.begin(), spreads_ms.end());
   return out;
 }
@@ -215,12 +213,8 @@ Status WriteLabTracks(const std::string& path, int count, double duration_s, dou
 }
 
 cv::Mat LuminancePicture(const cv::Mat& luminance) {
-  std::vector<float> v(luminance.begin<float>(), luminance.end<float>());
-  std::sort(v.begin(), v.end());
-  const float white = std::max(1e-6f, v[std::min(v.size() - 1, v.size() * 99 / 100)]);
-  cv::Mat out;
-  luminance.convertTo(out, CV_8U, 255.0 / white);
-  return out;
+  const std::vector<float> values(luminance.begin<float>(), luminance.end<float>());
+  return LuminanceToImage(values, luminance.cols, luminance.rows, LitWhiteLevel(values));
 }
 
 }  // namespace sandtable::sim

@@ -70,7 +70,8 @@ Expected<TimelineSkew> MeasureTimelineSkew(const std::map<NodeId, std::string>& 
 // Writes the tracks CSV; `area_radius_m` bounds where they walk.
 Status WriteLabTracks(const std::string& path, int count, double duration_s, double area_radius_m);
 
-// An 8-bit picture of a luminance image (white = its 99th percentile), for the report.
+// An 8-bit picture of a luminance image (LuminanceToImage, white = LitWhiteLevel), for the
+// report.
 cv::Mat LuminancePicture(const cv::Mat& luminance);
 
 }  // namespace sandtable::sim
