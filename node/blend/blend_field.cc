@@ -1,0 +1,542 @@
+#include "node/blend/blend_field.h"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <queue>
+#include <string>
+#include <utility>
+
+#include "common/base/units.h"
+
+namespace sandtable::node {
+namespace {
+
+// Normalized undistorted ray directions (z = 1) of pixels, from a coarse grid of exact
+// undistortions interpolated bilinearly (the Brown model is smooth: on an 8 px grid the
+// interpolation error is far below a pixel for the distortions the calibration accepts).
+class RayTable {
+ public:
+  RayTable(const CameraModel& model, int step) : step_(step) {
+    cols_ = (model.width_px + step - 1) / step + 1;
+    rows_ = (model.height_px + step - 1) / step + 1;
+    xy_.resize(static_cast<size_t>(cols_) * rows_);
+    for (int r = 0; r < rows_; ++r) {
+      for (int c = 0; c < cols_; ++c) {
+        const Eigen::Vector2d pixel(c * step, r * step);
+        Expected<Eigen::Vector3d> ray = model.Unproject(pixel);
+        // Past the fold (none inside an image the calibration accepted): the pinhole ray.
+        const Eigen::Vector2d n =
+            ray.ok() ? Eigen::Vector2d(ray->x(), ray->y()) : model.NormalizedFromPixel(pixel);
+        xy_[static_cast<size_t>(r) * cols_ + c] = n;
+      }
+    }
+  }
+  Eigen::Vector3d At(double x_px, double y_px) const {
+    const double gx = std::clamp(x_px / step_, 0.0, cols_ - 1.0);
+    const double gy = std::clamp(y_px / step_, 0.0, rows_ - 1.0);
+    const int c = std::min(static_cast<int>(gx), cols_ - 2);
+    const int r = std::min(static_cast<int>(gy), rows_ - 2);
+    const double fx = gx - c, fy = gy - r;
+    auto at = [&](int cc, int rr) { return xy_[static_cast<size_t>(rr) * cols_ + cc]; };
+    const Eigen::Vector2d n = (1 - fy) * ((1 - fx) * at(c, r) + fx * at(c + 1, r)) +
+                              fy * ((1 - fx) * at(c, r + 1) + fx * at(c + 1, r + 1));
+    return {n.x(), n.y(), 1.0};
+  }
+
+ private:
+  int step_, cols_, rows_;
+  std::vector<Eigen::Vector2d> xy_;
+};
+
+struct Cast {
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  double range_m = 0.0;  // 0: lights nothing
+  double irradiance = 0.0;
+  double cos_incidence = 0.0;
+  double albedo = 1.0;
+};
+
+// The physical surface's albedo at a hit: the material's base colour factor as Rec. 709
+// luminance (textures are imagery to show, not the white models' paint); 1 without material.
+double SurfaceAlbedo(const Scene& scene, int triangle) {
+  if (triangle < 0 || triangle >= static_cast<int>(scene.triangle_material.size())) return 1.0;
+  const int m = scene.triangle_material[triangle];
+  if (m < 0 || m >= static_cast<int>(scene.materials.size())) return 1.0;
+  const Eigen::Vector4d& c = scene.materials[m].base_color_factor;
+  return std::clamp(0.2126 * c.x() + 0.7152 * c.y() + 0.0722 * c.z(), 0.0, 1.0);
+}
+
+// Casts the rays of `pixels` (x, y) from the projector's centre.
+std::vector<Cast> CastPixels(const std::vector<Eigen::Vector2d>& pixels, const RayTable& rays,
+                             const Rigid3d& projector_from_table, const RayCaster& caster,
+                             double min_cos) {
+  const Rigid3d table_from_projector = projector_from_table.Inverse();
+  const Eigen::Vector3d centre = table_from_projector.translation;
+  const Eigen::Matrix3d rotation = table_from_projector.RotationMatrix();
+  std::vector<Ray> batch(pixels.size());
+  for (size_t i = 0; i < pixels.size(); ++i) {
+    batch[i].origin_in_table_m = centre;
+    batch[i].direction_in_table = rotation * rays.At(pixels[i].x(), pixels[i].y());
+  }
+  std::vector<std::optional<RayHit>> hits;
+  caster.IntersectBatch(batch, &hits, /*coherent=*/true);
+  std::vector<Cast> out(pixels.size());
+  for (size_t i = 0; i < pixels.size(); ++i) {
+    if (!hits[i] || !hits[i]->front_face) continue;
+    const Eigen::Vector3d dir = batch[i].direction_in_table.normalized();
+    // normal_in_table faces the ray's origin: cos = -dir . n.
+    const double cos_incidence = -dir.dot(hits[i]->normal_in_table);
+    if (cos_incidence < min_cos) continue;
+    out[i].point = hits[i]->point_in_table_m;
+    out[i].normal = hits[i]->normal_in_table;
+    out[i].range_m = hits[i]->distance_m;
+    out[i].irradiance = cos_incidence / (out[i].range_m * out[i].range_m);
+    out[i].cos_incidence = cos_incidence;
+    out[i].albedo = SurfaceAlbedo(caster.scene(), hits[i]->triangle);
+  }
+  return out;
+}
+
+}  // namespace
+
+Status BlendOptions::Check() const {
+  if (grid_step_px < 1 || grid_step_px > 64) {
+    return InvalidArgumentError("blend: grid_step_px = " + std::to_string(grid_step_px) +
+                                " must be in [1, 64]");
+  }
+  if (!(correction_limit_deg > 0.0 && correction_limit_deg < weight_falloff_deg &&
+        weight_falloff_deg <= max_incidence_deg && max_incidence_deg < 90.0)) {
+    return InvalidArgumentError(
+        "blend: need 0 < correction_limit_deg < weight_falloff_deg <= max_incidence_deg < 90");
+  }
+  if (!(break_ratio > 1.0) || !std::isfinite(break_ratio)) {
+    return InvalidArgumentError("blend: break_ratio must be > 1");
+  }
+  if (!(shadow_ray_offset_m > 0.0) || !(shadow_ray_offset_m < 0.01)) {
+    return InvalidArgumentError("blend: shadow_ray_offset_m must be in (0, 0.01)");
+  }
+  return OkStatus();
+}
+
+Status DistanceField::Check() const {
+  if (step_px < 1 || step_px > 64 || cols < 1 || rows < 1 ||
+      static_cast<int64_t>(cols) * rows > (int64_t{1} << 22)) {
+    return InvalidArgumentError("distance field of unit " + std::to_string(unit) + ": grid " +
+                                std::to_string(cols) + " x " + std::to_string(rows) + " step " +
+                                std::to_string(step_px) + " px is out of range");
+  }
+  const size_t n = static_cast<size_t>(cols) * rows;
+  if (distance_m.size() != n) {
+    return InvalidArgumentError("distance field of unit " + std::to_string(unit) + ": " +
+                                std::to_string(distance_m.size()) + " distances for a " +
+                                std::to_string(cols) + " x " + std::to_string(rows) + " grid");
+  }
+  for (size_t i = 0; i < n; ++i) {
+    if (!std::isfinite(distance_m[i]) || std::abs(distance_m[i]) > kMaxFieldDistance_m) {
+      return InvalidArgumentError("distance field of unit " + std::to_string(unit) +
+                                  ": a distance is not finite or beyond " +
+                                  std::to_string(kMaxFieldDistance_m) + " m");
+    }
+  }
+  ST_RETURN_IF_ERROR(projector.Check());
+  if (cols != PointsAlong(projector.width_px, step_px) ||
+      rows != PointsAlong(projector.height_px, step_px)) {
+    return InvalidArgumentError("distance field of unit " + std::to_string(unit) + ": a " +
+                                std::to_string(cols) + " x " + std::to_string(rows) +
+                                " grid does not span a " + std::to_string(projector.width_px) +
+                                " x " + std::to_string(projector.height_px) + " image at step " +
+                                std::to_string(step_px) + " px");
+  }
+  return OkStatus();
+}
+
+ProjectorSurface CastProjectorSurface(const CameraModel& projector,
+                                      const Rigid3d& projector_from_table,
+                                      const RayCaster& caster, const BlendOptions& options) {
+  ProjectorSurface s;
+  s.width_px = projector.width_px;
+  s.height_px = projector.height_px;
+  const size_t n = static_cast<size_t>(s.width_px) * s.height_px;
+  s.point_in_table_m.assign(n, Eigen::Vector3f::Zero());
+  s.normal_in_table.assign(n, Eigen::Vector3f::UnitZ());
+  s.range_m.assign(n, 0.0f);
+  s.irradiance.assign(n, 0.0f);
+  s.cos_incidence.assign(n, 0.0f);
+  s.albedo.assign(n, 1.0f);
+  const RayTable rays(projector, options.grid_step_px);
+  const double min_cos = std::cos(DegToRad(options.max_incidence_deg));
+  // Row blocks keep the batches coherent and the memory bounded.
+  constexpr int kRowsPerBatch = 32;
+  std::vector<Eigen::Vector2d> pixels;
+  for (int r0 = 0; r0 < s.height_px; r0 += kRowsPerBatch) {
+    const int r1 = std::min(s.height_px, r0 + kRowsPerBatch);
+    pixels.clear();
+    for (int r = r0; r < r1; ++r) {
+      for (int c = 0; c < s.width_px; ++c) pixels.emplace_back(c, r);
+    }
+    const std::vector<Cast> casts =
+        CastPixels(pixels, rays, projector_from_table, caster, min_cos);
+    for (size_t k = 0; k < casts.size(); ++k) {
+      const size_t i = static_cast<size_t>(r0) * s.width_px + k;
+      if (casts[k].range_m <= 0) continue;
+      s.point_in_table_m[i] = casts[k].point.cast<float>();
+      s.normal_in_table[i] = casts[k].normal.cast<float>();
+      s.range_m[i] = static_cast<float>(casts[k].range_m);
+      s.irradiance[i] = static_cast<float>(casts[k].irradiance);
+      s.cos_incidence[i] = static_cast<float>(casts[k].cos_incidence);
+      s.albedo[i] = static_cast<float>(casts[k].albedo);
+      ++s.lit_pixels;
+    }
+  }
+  return s;
+}
+
+DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
+                                   const Rigid3d& projector_from_table, const RayCaster& caster,
+                                   const BlendOptions& options) {
+  DistanceField f;
+  f.unit = unit;
+  f.projector = projector;
+  f.projector_from_table = projector_from_table;
+  f.step_px = options.grid_step_px;
+  f.cols = DistanceField::PointsAlong(projector.width_px, f.step_px);
+  f.rows = DistanceField::PointsAlong(projector.height_px, f.step_px);
+  const size_t n = static_cast<size_t>(f.cols) * f.rows;
+  std::vector<Eigen::Vector2d> pixels(n);
+  for (int r = 0; r < f.rows; ++r) {
+    for (int c = 0; c < f.cols; ++c) pixels[static_cast<size_t>(r) * f.cols + c] = f.GridPixel(c, r);
+  }
+  const RayTable rays(projector, std::max(1, f.step_px));
+  const double min_cos = std::cos(DegToRad(options.max_incidence_deg));
+  const std::vector<Cast> casts = CastPixels(pixels, rays, projector_from_table, caster, min_cos);
+  f.distance_m.assign(n, 0.0f);
+  const double focal_px = 0.5 * (projector.fx_px + projector.fy_px);
+  auto lit = [&](size_t i) { return casts[i].range_m > 0; };
+  const int dc[8] = {1, -1, 0, 0, 1, 1, -1, -1};
+  const int dr[8] = {0, 0, 1, -1, 1, -1, 1, -1};
+  const int opposite[8] = {1, 0, 3, 2, 7, 6, 5, 4};
+  // Breaks between lit neighbours: points farther apart than break_ratio times what the pixel
+  // step spans at their range are suspect (a silhouette, or a surface met obliquely); the
+  // pixels between them are cast (kSubsamples rays): a continuous surface spreads the distance
+  // over the sub-steps, a silhouette puts most of it into one jump (or a sub-step misses).
+  constexpr int kSubsamples = 8;
+  std::vector<uint8_t> broken(n * 8, 0);
+  struct Suspect {
+    size_t i;
+    int k;
+  };
+  std::vector<Suspect> suspects;
+  std::vector<Eigen::Vector2d> sub_pixels;
+  for (int r = 0; r < f.rows; ++r) {
+    for (int c = 0; c < f.cols; ++c) {
+      const size_t i = static_cast<size_t>(r) * f.cols + c;
+      if (!lit(i)) continue;
+      for (int k : {0, 2, 4, 5}) {
+        const int cc = c + dc[k], rr = r + dr[k];
+        if (cc < 0 || rr < 0 || cc >= f.cols || rr >= f.rows) continue;
+        const size_t j = static_cast<size_t>(rr) * f.cols + cc;
+        if (!lit(j)) continue;
+        const double spacing_m = (casts[i].point - casts[j].point).norm();
+        const double expected_m = (pixels[j] - pixels[i]).norm() *
+                                  std::min(casts[i].range_m, casts[j].range_m) / focal_px;
+        if (spacing_m <= options.break_ratio * expected_m) continue;
+        suspects.push_back({i, k});
+        for (int q = 1; q < kSubsamples; ++q) {
+          sub_pixels.push_back(pixels[i] + (pixels[j] - pixels[i]) * (double(q) / kSubsamples));
+        }
+      }
+    }
+  }
+  const std::vector<Cast> sub =
+      CastPixels(sub_pixels, rays, projector_from_table, caster, min_cos);
+  for (size_t s_index = 0; s_index < suspects.size(); ++s_index) {
+    const auto [i, k] = suspects[s_index];
+    const size_t j = static_cast<size_t>(static_cast<int>(i / f.cols) + dr[k]) * f.cols +
+                     (static_cast<int>(i % f.cols) + dc[k]);
+    const double spacing_m = (casts[i].point - casts[j].point).norm();
+    bool is_break = false;
+    Eigen::Vector3d previous = casts[i].point;
+    double largest_jump_m = 0.0;
+    for (int q = 1; q <= kSubsamples && !is_break; ++q) {
+      Eigen::Vector3d next = casts[j].point;
+      if (q < kSubsamples) {
+        const Cast& hit = sub[s_index * (kSubsamples - 1) + (q - 1)];
+        if (hit.range_m <= 0) is_break = true;
+        next = hit.point;
+      }
+      largest_jump_m = std::max(largest_jump_m, (next - previous).norm());
+      previous = next;
+    }
+    if (is_break || largest_jump_m > 0.5 * spacing_m) {
+      broken[i * 8 + k] = 1;
+      broken[j * 8 + opposite[k]] = 1;
+    }
+  }
+  // Where the lit surface ends between a lit grid point i and a neighbour j that is unlit or
+  // across a break: bisection along the pixel segment (kBisections casts), the crossing being
+  // where a sample stops being lit and near i (within half the i-j distance: the far side of a
+  // silhouette is a whole jump away). i is seeded with its 3D distance to the crossing, and an
+  // unlit j gets minus its distance (in metres at i's range), so that the interpolated field
+  // passes through 0 at the crossing rather than a cell early (a signed distance; lookups clamp
+  // at 0).
+  constexpr int kBisections = 5;
+  std::vector<double> d(n, std::numeric_limits<double>::infinity());
+  std::vector<double> outside(n, -std::numeric_limits<double>::infinity());
+  using Item = std::pair<double, size_t>;
+  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> queue;
+  auto seed = [&](size_t i, double value) {
+    if (value < d[i]) {
+      d[i] = value;
+      queue.emplace(value, i);
+    }
+  };
+  struct Crossing {
+    size_t i, j;
+    double lo = 0.0, hi = 1.0;  // lit and near i at lo, not at hi
+  };
+  std::vector<Crossing> crossings;
+  for (int r = 0; r < f.rows; ++r) {
+    for (int c = 0; c < f.cols; ++c) {
+      const size_t i = static_cast<size_t>(r) * f.cols + c;
+      if (!lit(i)) continue;
+      if (c == 0 || r == 0 || c == f.cols - 1 || r == f.rows - 1) seed(i, 0.0);  // image edge
+      for (int k = 0; k < 8; ++k) {
+        const int cc = c + dc[k], rr = r + dr[k];
+        if (cc < 0 || rr < 0 || cc >= f.cols || rr >= f.rows) continue;
+        const size_t j = static_cast<size_t>(rr) * f.cols + cc;
+        if (!lit(j) || broken[i * 8 + k]) crossings.push_back({i, j});
+      }
+    }
+  }
+  std::vector<Eigen::Vector2d> probe(crossings.size());
+  for (int step = 0; step < kBisections && !crossings.empty(); ++step) {
+    for (size_t q = 0; q < crossings.size(); ++q) {
+      const Crossing& x = crossings[q];
+      probe[q] = pixels[x.i] + (pixels[x.j] - pixels[x.i]) * (0.5 * (x.lo + x.hi));
+    }
+    const std::vector<Cast> hits = CastPixels(probe, rays, projector_from_table, caster, min_cos);
+    for (size_t q = 0; q < crossings.size(); ++q) {
+      Crossing& x = crossings[q];
+      const double mid = 0.5 * (x.lo + x.hi);
+      const double jump_limit_m = 0.5 * (casts[x.j].range_m > 0
+                                             ? (casts[x.j].point - casts[x.i].point).norm()
+                                             : std::numeric_limits<double>::infinity());
+      const bool near_lit =
+          hits[q].range_m > 0 && (hits[q].point - casts[x.i].point).norm() < jump_limit_m;
+      (near_lit ? x.lo : x.hi) = mid;
+    }
+  }
+  for (const Crossing& x : crossings) {
+    const double t = 0.5 * (x.lo + x.hi);
+    const double pixel_step = (pixels[x.j] - pixels[x.i]).norm();
+    const double metres_per_px = casts[x.i].range_m / focal_px;
+    // The 3D distance to the crossing, at least what the pixel distance spans (a chord).
+    seed(x.i, t * pixel_step * metres_per_px);
+    if (!lit(x.j)) {
+      outside[x.j] = std::max(outside[x.j], -(1.0 - t) * pixel_step * metres_per_px);
+    }
+  }
+  while (!queue.empty()) {
+    const auto [di, i] = queue.top();
+    queue.pop();
+    if (di > d[i]) continue;
+    const int r = static_cast<int>(i / f.cols), c = static_cast<int>(i % f.cols);
+    if (!lit(i)) {
+      // Unlit points pass no distance on (their 3D position is not a surface this projector
+      // reaches); their lit neighbours were seeded above.
+      continue;
+    }
+    for (int k = 0; k < 8; ++k) {
+      const int cc = c + dc[k], rr = r + dr[k];
+      if (cc < 0 || rr < 0 || cc >= f.cols || rr >= f.rows) continue;
+      const size_t j = static_cast<size_t>(rr) * f.cols + cc;
+      if (!lit(j) || broken[i * 8 + k]) continue;
+      const double step_m = (casts[i].point - casts[j].point).norm();
+      if (di + step_m < d[j]) {
+        d[j] = di + step_m;
+        queue.emplace(d[j], j);
+      }
+    }
+  }
+  const double cell_m = f.step_px * 1.0 / focal_px;  // per metre of range
+  for (size_t i = 0; i < n; ++i) {
+    if (lit(i)) {
+      f.distance_m[i] = std::isfinite(d[i]) ? static_cast<float>(d[i]) : 0.0f;
+    } else {
+      // Unlit: minus the distance to the nearest crossing; deep inside, a cell at 1 m.
+      f.distance_m[i] = static_cast<float>(std::isfinite(outside[i]) ? outside[i] : -cell_m);
+    }
+  }
+  return f;
+}
+
+float DistanceField::DistanceAtPixel(const Eigen::Vector2d& pixel) const {
+  const Eigen::Vector2d spacing = Spacing();
+  const double gx = (pixel.x() + 0.5) / spacing.x(), gy = (pixel.y() + 0.5) / spacing.y();
+  if (!(gx >= 0 && gy >= 0 && gx <= cols - 1 && gy <= rows - 1)) return 0.0f;
+  const int c = std::min(static_cast<int>(gx), cols - 2);
+  const int r = std::min(static_cast<int>(gy), rows - 2);
+  const double fx = gx - c, fy = gy - r;
+  auto at = [&](int cc, int rr) { return distance_m[static_cast<size_t>(rr) * cols + cc]; };
+  const double value = (1 - fy) * ((1 - fx) * at(c, r) + fx * at(c + 1, r)) +
+                       fy * ((1 - fx) * at(c, r + 1) + fx * at(c + 1, r + 1));
+  return static_cast<float>(std::max(0.0, value));
+}
+
+float LookupDistance(const DistanceField& field, const Eigen::Vector3d& point_in_table_m,
+                     const Eigen::Vector3d& normal_in_table, const RayCaster& caster,
+                     const BlendOptions& options) {
+  const Eigen::Vector3d x_in_projector = field.projector_from_table * point_in_table_m;
+  const std::optional<Eigen::Vector2d> pixel = field.projector.Project(x_in_projector);
+  if (!pixel || !field.projector.InImage(*pixel)) return 0.0f;
+  const Eigen::Vector3d centre = field.projector_from_table.Inverse().translation;
+  const Eigen::Vector3d to_centre = centre - point_in_table_m;
+  const double range_m = to_centre.norm();
+  if (normal_in_table.dot(to_centre) < std::cos(DegToRad(options.max_incidence_deg)) * range_m) {
+    return 0.0f;
+  }
+  const float d = field.DistanceAtPixel(*pixel);
+  if (d <= 0) return 0.0f;
+  if (caster.Occluded(point_in_table_m + options.shadow_ray_offset_m * normal_in_table, centre)) {
+    return 0.0f;
+  }
+  return d;
+}
+
+Blender::Blender(ProjectorSurface surface, DistanceField own, const RayCaster* caster,
+                 BlendOptions options)
+    : surface_(std::move(surface)), own_(std::move(own)), caster_(caster), options_(options) {
+  // A lit pixel of this projector lights its point: D at the pixel itself.
+  const size_t n = surface_.range_m.size();
+  own_d_.assign(n, 0.0f);
+  for (int y = 0; y < surface_.height_px; ++y) {
+    for (int x = 0; x < surface_.width_px; ++x) {
+      const size_t i = static_cast<size_t>(y) * surface_.width_px + x;
+      if (surface_.range_m[i] <= 0) continue;
+      own_d_[i] = own_.DistanceAtPixel(Eigen::Vector2d(x, y));
+    }
+  }
+  own_w_.assign(n, 0.0f);
+  own_reach_.assign(n, 0.0f);
+  for (size_t i = 0; i < n; ++i) {
+    if (surface_.range_m[i] <= 0) continue;
+    own_w_[i] = static_cast<float>((own_d_[i] + options_.distance_floor_m) *
+                                   IncidenceWeight(surface_.cos_incidence[i], options_));
+    own_reach_[i] = static_cast<float>(Reach(surface_.cos_incidence[i], options_));
+  }
+}
+
+double Reach(double cos_incidence, const BlendOptions& options) {
+  return std::min(1.0, cos_incidence / std::cos(DegToRad(options.correction_limit_deg)));
+}
+
+double IncidenceWeight(double cos_incidence, const BlendOptions& options) {
+  if (!options.incidence_weight) return 1.0;
+  constexpr double kFloor = 1e-3;
+  const double c0 = std::cos(DegToRad(options.weight_falloff_deg));
+  const double c1 = std::cos(DegToRad(options.correction_limit_deg));
+  const double t = std::clamp((cos_incidence - c0) / (c1 - c0), 0.0, 1.0);
+  return kFloor + (1.0 - kFloor) * t * t * (3.0 - 2.0 * t);  // smoothstep
+}
+
+void Blender::SetNeighbour(const DistanceField& field) {
+  const size_t n = surface_.range_m.size();
+  std::vector<float> w(n, 0.0f), reach(n, 0.0f);
+  // Which lit pixels fall in the neighbour's image facing it: those then cast shadow rays to
+  // its centre, in one coherent batch.
+  const Eigen::Vector3d centre = field.projector_from_table.Inverse().translation;
+  const double min_cos = std::cos(DegToRad(options_.max_incidence_deg));
+  std::vector<size_t> candidates;
+  std::vector<Eigen::Vector3d> from;
+  for (size_t i = 0; i < n; ++i) {
+    if (surface_.range_m[i] <= 0) continue;
+    const Eigen::Vector3d x = surface_.point_in_table_m[i].cast<double>();
+    const Eigen::Vector3d normal = surface_.normal_in_table[i].cast<double>();
+    const Eigen::Vector3d to_centre = centre - x;
+    const double cos_incidence = normal.dot(to_centre) / to_centre.norm();
+    if (cos_incidence < min_cos) continue;
+    const std::optional<Eigen::Vector2d> pixel =
+        field.projector.Project(field.projector_from_table * x);
+    if (!pixel || !field.projector.InImage(*pixel)) continue;
+    w[i] = static_cast<float>((field.DistanceAtPixel(*pixel) + options_.distance_floor_m) *
+                              IncidenceWeight(cos_incidence, options_));
+    reach[i] = static_cast<float>(Reach(cos_incidence, options_));
+    candidates.push_back(i);
+    from.push_back(x + options_.shadow_ray_offset_m * normal);
+  }
+  std::vector<uint8_t> occluded;
+  caster_->OccludedToPoint(from, centre, 1e-5, &occluded);
+  for (size_t k = 0; k < candidates.size(); ++k) {
+    if (occluded[k]) w[candidates[k]] = 0.0f;
+  }
+  neighbour_w_[field.unit] = std::move(w);
+  neighbour_reach_[field.unit] = std::move(reach);
+}
+
+bool Blender::RemoveNeighbour(NodeId unit) {
+  neighbour_reach_.erase(unit);
+  return neighbour_w_.erase(unit) > 0;
+}
+
+std::vector<NodeId> Blender::neighbours() const {
+  std::vector<NodeId> out;
+  for (const auto& [unit, w] : neighbour_w_) out.push_back(unit);
+  return out;
+}
+
+cv::Mat Blender::Alpha() const {
+  cv::Mat alpha(surface_.height_px, surface_.width_px, CV_32FC1, cv::Scalar(0));
+  float* a = alpha.ptr<float>();
+  const size_t n = own_d_.size();
+  for (size_t i = 0; i < n; ++i) {
+    if (surface_.range_m[i] <= 0) continue;
+    float sum = own_w_[i];
+    for (const auto& [unit, w] : neighbour_w_) sum += w[i];
+    a[i] = own_w_[i] / sum;
+  }
+  return alpha;
+}
+
+double Blender::CorrectedIrradiance(size_t i) const {
+  const double r = surface_.range_m[i];
+  const double limit = std::cos(DegToRad(options_.correction_limit_deg));
+  // A dark surface needs more light for the same luminance; a black one cannot be corrected
+  // (its albedo is floored at 1 %, so it does not set the site's level to 0).
+  return std::max(static_cast<double>(surface_.cos_incidence[i]), limit) *
+         std::max(static_cast<double>(surface_.albedo[i]), 0.01) / (r * r);
+}
+
+double Blender::LevelBound() const {
+  const cv::Mat alpha = Alpha();
+  const float* a = alpha.ptr<float>();
+  double bound = std::numeric_limits<double>::infinity();
+  for (size_t i = 0; i < own_d_.size(); ++i) {
+    if (a[i] <= 0) continue;
+    bound = std::min(bound, CorrectedIrradiance(i) / static_cast<double>(a[i]));
+  }
+  return bound;
+}
+
+cv::Mat Blender::Factor(double level) const {
+  // A_i T / (E'_i R), R = sum_j A_j r_j: the share of the intended light the projectors lighting
+  // the point deliver together (a projector past the correction limit delivers r < 1 of it);
+  // dividing by R restores the level where one that faces the surface better can make it up.
+  // A_i / R = w_i / sum_j w_j r_j.
+  cv::Mat factor(surface_.height_px, surface_.width_px, CV_32FC1, cv::Scalar(0));
+  float* f = factor.ptr<float>();
+  for (size_t i = 0; i < own_d_.size(); ++i) {
+    if (surface_.range_m[i] <= 0 || own_w_[i] <= 0) continue;
+    double delivered = own_w_[i] * own_reach_[i];
+    for (const auto& [unit, w] : neighbour_w_) {
+      delivered += w[i] * neighbour_reach_.at(unit)[i];
+    }
+    f[i] = static_cast<float>(
+        std::min(1.0, own_w_[i] * level / (CorrectedIrradiance(i) * std::max(delivered, 1e-30))));
+  }
+  return factor;
+}
+
+}  // namespace sandtable::node

@@ -1,0 +1,178 @@
+// Blending in projector space (docs/blend.md): TR09-017 Algorithm 1 on every surface a
+// projector lights (table, walls, roofs), with distances measured along the surface.
+//
+// Each node works in its own projector's image:
+//   1. ProjectorSurface: per pixel, the surface point the pixel lights (a ray cast through the
+//      calibrated projector into the model as placed, table included), its range and the light a
+//      unit emission brings there, cos(incidence) / range^2 (1 / m^2; Shader Lamps' intensity
+//      model). A pixel lights nothing when its ray misses, meets a back face, or meets the
+//      surface past max_incidence_deg (85: nearly edge-on).
+//   2. DistanceField: on a grid every step_px pixels of the image, the distance D along the
+//      surface from each grid point to the nearest surface point this projector cannot light
+//      (Dijkstra over the grid with 3D edge lengths). What it cannot light is: pixels that light
+//      nothing, the image border, and surface breaks, where neighbouring grid points are far
+//      apart in 3D (a building's silhouette: the surface just behind it lies in this projector's
+//      shadow, and the building's far side faces away). The field is what a node shares with
+//      its overlapping neighbours (with its calibration, so they can look it up).
+//   3. D of projector k at a table point x: whether k lights x is decided exactly, as k's own
+//      pixels decide it: x in k's image, facing k within max_incidence_deg, and the segment from x
+//      to k's centre free of the model (a shadow ray in the same model); then D_k(x) is the
+//      grid's bilinear value at x's pixel in k. 0 when k does not light x.
+//   4. Weight w_k(x) = (D_k(x) + e) g(theta_k(x)) over the projectors that light x (e the
+//      distance floor; g the incidence factor: 1 up to correction_limit_deg, falling smoothly to
+//      ~0 at weight_falloff_deg, so a projector meeting a wall edge-on gives way to one that
+//      faces it), alpha A_i = w_i / sum_k w_k, and the mask factor A_i T / E'_i(x) (intensity
+//      correction) with E' = albedo max(cos theta, cos correction_limit) / range^2 (the albedo
+//      of the model's material: every surface then shows white at one luminance): past the limit
+//      (60 degrees) the correction stops and a surface that no projector faces better shows
+//      dimmer rather than forcing the whole site down. T is the cluster's common level: the
+//      largest at which no projector clips, the minimum over all projectors of E'_i / A_i.
+// Every node evaluates every D at its own estimate of x with the same lookup, so the alphas of
+// the projectors lighting one point sum to 1 up to the registration error times the alpha's
+// gradient.
+// Frames: the table frame (metres); pixels in the OpenCV convention (pixel centres at integers).
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "common/base/ids.h"
+#include "common/base/status.h"
+#include "common/camera/camera_model.h"
+#include "common/geometry/rigid3.h"
+#include "common/scene/ray_caster.h"
+
+namespace sandtable::node {
+
+// Largest |distance| a field may hold (fields from the wire are checked against it), m.
+inline constexpr double kMaxFieldDistance_m = 1000.0;
+
+struct BlendOptions {
+  int grid_step_px = 8;             // the distance field's grid spacing in the projector image
+  double max_incidence_deg = 85.0;      // a pixel meeting the surface past this lights nothing
+  double correction_limit_deg = 60.0;   // the intensity correction stops here
+  double weight_falloff_deg = 80.0;     // the incidence factor g is ~0 (1e-3) from here on
+  bool incidence_weight = true;         // false: g = 1 (plain Algorithm 1)
+  // Neighbouring grid points farther apart in 3D than this times the spacing the pixel step
+  // gives at their range (range x step / f) are checked for a break (two surfaces) by casting
+  // the pixels between them.
+  double break_ratio = 2.0;
+  // A looked-up point is lifted this far off its surface along the normal before the shadow
+  // ray to another projector is cast (so it does not shadow itself).
+  double shadow_ray_offset_m = 1e-4;
+  // Added to every lighting projector's D in the alpha, so that a point all of whose
+  // projectors have D = 0 (the field's seeds) is shared among them rather than dark.
+  double distance_floor_m = 1e-4;
+  Status Check() const;
+};
+
+// What a projector lights, per pixel (row-major, width x height).
+struct ProjectorSurface {
+  int width_px = 0, height_px = 0;
+  std::vector<Eigen::Vector3f> point_in_table_m;
+  std::vector<Eigen::Vector3f> normal_in_table;  // unit, facing the projector
+  std::vector<float> range_m;     // from the projector's centre; 0: lights nothing
+  std::vector<float> irradiance;  // cos(incidence) / range^2, 1 / m^2; 0: lights nothing
+  std::vector<float> cos_incidence;
+  std::vector<float> albedo;  // the model's material (base colour factor, Rec. 709), [0, 1]
+  size_t lit_pixels = 0;
+};
+
+// A projector's distance field (what a node shares).
+struct DistanceField {
+  NodeId unit = kInvalidNodeId;
+  CameraModel projector;
+  Rigid3d projector_from_table;
+  // The grid spans the image from edge to edge: cols x rows points, the first and last on the
+  // image's edges (pixel -0.5 and width - 0.5), about step_px apart.
+  int step_px = 8, cols = 0, rows = 0;
+  // Along the surface, m: >= 0 where the grid point lights the surface; where it does not,
+  // minus its distance to the lit surface's edge (a signed field: interpolation passes through
+  // 0 at the edge, between grid points); lookups clamp at 0.
+  std::vector<float> distance_m;
+  static int PointsAlong(int side_px, int step_px) { return (side_px + step_px - 1) / step_px + 1; }
+  Eigen::Vector2d Spacing() const {
+    return {static_cast<double>(projector.width_px) / (cols - 1),
+            static_cast<double>(projector.height_px) / (rows - 1)};
+  }
+  Eigen::Vector2d GridPixel(int c, int r) const {
+    const Eigen::Vector2d s = Spacing();
+    return {-0.5 + c * s.x(), -0.5 + r * s.y()};
+  }
+  // Bilinear D at a pixel of the image (0 outside it).
+  float DistanceAtPixel(const Eigen::Vector2d& pixel) const;
+  Status Check() const;  // sizes agree, values finite (for fields off the wire)
+};
+
+// Casts every pixel of the projector (distortion included) into `caster`'s scene.
+ProjectorSurface CastProjectorSurface(const CameraModel& projector,
+                                      const Rigid3d& projector_from_table,
+                                      const RayCaster& caster, const BlendOptions& options);
+
+// The field on the grid (its own casts, grid_step_px apart).
+DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
+                                   const Rigid3d& projector_from_table, const RayCaster& caster,
+                                   const BlendOptions& options);
+
+// The incidence factor g of a projector meeting a surface at cos(theta).
+double IncidenceWeight(double cos_incidence, const BlendOptions& options);
+
+// The share of the intended light a projector meeting a surface at cos(theta) delivers when
+// its correction stops at the limit: min(1, cos theta / cos(correction_limit)).
+double Reach(double cos_incidence, const BlendOptions& options);
+
+// D of `field`'s projector at a surface point (normal facing out of the surface); 0 when that
+// projector does not light it (`caster`: the same model the fields were cast in).
+float LookupDistance(const DistanceField& field, const Eigen::Vector3d& point_in_table_m,
+                     const Eigen::Vector3d& normal_in_table, const RayCaster& caster,
+                     const BlendOptions& options);
+
+// One node's blend: its own surface and field, and each neighbour's D at its pixels.
+class Blender {
+ public:
+  // `caster` (the model the surface was cast in) must outlive the blender.
+  Blender(ProjectorSurface surface, DistanceField own, const RayCaster* caster,
+          BlendOptions options);
+
+  // Looks the neighbour's field up at every lit pixel (the costly part: a projection per lit
+  // pixel); replaces an earlier field of the same unit.
+  void SetNeighbour(const DistanceField& field);
+  // Forgets a neighbour (a node that left): nothing to recompute but the composition.
+  bool RemoveNeighbour(NodeId unit);
+  std::vector<NodeId> neighbours() const;
+
+  // The largest level T at which this projector does not clip: min over lit pixels of E' / A.
+  double LevelBound() const;
+  // Alpha (CV_32FC1, 0 where the projector lights nothing) and the mask factor
+  // min(A T / (E' R), 1) (CV_32FC1, linear emission; R the share of the intended light the
+  // projectors lighting the point deliver, < 1 only past the correction limit).
+  cv::Mat Alpha() const;
+  cv::Mat Factor(double level) const;
+
+  const ProjectorSurface& surface() const { return surface_; }
+  const DistanceField& own_field() const { return own_; }
+  const std::vector<float>& own_distance() const { return own_d_; }
+  const std::vector<float>& own_weight() const { return own_w_; }
+  // Per neighbour, its weight at each of this projector's pixels (0: it does not light it).
+  const std::map<NodeId, std::vector<float>>& neighbour_weights() const { return neighbour_w_; }
+
+ private:
+  double CorrectedIrradiance(size_t i) const;  // E' of lit pixel i
+
+  ProjectorSurface surface_;
+  DistanceField own_;
+  const RayCaster* caster_;
+  BlendOptions options_;
+  std::vector<float> own_d_;                          // per pixel (0 unlit)
+  std::vector<float> own_w_;                          // per pixel weight (0 unlit)
+  std::vector<float> own_reach_;                      // per pixel r (Reach)
+  std::map<NodeId, std::vector<float>> neighbour_w_;  // per pixel weight; 0: it does not light
+  std::map<NodeId, std::vector<float>> neighbour_reach_;
+};
+
+}  // namespace sandtable::node
