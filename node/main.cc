@@ -8,7 +8,7 @@
 //                  [--calibration-path auto|full]
 //                  [--render auto|on|off] [--timeline TRACKS.csv] [--sun on|off]
 //                  [--sun-start-h H] [--sun-hours-per-s R] [--render-max-fps F]
-//                  [--render-log FILE]
+//                  [--render-log FILE] [--blend on|off] [--blend-step-px N]
 //                  [--bind ENDPOINT] [--curve-keys FILE] [--heartbeat-ms N] [--workers N]
 //   (--world E is short for --projector world:E --camera world:E; node/devices/device_factory.h)
 //   sandtable-node calibrate-unit --poses DIR -o unit.json ...   (the unit's factory calibration)
@@ -27,6 +27,9 @@
 // {"render":ID,"frames":N,"frame_ms_p50":...} every 2 s. --render auto renders when there is a
 // projector and, when no GL context can be made, says so ({"render":ID,"unavailable":WHY}) and
 // runs without a show; --render on makes that an error (exit 1).
+// The blend (node/blend, docs/blend.md): with a show, once calibrated the unit blends with the
+// units whose footprints overlap its own and prints {"blend":ID,"blended":true,...} each time a
+// new mask is shown, {"blend":ID,"reblend":"left","peer":K,...} when a neighbour left.
 // Exit status: 0 after SIGINT/SIGTERM (Goodbye said), 1 when it cannot start, 2 for a bad flag
 // or a bad input file.
 #include <csignal>
@@ -43,6 +46,7 @@
 #include "common/scene/gltf_loader.h"
 #include "node/app/calibration_service.h"
 #include "node/app/self_calibration_service.h"
+#include "node/blend/blend_service.h"
 #include "node/calibration/calibrate_unit_command.h"
 #include "node/devices/device_factory.h"
 #include "node/events/event_state_service.h"
@@ -85,6 +89,8 @@ static int Run(int argc, char** argv) {
   std::string render_mode = "auto", timeline_path, sun = "on", render_log;
   node::SunOptions sun_options;
   double render_max_fps = 30.0;
+  std::string blend_mode = "on";
+  int blend_step_px = node::BlendOptions{}.grid_step_px;
   app.add_option("--id", id, "this unit's node id (below 4294967280)")
       ->check(cli::Integer<uint32_t>(0, kFirstReservedSenderId - 1));
   app.add_option("--coordinator", coordinator,
@@ -149,6 +155,11 @@ static int Run(int argc, char** argv) {
       ->check(CLI::Range(0.1, 1000.0));
   app.add_option("--render-log", render_log,
                  "CSV of every shown frame: steady ns, media time (the lab's skew)");
+  app.add_option("--blend", blend_mode,
+                 "blend with the overlapping units (with a show): on, or off (no mask)")
+      ->check(CLI::IsMember({"on", "off"}));
+  app.add_option("--blend-step-px", blend_step_px, "the blend's distance field grid step, px")
+      ->check(cli::Integer(1, 64));
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
   if (calibrate->parsed()) return node::RunCalibrateUnit(calibrate->remaining());
   if (render_frame->parsed()) return node::RunRenderFrame(render_frame->remaining());
@@ -313,6 +324,7 @@ static int Run(int argc, char** argv) {
   // Declared before the runtime: destroyed after it, so no worker job outlives the service's
   // camera.
   std::unique_ptr<node::SelfCalibrationService> self_calibration;
+  std::unique_ptr<node::BlendService> blend;
   node::NodeRuntime runtime(options);
   node::EventStateService events;
   runtime.AddService(&events);
@@ -325,6 +337,15 @@ static int Run(int argc, char** argv) {
         [](const nlohmann::json& line) { WriteJsonLine(std::cout, line); });
     runtime.AddService(render_service.get());
   }
+  if (render_loop && blend_mode == "on") {
+    node::BlendServiceOptions blend_options;
+    blend_options.blend.grid_step_px = blend_step_px;
+    blend_options.export_dir = export_dir;
+    blend = std::make_unique<node::BlendService>(
+        model, render_loop.get(), blend_options,
+        [](const nlohmann::json& line) { WriteJsonLine(std::cout, line); });
+    runtime.AddService(blend.get());
+  }
   // Self-calibration (structured light with the neighbours) when the unit has its factory
   // calibration, a projector and a camera, and is not in the lab's true-pose test mode.
   if (calibration && true_pose_path.empty() && projector && !camera_spec.empty()) {
@@ -336,6 +357,8 @@ static int Run(int argc, char** argv) {
         *calibration, projector.get(), model, sc,
         [&, id = options.id](const node::SelfCalibrationOutcome& outcome) {
           calibration = outcome.calibration;
+          if (blend)
+            blend->SetCalibration(outcome.calibration, outcome.round, outcome.overlapping, runtime);
           if (export_dir.empty()) return;
           Expected<nlohmann::json> line = node::ExportSelfCalibration(outcome, id, export_dir);
           if (!line.ok()) {
@@ -413,8 +436,13 @@ static int Run(int argc, char** argv) {
     // A unit that starts calibrated (the lab's true-pose mode) shows at once.
     runtime.workers().Run<Status>(
         [loop = render_loop.get(), c = *calibration] { return loop->ShowCalibration(c); },
-        [](Status shown) {
-          if (!shown.ok()) ST_LOG(kWarning) << "render: " << shown.message();
+        [&blend, &runtime, c = *calibration](Status shown) {
+          if (!shown.ok()) {
+            ST_LOG(kWarning) << "render: " << shown.message();
+            return;
+          }
+          // Neighbours unknown (no round): the field goes to every linked peer.
+          if (blend) blend->SetCalibration(c, 0, std::nullopt, runtime);
         });
   }
   Status ran = runtime.Run(g_stop);

@@ -802,6 +802,17 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
     result->set_round(r.round);
     result->set_projector_id(m);
     result->set_report_json(report_text);
+    std::set<NodeId> overlapping;
+    for (const auto& [a, b] : r.overlaps) {
+      if (a == m) overlapping.insert(b);
+      if (b == m) overlapping.insert(a);
+    }
+    for (const auto& [p, seeing] : r.cameras_seeing) {
+      if (p == m) overlapping.insert(seeing.begin(), seeing.end());
+      if (seeing.count(m)) overlapping.insert(p);
+    }
+    overlapping.erase(m);
+    for (NodeId u : overlapping) result->add_overlapping_units(u);
     const UnitCalibration* found = nullptr;
     if (solution) {
       auto c = solution->calibrations.find(m);

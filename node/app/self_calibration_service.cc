@@ -741,6 +741,7 @@ void SelfCalibrationService::HandleResult(const wire::CalibrationResult& result,
   if (outcome.report.is_discarded()) outcome.report = nlohmann::json::object();
   outcome.site_mpcdi = site_mpcdi_;
   outcome.round = result.round();
+  outcome.overlapping.emplace(result.overlapping_units().begin(), result.overlapping_units().end());
   calibrated_ = true;
   node.set_calibration_state(wire::CALIBRATION_STATE_CALIBRATED);
   ST_LOG(kInfo) << "self-calibration: calibrated (projector rms " << c.projector_rms_px

@@ -87,7 +87,10 @@ struct SelfCalibrationOutcome {
   // The runner only: the site as MPCDI (common/io/mpcdi_builder.h; the warp cast on the found
   // model, or on the table plane when there is none), ready for WriteMpcdi.
   std::shared_ptr<const MpcdiSite> site_mpcdi;
-  uint64_t round = 0;     // the round that calibrated it; 0 for a saved calibration that held
+  uint64_t round = 0;  // the round that calibrated it; 0 for a saved calibration that held
+  // The units whose footprints overlap this one's (from the round; nullopt: not known, e.g. a
+  // saved calibration that held).
+  std::optional<std::set<NodeId>> overlapping;
   bool verified = false;  // a saved calibration that held its check (no round)
 };
 

@@ -154,8 +154,8 @@ Status DistanceField::Check() const {
 }
 
 ProjectorSurface CastProjectorSurface(const CameraModel& projector,
-                                      const Rigid3d& projector_from_table,
-                                      const RayCaster& caster, const BlendOptions& options) {
+                                      const Rigid3d& projector_from_table, const RayCaster& caster,
+                                      const BlendOptions& options) {
   ProjectorSurface s;
   s.width_px = projector.width_px;
   s.height_px = projector.height_px;
@@ -177,8 +177,7 @@ ProjectorSurface CastProjectorSurface(const CameraModel& projector,
     for (int r = r0; r < r1; ++r) {
       for (int c = 0; c < s.width_px; ++c) pixels.emplace_back(c, r);
     }
-    const std::vector<Cast> casts =
-        CastPixels(pixels, rays, projector_from_table, caster, min_cos);
+    const std::vector<Cast> casts = CastPixels(pixels, rays, projector_from_table, caster, min_cos);
     for (size_t k = 0; k < casts.size(); ++k) {
       const size_t i = static_cast<size_t>(r0) * s.width_px + k;
       if (casts[k].range_m <= 0) continue;
@@ -207,7 +206,8 @@ DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
   const size_t n = static_cast<size_t>(f.cols) * f.rows;
   std::vector<Eigen::Vector2d> pixels(n);
   for (int r = 0; r < f.rows; ++r) {
-    for (int c = 0; c < f.cols; ++c) pixels[static_cast<size_t>(r) * f.cols + c] = f.GridPixel(c, r);
+    for (int c = 0; c < f.cols; ++c)
+      pixels[static_cast<size_t>(r) * f.cols + c] = f.GridPixel(c, r);
   }
   const RayTable rays(projector, std::max(1, f.step_px));
   const double min_cos = std::cos(DegToRad(options.max_incidence_deg));
@@ -250,8 +250,7 @@ DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
       }
     }
   }
-  const std::vector<Cast> sub =
-      CastPixels(sub_pixels, rays, projector_from_table, caster, min_cos);
+  const std::vector<Cast> sub = CastPixels(sub_pixels, rays, projector_from_table, caster, min_cos);
   for (size_t s_index = 0; s_index < suspects.size(); ++s_index) {
     const auto [i, k] = suspects[s_index];
     const size_t j = static_cast<size_t>(static_cast<int>(i / f.cols) + dr[k]) * f.cols +
@@ -321,9 +320,9 @@ DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
     for (size_t q = 0; q < crossings.size(); ++q) {
       Crossing& x = crossings[q];
       const double mid = 0.5 * (x.lo + x.hi);
-      const double jump_limit_m = 0.5 * (casts[x.j].range_m > 0
-                                             ? (casts[x.j].point - casts[x.i].point).norm()
-                                             : std::numeric_limits<double>::infinity());
+      const double jump_limit_m =
+          0.5 * (casts[x.j].range_m > 0 ? (casts[x.j].point - casts[x.i].point).norm()
+                                        : std::numeric_limits<double>::infinity());
       const bool near_lit =
           hits[q].range_m > 0 && (hits[q].point - casts[x.i].point).norm() < jump_limit_m;
       (near_lit ? x.lo : x.hi) = mid;

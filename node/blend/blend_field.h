@@ -53,11 +53,11 @@ namespace sandtable::node {
 inline constexpr double kMaxFieldDistance_m = 1000.0;
 
 struct BlendOptions {
-  int grid_step_px = 8;             // the distance field's grid spacing in the projector image
-  double max_incidence_deg = 85.0;      // a pixel meeting the surface past this lights nothing
-  double correction_limit_deg = 60.0;   // the intensity correction stops here
-  double weight_falloff_deg = 80.0;     // the incidence factor g is ~0 (1e-3) from here on
-  bool incidence_weight = true;         // false: g = 1 (plain Algorithm 1)
+  int grid_step_px = 8;                // the distance field's grid spacing in the projector image
+  double max_incidence_deg = 85.0;     // a pixel meeting the surface past this lights nothing
+  double correction_limit_deg = 60.0;  // the intensity correction stops here
+  double weight_falloff_deg = 80.0;    // the incidence factor g is ~0 (1e-3) from here on
+  bool incidence_weight = true;        // false: g = 1 (plain Algorithm 1)
   // Neighbouring grid points farther apart in 3D than this times the spacing the pixel step
   // gives at their range (range x step / f) are checked for a break (two surfaces) by casting
   // the pixels between them.
@@ -76,7 +76,7 @@ struct ProjectorSurface {
   int width_px = 0, height_px = 0;
   std::vector<Eigen::Vector3f> point_in_table_m;
   std::vector<Eigen::Vector3f> normal_in_table;  // unit, facing the projector
-  std::vector<float> range_m;     // from the projector's centre; 0: lights nothing
+  std::vector<float> range_m;                    // from the projector's centre; 0: lights nothing
   std::vector<float> irradiance;  // cos(incidence) / range^2, 1 / m^2; 0: lights nothing
   std::vector<float> cos_incidence;
   std::vector<float> albedo;  // the model's material (base colour factor, Rec. 709), [0, 1]
@@ -111,8 +111,8 @@ struct DistanceField {
 
 // Casts every pixel of the projector (distortion included) into `caster`'s scene.
 ProjectorSurface CastProjectorSurface(const CameraModel& projector,
-                                      const Rigid3d& projector_from_table,
-                                      const RayCaster& caster, const BlendOptions& options);
+                                      const Rigid3d& projector_from_table, const RayCaster& caster,
+                                      const BlendOptions& options);
 
 // The field on the grid (its own casts, grid_step_px apart).
 DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,

@@ -155,6 +155,11 @@ Status RenderLoop::ShowCalibration(const UnitCalibration& calibration,
     pending_scene_ = std::move(scene);
     pending_tracks_ = std::move(draped);
     suspended_ = false;
+    // The blend belongs to the calibration it was computed with.
+    if (!blend_factor_.empty()) {
+      blend_factor_.release();
+      pending_mask_ = ComposedMask();
+    }
     generation = ++generation_;
     summary_.calibrated = true;
   }
@@ -162,15 +167,47 @@ Status RenderLoop::ShowCalibration(const UnitCalibration& calibration,
   return WaitForShown(generation, timeout);
 }
 
+cv::Mat RenderLoop::ComposedMask() const {
+  if (blank_factor_.empty()) return blend_factor_.clone();
+  if (blend_factor_.empty() || blend_factor_.size() != blank_factor_.size()) {
+    return blank_factor_.clone();
+  }
+  return blank_factor_.mul(blend_factor_);
+}
+
 Status RenderLoop::ShowMask(const cv::Mat& mask, std::chrono::milliseconds timeout) {
   uint64_t generation = 0;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    pending_mask_ = mask.clone();
+    if (mask.empty()) {
+      blank_factor_.release();
+    } else if (mask.type() == CV_8UC1) {
+      mask.convertTo(blank_factor_, CV_32FC1, 1.0 / 255.0);
+    } else {
+      blank_factor_ = mask.clone();
+    }
+    pending_mask_ = ComposedMask();
     generation = ++generation_;
   }
   changed_.notify_all();
   return WaitForShown(generation, timeout);
+}
+
+Expected<int64_t> RenderLoop::ShowBlend(const cv::Mat& factor, std::chrono::milliseconds timeout) {
+  if (!factor.empty() && factor.type() != CV_32FC1) {
+    return InvalidArgumentError("render: a blend factor must be CV_32FC1");
+  }
+  uint64_t generation = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    blend_factor_ = factor.clone();
+    pending_mask_ = ComposedMask();
+    generation = ++generation_;
+  }
+  changed_.notify_all();
+  ST_RETURN_IF_ERROR(WaitForShown(generation, timeout));
+  std::lock_guard<std::mutex> lock(mutex_);
+  return last_shown_ns_;
 }
 
 Status RenderLoop::WaitForShown(uint64_t generation, std::chrono::milliseconds timeout) {
@@ -266,9 +303,9 @@ void RenderLoop::Run(std::promise<Status>* started) {
       generation = generation_;
       if (!view && !mask && version == drawn_version && !timeline.playing) continue;
     }
-    // At most max_fps.
+    // At most max_fps; a new mask (a re-blend after a neighbour left) is not held back.
     const Clock::time_point next = last_frame + std::chrono::duration_cast<Clock::duration>(period);
-    if (Clock::now() < next) std::this_thread::sleep_until(next);
+    if (!mask && Clock::now() < next) std::this_thread::sleep_until(next);
 
     Status status = OkStatus();
     if (scene) {
@@ -291,8 +328,17 @@ void RenderLoop::Run(std::promise<Status>* started) {
         summary_.floor_ms = Percentile(std::deque<double>(floor.begin(), floor.end()), 0.5);
       }
     }
+    if (scene && !mask) {
+      // A new renderer starts without a mask: the current one (the join's blanking) applies.
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!current_mask_.empty()) mask = current_mask_;
+    }
     if (view) status = renderer->SetView(*view);
     if (status.ok() && mask) status = renderer->SetMask(*mask);
+    if (mask) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      current_mask_ = *mask;
+    }
     const int64_t draw_ns = NowNs();
     const double media_time_s = timeline.MediaTimeAt(draw_ns);
     Expected<FrameStats> stats = status.ok() ? renderer->Render(BuildContent(inputs, media_time_s))
@@ -349,6 +395,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
         summary_.pattern = TestPatternName(inputs.pattern);
         drawn_generation = generation;
         shown_generation_ = std::max(shown_generation_, drawn_generation);
+        last_shown_ns_ = NowNs();
       }
     }
     if (shown) shown_cv_.notify_all();

@@ -99,10 +99,15 @@ class RenderLoop {
   // UNAVAILABLE when no frame was shown in time.
   Status ShowCalibration(const UnitCalibration& calibration,
                          std::chrono::milliseconds timeout = std::chrono::seconds(10));
-  // Multiplies the frame by `mask` (renderer.h SetMask; empty: none) and waits until it is
-  // shown.
+  // Multiplies the frame by `mask` (renderer.h SetMask; empty: none; a join's blanking) and
+  // waits until it is shown.
   Status ShowMask(const cv::Mat& mask,
                   std::chrono::milliseconds timeout = std::chrono::seconds(10));
+  // The blend factor (node/blend: alpha x intensity correction, CV_32FC1 linear; empty: none),
+  // multiplied with ShowMask's; waits until a frame drawn with it is shown (not held back by
+  // max_fps) and returns that frame's steady time (ns). A new calibration drops it.
+  Expected<int64_t> ShowBlend(const cv::Mat& factor,
+                              std::chrono::milliseconds timeout = std::chrono::seconds(10));
   void Suspend();
   void Resume();
 
@@ -143,6 +148,10 @@ class RenderLoop {
   std::optional<Scene> pending_scene_;
   std::shared_ptr<const std::vector<DrapedTrack>> pending_tracks_, draped_tracks_;
   std::optional<cv::Mat> pending_mask_;
+  cv::Mat blank_factor_, blend_factor_;      // CV_32FC1 or empty; their product is the mask
+  cv::Mat current_mask_;                     // the composed mask (re-applied to a new renderer)
+  int64_t last_shown_ns_ = 0;                // steady time of the last shown frame
+  cv::Mat ComposedMask() const;              // under mutex_
   std::mutex show_mutex_;                    // held while a frame is given to the projector
   std::optional<uint64_t> last_shown_hash_;  // render thread only
 

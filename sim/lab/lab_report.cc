@@ -185,6 +185,8 @@ json LabReportJson(const LabResult& r) {
   }
   out["calibration"] = calibration;
   if (!r.render.empty()) out["render"] = r.render;
+  if (!r.photometric.empty()) out["photometric"] = r.photometric;
+  if (!r.live.empty()) out["live"] = r.live;
   if (r.model_offset_measured || sc.contains("runner_report")) {
     json registration = json::object();
     if (r.model_offset_measured) {
@@ -470,6 +472,56 @@ std::string LabReportMarkdown(const LabResult& r) {
     if (rd.contains("show_top_png")) {
       md << "![the show from above](" << rd["show_top_png"].get<std::string>() << ")\n\n";
     }
+  }
+  if (!r.photometric.empty()) {
+    const json& p = r.photometric;
+    auto steps = [&](const char* key) {
+      if (!p.contains(key)) return std::string("-");
+      const json& k = p[key];
+      return Fixed(k.value("max_pct", 0.0), 2) + " | " + Fixed(k.value("p99_pct", 0.0), 2) + " | " +
+             std::to_string(k.value("pairs", 0)) + " | " +
+             std::to_string(k.value("pairs_straddled", 0));
+    };
+    md << "## The blend (docs/blend.md)\n\n"
+       << "Every node showing white through the full pipeline (its blend mask times the "
+          "intensity correction), luminance from the world's truth. Step: the relative "
+          "luminance change between two samples 5 mm apart on one surface, both lit; samples in a "
+          "projector pixel that straddles two surfaces are left out (counted).\n\n"
+       << "| surface | max step % | p99 step % | pairs | pairs straddled |\n"
+       << "| --- | --- | --- | --- | --- |\n"
+       << "| table, raw white (no blend) | " << steps("table_unblended") << " |\n"
+       << "| table | " << steps("table") << " |\n"
+       << "| roofs (from above) | " << steps("roofs_from_above") << " |\n"
+       << "| roofs (lattice) | " << steps("roofs") << " |\n"
+       << "| walls (lattice) | " << steps("walls") << " |\n\n"
+       << "Table uniformity (min / max): " << Fixed(p.value("uniformity_min_over_max", 0.0), 3)
+       << " blended, " << Fixed(p.value("uniformity_unblended", 0.0), 3)
+       << " raw white. Level: " << Fixed(p.value("level_per_m2", 0.0), 4)
+       << " / m^2 (cd/m^2 per nit at 1 m); cast per node at most "
+       << Fixed(p.value("blend_cast_ms_max", 0.0), 0) << " ms; bytes per node at most "
+       << Fixed(p.value("bytes_per_node_max", 0.0), 0) << ".\n\n";
+    if (p.contains("pictures")) {
+      const json& pic = p["pictures"];
+      if (pic.contains("before"))
+        md << "![raw white from above](" << pic["before"].get<std::string>() << ")\n";
+      if (pic.contains("after"))
+        md << "![blended white from above](" << pic["after"].get<std::string>() << ")\n";
+      if (pic.contains("steps_over_1pct")) {
+        md << "![where the step exceeds 1 %](" << pic["steps_over_1pct"].get<std::string>()
+           << ")\n";
+      }
+      if (pic.contains("alpha")) {
+        md << "\nAlpha masks (projector images):\n\n";
+        for (const auto& [id, path] : pic["alpha"].items()) {
+          md << "![alpha of unit " << id << "](" << path.get<std::string>() << ")\n";
+        }
+      }
+      md << "\n";
+    }
+  }
+  if (!r.live.empty() && r.live.contains("reblend_ms_max")) {
+    md << "Re-blend after the kill (SIGKILL to the neighbours' first mask without it, shown): "
+       << Fixed(r.live.value("reblend_ms_max", 0.0), 1) << " ms at most.\n\n";
   }
   return md.str();
 }

@@ -78,6 +78,10 @@ struct LabResult {
   // The show (docs/render.md): frame times, the floor, timeline skew, grid coincidence, and
   // per-unit summaries; empty when the nodes did not render.
   nlohmann::json render = nlohmann::json::object();
+  // The blend (docs/blend.md): steps per surface kind, uniformity, level, cost; empty when the
+  // nodes did not blend. `live`: re-blend after a kill.
+  nlohmann::json photometric = nlohmann::json::object();
+  nlohmann::json live = nlohmann::json::object();
   std::map<NodeId, std::string> unit_failures;
   bool model_offset_measured = false;
   // The nodes found no placement of the model: the registration was measured with the true one

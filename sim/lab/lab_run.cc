@@ -28,6 +28,7 @@
 #include "sim/lab/lab_images.h"
 #include "sim/lab/lab_inputs.h"
 #include "sim/lab/lab_report.h"
+#include "sim/lab/photometric_metric.h"
 #include "sim/lab/progress.h"
 #include "sim/lab/registration_metric.h"
 #include "sim/lab/render_metrics.h"
@@ -42,6 +43,11 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 using std::chrono::milliseconds;
+
+// The photometric measure (photometric_metric.h): steps over 5 mm, on samples lit above 3x the
+// ambient luminance of a white surface.
+constexpr double kStepSpacing_m = 0.005;
+constexpr double kLitAmbientFactor = 3.0;
 
 constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2, kExitInterrupted = 130;
 constexpr int kLogTailLines = 20;
@@ -103,7 +109,7 @@ class LabRun {
     result_.metric_options.seed = options_.seed;
     if (int usage = Prepare(); usage != kExitOk) return usage;
     const bool ok = StartWorld() && StartCoordinator() && StartNodes() && Calibrate() && Join() &&
-                    Show() && Hold() && Measure();
+                    Show() && Blend() && Hold() && Measure();
     (void)ok;  // a failure is in result_.failure
     return Finish();
   }
@@ -344,6 +350,7 @@ class LabRun {
       if (options_.render == "off") {
         argv.insert(argv.end(), {"--render", "off"});
       } else {
+        if (options_.blend == "off") argv.insert(argv.end(), {"--blend", "off"});
         argv.insert(argv.end(),
                     {"--timeline", tracks_path_, "--render-max-fps",
                      std::to_string(options_.render_max_fps), "--render-log",
@@ -384,6 +391,9 @@ class LabRun {
     for (const auto& child : supervisor_.children()) {
       if (child->name() != "node-" + std::to_string(unit)) continue;
       supervisor_.ExpectExit(child.get());
+      kill_ns_ = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                     std::chrono::steady_clock::now().time_since_epoch())
+                     .count();
       child->Signal(SIGKILL);
       killed_ = true;
       kill_at_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - from).count();
@@ -411,6 +421,25 @@ class LabRun {
     std::vector<NodeId> finished;
     for (const auto& [id, line] : calibrated_) {
       if (id != unit) finished.push_back(id);
+    }
+    // Re-blend: each neighbour's first mask shown without the killed unit, from the kill.
+    json reblend = json::object();
+    double reblend_max_ms = 0.0;
+    for (const json& line : reblends_) {
+      if (line.value("peer", kInvalidNodeId) != unit) continue;
+      const std::string id = std::to_string(line.value("blend", kInvalidNodeId));
+      if (reblend.contains(id)) continue;
+      const double shown_ms = (line.value("shown_ns", int64_t{0}) - kill_ns_) * 1e-6;
+      const double detected_ms = (line.value("detected_ns", int64_t{0}) - kill_ns_) * 1e-6;
+      reblend[id] = {{"detected_ms", detected_ms},
+                     {"shown_ms", shown_ms},
+                     {"compose_ms", line.value("compose_ms", 0.0)}};
+      reblend_max_ms = std::max(reblend_max_ms, shown_ms);
+    }
+    if (!reblend.empty()) {
+      result_.live["reblend_ms_max"] = reblend_max_ms;
+      result_.live["reblend"] = reblend;
+      result_.live["recalibrated_after_the_kill"] = recalibrated.size();
     }
     result_.kill = {{"unit", unit},
                     {"at_s", kill_at_s_},
@@ -668,6 +697,196 @@ class LabRun {
     result_.render["timeline_skew"] =
         skew.ok() ? skew->ToJson() : nlohmann::json{{"error", skew.status().message()}};
     if (skew.ok()) result_.render["timeline_skew_ms_p99"] = skew->p99_ms;
+    progress_.End();
+    return true;
+  }
+
+  // {"projector_id": .., "points": ..} -> luminance of each point from that projector (0 where it
+  // does not light it), from the world's truth.
+  Expected<std::vector<double>> TruthLuminance(NodeId projector,
+                                               const std::vector<Eigen::Vector3d>& points) {
+    wire::Envelope request;
+    wire::GroundTruthRequest* r = request.mutable_ground_truth_request();
+    r->set_projector_id(projector);
+    for (const Eigen::Vector3d& p : points) {
+      wire::Vector3* v = r->add_points_in_table_m();
+      v->set_x(p.x());
+      v->set_y(p.y());
+      v->set_z(p.z());
+    }
+    Expected<wire::Envelope> reply =
+        Call(world_endpoint_, std::move(request), wire::Envelope::kGroundTruthReply, ToMs(300));
+    if (!reply.ok()) return reply.status();
+    const wire::GroundTruthReply& g = reply->ground_truth_reply();
+    if (!g.ok() || g.samples_size() != static_cast<int>(points.size())) {
+      return UnavailableError("ground truth: " + g.message());
+    }
+    std::vector<double> out(points.size(), 0.0);
+    for (int i = 0; i < g.samples_size(); ++i) {
+      if (g.samples(i).visible()) out[i] = g.samples(i).luminance_cd_per_m2();
+    }
+    return out;
+  }
+
+  bool Blend() {
+    if (options_.render == "off" || options_.blend == "off" || calibrated_.empty() ||
+        !render_unavailable_.empty()) {
+      return true;
+    }
+    Phase("blend", static_cast<int>(calibrated_.size()));
+    const fs::path dir(options_.out_dir);
+    // 1. Every calibrated node has shown a blend and none has changed it for settle.
+    const auto settle = std::chrono::milliseconds(1500);
+    const WaitOutcome settled = supervisor_.WaitUntil(
+        [&] {
+          progress_.Update(static_cast<int>(blend_.size()));
+          for (const auto& [id, line] : calibrated_) {
+            if (!blend_.count(id)) return false;
+          }
+          return std::chrono::steady_clock::now() - last_blend_line_ > settle;
+        },
+        ToMs(120), stop_, Handler());
+    if (settled != WaitOutcome::kDone) {
+      return Failed("blend", settled, "not every calibrated node blended", nullptr);
+    }
+    // 2. Raw white, then white through the full pipeline (the blend), seen from above.
+    struct Views {
+      std::optional<TopView> view;
+      std::string error;
+    };
+    auto top = [this](const std::string& pattern, Views* out) {
+      Status set = SetPattern(pattern);
+      if (!set.ok()) return FailedWith("blend", "test pattern: " + set.ToString());
+      if (!WaitForPattern(pattern)) return false;
+      return Watched<Views>(
+          "blend",
+          [this] {
+            Views v;
+            Expected<TopView> all = TopViewOf({});
+            if (all.ok()) {
+              v.view = std::move(*all);
+            } else {
+              v.error = all.status().ToString();
+            }
+            return v;
+          },
+          out);
+    };
+    Views before, after;
+    if (!top("raw-white", &before) || !top("white", &after)) return false;
+    if (!before.view || !after.view) {
+      return FailedWith("blend", "top view: " + before.error + after.error);
+    }
+    // 3. Walls and roofs: the truth at lattice points, with white still shown.
+    struct Measured {
+      json photometric = json::object();
+      cv::Mat over;
+      std::string error;
+    };
+    Measured measured;
+    if (!Watched<Measured>(
+            "blend",
+            [this, &before, &after] {
+              Measured m;
+              const auto start = std::chrono::steady_clock::now();
+              auto scene = std::make_shared<const Scene>(scene_);
+              Expected<std::unique_ptr<RayCaster>> caster = RayCaster::Create(scene);
+              if (!caster.ok()) {
+                m.error = caster.status().ToString();
+                return m;
+              }
+              const FaceGroups faces = GroupFaces(*scene);
+              std::vector<StraddleTest::Projector> projectors;
+              for (const UnitSpec& unit : inputs_.site.units) {
+                if (!calibrated_.count(unit.id)) continue;
+                projectors.push_back(
+                    {unit.projector.model, unit.projector.table_from_projector.Inverse()});
+              }
+              const StraddleTest straddle(projectors, **caster, faces);
+              const TopView& b = *before.view;
+              const TopView& a = *after.view;
+              const cv::Mat ids =
+                  TopViewFaceIds(**caster, faces, a.area_min_m, a.area_max_m, a.luminance.size());
+              const cv::Mat straddled = TopViewStraddled(**caster, straddle, a.area_min_m,
+                                                         a.area_max_m, a.luminance.size());
+              const double lit = kLitAmbientFactor * inputs_.site.ambient_luminance_nits;
+              const int spacing_px =
+                  std::max(1, static_cast<int>(std::lround(kStepSpacing_m * 1e3 / a.mm_per_px())));
+              json p = json::object();
+              const StepStats table =
+                  MeasureImageSteps(a.luminance, ids, faces, SurfaceKind::kTable, spacing_px, lit,
+                                    &m.over, straddled);
+              const StepStats roof_top = MeasureImageSteps(
+                  a.luminance, ids, faces, SurfaceKind::kRoof, spacing_px, lit, nullptr, straddled);
+              const StepStats table_before =
+                  MeasureImageSteps(b.luminance, ids, faces, SurfaceKind::kTable, spacing_px, lit,
+                                    nullptr, straddled);
+              p["table"] = table.ToJson();
+              p["roofs_from_above"] = roof_top.ToJson();
+              p["table_unblended"] = table_before.ToJson();
+              p["uniformity_min_over_max"] =
+                  TableUniformity(a.luminance, ids, faces, lit, straddled);
+              p["uniformity_unblended"] = TableUniformity(b.luminance, ids, faces, lit, straddled);
+              for (SurfaceKind kind : {SurfaceKind::kWall, SurfaceKind::kRoof}) {
+                const SurfaceLattice lattice = SampleFaces(*scene, faces, kind, kStepSpacing_m);
+                std::vector<double> l(lattice.points_in_table_m.size(),
+                                      inputs_.site.ambient_luminance_nits);
+                for (const auto& [id, line] : calibrated_) {
+                  Expected<std::vector<double>> t = TruthLuminance(id, lattice.points_in_table_m);
+                  if (!t.ok()) {
+                    m.error = t.status().ToString();
+                    return m;
+                  }
+                  for (size_t i = 0; i < l.size(); ++i) l[i] += (*t)[i];
+                }
+                const StepStats steps = MeasureSampleSteps(l, lattice, lit, &straddle);
+                p[kind == SurfaceKind::kWall ? "walls" : "roofs"] = steps.ToJson();
+              }
+              p["max_step_pct_per_5mm"] = {{"table", table.max_pct},
+                                           {"walls", p["walls"]["max_pct"]},
+                                           {"roofs", p["roofs"]["max_pct"]}};
+              p["p99_step_pct_per_5mm"] = {{"table", table.p99_pct},
+                                           {"walls", p["walls"]["p99_pct"]},
+                                           {"roofs", p["roofs"]["p99_pct"]}};
+              p["measure_s"] =
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+              m.photometric = p;
+              return m;
+            },
+            &measured)) {
+      return false;
+    }
+    if (!measured.error.empty()) return FailedWith("blend", "measure: " + measured.error);
+    json& p = measured.photometric;
+    // The nodes' figures: level, cast and compose times, bytes, neighbours.
+    json nodes = json::object();
+    double cast_ms_max = 0.0, bytes_max = 0.0;
+    for (const auto& [id, line] : blend_) {
+      nodes[std::to_string(id)] = line;
+      cast_ms_max = std::max(cast_ms_max, line.value("cast_ms", 0.0));
+      bytes_max =
+          std::max(bytes_max, line.value("bytes_sent", 0.0) + line.value("bytes_received", 0.0));
+      if (line.contains("level_per_m2")) p["level_per_m2"] = line["level_per_m2"];
+    }
+    p["nodes"] = nodes;
+    p["blend_cast_ms_max"] = cast_ms_max;
+    p["bytes_per_node_max"] = bytes_max;
+    // Pictures.
+    auto write = [&](const std::string& name, const cv::Mat& image, const std::string& key) {
+      if (io::WritePngFile((dir / name).string(), image).ok()) p["pictures"][key] = name;
+    };
+    write("blend_before_top.png", LuminancePicture(before.view->luminance), "before");
+    write("blend_after_top.png", LuminancePicture(after.view->luminance), "after");
+    write("blend_steps_over_1pct.png", measured.over, "steps_over_1pct");
+    for (const auto& [id, line] : blend_) {
+      const fs::path alpha = dir / "calibration" / ("blend-" + std::to_string(id) + ".png");
+      if (fs::exists(alpha)) {
+        p["pictures"]["alpha"][std::to_string(id)] = fs::relative(alpha, dir).string();
+      }
+    }
+    result_.photometric = p;
+    Status set = SetPattern("none");
+    if (!set.ok()) return FailedWith("blend", "test pattern: " + set.ToString());
     progress_.End();
     return true;
   }
@@ -1031,6 +1250,15 @@ class LabRun {
         } else if (line.contains("frames")) {
           render_summary_[id] = line;
         }
+      } else if (child.spec().role == "node" && line.contains("blend") &&
+                 line["blend"].is_number_unsigned()) {
+        const NodeId id = line["blend"].get<NodeId>();
+        last_blend_line_ = std::chrono::steady_clock::now();
+        if (line.contains("reblend")) {
+          reblends_.push_back(line);
+        } else {
+          blend_[id] = line;
+        }
       } else if (child.spec().role == "node" && line.contains("verification") &&
                  line["verification"].is_number_unsigned()) {
         verification_[line["verification"].get<NodeId>()] = line;
@@ -1129,7 +1357,11 @@ class LabRun {
   std::string curve_keys_path_;  // --curve: the run's site key file
   std::optional<net::CurveKeyPair> site_keys_;
   std::string tracks_path_;
-  std::map<NodeId, std::string> render_pattern_;      // the last pattern each node showed
+  std::map<NodeId, std::string> render_pattern_;  // the last pattern each node showed
+  std::map<NodeId, json> blend_;                  // the last blended line of each node
+  std::vector<json> reblends_;                    // {"blend":..,"reblend":..} lines
+  std::chrono::steady_clock::time_point last_blend_line_{};
+  int64_t kill_ns_ = 0;                               // steady time of the kill
   std::map<NodeId, std::string> render_unavailable_;  // nodes that cannot render, and why
   std::map<NodeId, json> render_summary_;             // each node's last render summary
   zmq::context_t zmq_context_;

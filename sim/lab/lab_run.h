@@ -13,6 +13,7 @@
 //                   -> {"ready":"sandtable-node","id":N,...}            (k/N ready)
 //   calibration     -> {"calibrated":N,"source":..,"json":..,"yaml":..} (k/N held)
 //   show            the nodes' show: the table grid measured from above, the timeline played
+//   blend           the nodes' blend: raw white and blended white measured on every surface
 //   hold            optional: the site keeps running for hold_s (children watched)
 //   metrics         the registration metric (registration_metric.h) on the exported files
 //   report          report.json, report.md, pictures (lab_report.h, lab_images.h)
@@ -81,6 +82,10 @@ struct LabRunOptions {
   double show_s = 4.0;
   double render_max_fps = 10.0;  // per node: the world takes every frame (~3 MB each)
   int grid_view_width_px = 1600;
+  // The blend (docs/blend.md): once the show is measured, every node blends with its
+  // overlapping neighbours; the lab measures the luminance from the world's truth, every node
+  // showing raw white (before) and white through the full pipeline (after). "off": no blend.
+  std::string blend = "on";
   std::string command_line;  // for the report
   Status Check() const;
 };

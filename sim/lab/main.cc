@@ -96,6 +96,9 @@ static int Run(int argc, char** argv) {
   run->add_option("--render", options.render,
                   "the nodes' show: on (grid measured from above, tracks played) or off")
       ->check(CLI::IsMember({"on", "off"}));
+  run->add_option("--blend", options.blend,
+                  "the nodes' blend: on (measured: raw white against blended white) or off")
+      ->check(CLI::IsMember({"on", "off"}));
   run->add_option("--show-s", options.show_s, "how long the show plays (s)")
       ->check(CLI::Range(0.0, 3600.0));
   run->add_option("--render-max-fps", options.render_max_fps, "frames a second per node at most")

@@ -31,7 +31,7 @@ int Find(std::vector<int>& parent, int i) {
 }
 
 constexpr double kTableHeight_m = 1e-3;  // a face within this of z = 0 is the table
-constexpr double kFaceMargin_m = 3e-3;    // lattice samples keep this far from a face's edges
+constexpr double kFaceMargin_m = 3e-3;   // lattice samples keep this far from a face's edges
 
 bool InTriangle2d(const Eigen::Vector2d& p, const Eigen::Vector2d& a, const Eigen::Vector2d& b,
                   const Eigen::Vector2d& c) {
@@ -39,7 +39,7 @@ bool InTriangle2d(const Eigen::Vector2d& p, const Eigen::Vector2d& a, const Eige
     return u.x() * v.y() - u.y() * v.x();
   };
   const double d1 = cross(b - a, p - a), d2 = cross(c - b, p - b), d3 = cross(a - c, p - c);
-  const bool neg = d1 < 0 || d2 < 0 || d3 < 0, pos = d1 > 0 || d2 > 0 || d3 > 0;
+  const bool neg = d1 < 0 || d2 < 0 || d3<0, pos = d1> 0 || d2 > 0 || d3 > 0;
   return !(neg && pos);
 }
 
@@ -51,8 +51,8 @@ StepStats Summarise(std::vector<double>* steps) {
   if (steps->empty()) return s;
   s.max_pct = *std::max_element(steps->begin(), steps->end());
   s.p99_pct = Quantile(*steps, 0.99);
-  s.pairs_over_1pct =
-      static_cast<int>(std::count_if(steps->begin(), steps->end(), [](double v) { return v > 1.0; }));
+  s.pairs_over_1pct = static_cast<int>(
+      std::count_if(steps->begin(), steps->end(), [](double v) { return v > 1.0; }));
   return s;
 }
 
@@ -146,7 +146,7 @@ FaceGroups GroupFaces(const Scene& scene) {
         kind = SurfaceKind::kWall;
       } else if (normal[t].z() >= 0.3) {
         kind = normal[t].z() > 0.999 && std::abs(z) < kTableHeight_m ? SurfaceKind::kTable
-                                                                       : SurfaceKind::kRoof;
+                                                                     : SurfaceKind::kRoof;
       }
       g.kind.push_back(kind);
       g.normal.push_back(normal[t]);
@@ -197,21 +197,25 @@ StraddleTest::StraddleTest(std::vector<Projector> projectors, const RayCaster& t
       for (int c = 0; c <= w; ++c) {
         Expected<Eigen::Vector3d> ray = p.model.Unproject(Eigen::Vector2d(c - 0.5, r - 0.5));
         const Eigen::Vector3d dir =
-            ray.ok() ? *ray : Eigen::Vector3d(p.model.NormalizedFromPixel({c - 0.5, r - 0.5}).x(),
-                                              p.model.NormalizedFromPixel({c - 0.5, r - 0.5}).y(), 1.0);
+            ray.ok() ? *ray
+                     : Eigen::Vector3d(p.model.NormalizedFromPixel({c - 0.5, r - 0.5}).x(),
+                                       p.model.NormalizedFromPixel({c - 0.5, r - 0.5}).y(), 1.0);
         rays[c].origin_in_table_m = table_from_projector.translation;
         rays[c].direction_in_table = rotation * dir;
       }
       truth.IntersectBatch(rays, &hits, /*coherent=*/true);
       for (int c = 0; c <= w; ++c) {
-        if (hits[c]) corner_face[static_cast<size_t>(r) * (w + 1) + c] =
-            faces.group_of_triangle[hits[c]->triangle];
+        if (hits[c])
+          corner_face[static_cast<size_t>(r) * (w + 1) + c] =
+              faces.group_of_triangle[hits[c]->triangle];
       }
     }
     cv::Mat mask(h, w, CV_8UC1, cv::Scalar(0));
     for (int r = 0; r < h; ++r) {
       for (int c = 0; c < w; ++c) {
-        auto at = [&](int cc, int rr) { return corner_face[static_cast<size_t>(rr) * (w + 1) + cc]; };
+        auto at = [&](int cc, int rr) {
+          return corner_face[static_cast<size_t>(rr) * (w + 1) + cc];
+        };
         const int a = at(c, r);
         if (a < 0 || at(c + 1, r) != a || at(c, r + 1) != a || at(c + 1, r + 1) != a) {
           mask.at<uint8_t>(r, c) = 255;

@@ -42,8 +42,8 @@ enum class SurfaceKind { kNone, kTable, kRoof, kWall };
 const char* SurfaceKindName(SurfaceKind kind);
 
 struct FaceGroups {
-  std::vector<int> group_of_triangle;  // -1: degenerate
-  std::vector<SurfaceKind> kind;       // per group
+  std::vector<int> group_of_triangle;   // -1: degenerate
+  std::vector<SurfaceKind> kind;        // per group
   std::vector<Eigen::Vector3d> normal;  // per group, unit
   int count() const { return static_cast<int>(kind.size()); }
 };

@@ -34,7 +34,7 @@ std::vector<std::string> Seeds() {
   e.push_back(s.Next());
   e.back().mutable_calibration_result()->mutable_projector_model()->set_fx_px(1000);
   e.push_back(s.Next());
-  e.back().mutable_overlap_map()->mutable_distance_m()->Resize(4000, 0.5f);  // compressed
+  e.back().mutable_blend_share()->mutable_distance_m()->Resize(4000, 0.5f);  // compressed
   std::vector<std::string> out;
   for (auto& env : e) out.push_back(*proto::EncodeEnvelope(env));
   return out;

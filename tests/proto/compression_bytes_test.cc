@@ -84,18 +84,19 @@ TEST(CompressionBytesTest, ReportsBytesPerExchange) {
   capture.mutable_capture_reply()->set_pixels(CameraCapture());
   rows.push_back({"capture_reply 1280x800 gray8 noisy", capture});
 
+  // A distance field of a 1280 x 800 projector at an 8 px step (161 x 101 points).
   wire::Envelope overlap = stamper.Next();
-  auto* map = overlap.mutable_overlap_map();
-  map->set_width_cells(300);
-  map->set_height_cells(300);
-  map->set_cell_size_m(0.004);
-  for (int y = 0; y < 300; ++y) {
-    for (int x = 0; x < 300; ++x) {
-      const float d = static_cast<float>(std::min({x, y, 299 - x, 299 - y}) * 0.004);
-      map->add_distance_m(d);
+  auto* share = overlap.mutable_blend_share();
+  share->set_step_px(8);
+  share->set_cols(161);
+  share->set_rows(101);
+  for (int y = 0; y < 101; ++y) {
+    for (int x = 0; x < 161; ++x) {
+      const float d = static_cast<float>(std::min({x, y, 160 - x, 100 - y}) * 0.0095);
+      share->add_distance_m(d);
     }
   }
-  rows.push_back({"overlap_map 300x300 float", overlap});
+  rows.push_back({"blend_share 161x101 float", overlap});
 
   std::printf("%-40s %12s %12s %s\n", "exchange", "body_bytes", "wire_bytes", "compressed");
   for (const Row& row : rows) {

@@ -9,8 +9,8 @@
 #include <iostream>
 
 #include <gtest/gtest.h>
-#include <opencv2/imgproc.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "common/scene/procedural_scene.h"
 #include "node/blend/blend_field.h"
@@ -91,10 +91,10 @@ Measured Measure(Fixture& f, const cv::Mat& shadow_ids) {
   cv::Mat luminance(view->height_px(), view->width_px(), CV_32FC1, lum->data());
   luminance = luminance.clone();
   const Eigen::AlignedBox3d b = f.scene->Bounds();
-  const cv::Mat ids = sim::TopViewFaceIds(*f.caster, f.faces, b.min().head<2>(),
-                                          b.max().head<2>(), luminance.size());
-  const int spacing_px = static_cast<int>(std::lround(
-      kStepSpacing_m / ((b.max().x() - b.min().x()) / luminance.cols)));
+  const cv::Mat ids = sim::TopViewFaceIds(*f.caster, f.faces, b.min().head<2>(), b.max().head<2>(),
+                                          luminance.size());
+  const int spacing_px = static_cast<int>(
+      std::lround(kStepSpacing_m / ((b.max().x() - b.min().x()) / luminance.cols)));
   cv::Mat over;
   const cv::Mat straddled = sim::TopViewStraddled(*f.caster, *f.straddle, b.min().head<2>(),
                                                   b.max().head<2>(), luminance.size());
@@ -117,8 +117,8 @@ Measured Measure(Fixture& f, const cv::Mat& shadow_ids) {
     cv::imwrite(std::string(dir) + "/crop_over" + std::to_string(n) + ".png", c);
     ++n;
   }
-  m.roof_top = sim::MeasureImageSteps(luminance, ids, f.faces, sim::SurfaceKind::kRoof,
-                                      spacing_px, f.lit_nits, nullptr, straddled);
+  m.roof_top = sim::MeasureImageSteps(luminance, ids, f.faces, sim::SurfaceKind::kRoof, spacing_px,
+                                      f.lit_nits, nullptr, straddled);
   if (!shadow_ids.empty()) {
     m.shadow = sim::MeasureImageSteps(luminance, shadow_ids, f.faces, sim::SurfaceKind::kTable,
                                       spacing_px, f.lit_nits, nullptr, straddled);
@@ -171,12 +171,13 @@ void Print(const char* label, const Measured& m) {
   std::cout << label << ": p99 table " << m.table.p99_pct << " %, shadow " << m.shadow.p99_pct
             << " %, roofs from above " << m.roof_top.p99_pct << " %, roofs " << m.roof.p99_pct
             << " %, walls " << m.wall.p99_pct << " %\n";
-  std::cout << label << ": table max " << m.table.max_pct << " % (p99 " << m.table.p99_pct
-            << ", " << m.table.pairs << " pairs, " << m.table.pairs_straddled << " straddled), shadow max " << m.shadow.max_pct << " % ("
-            << m.shadow.pairs << "), roofs from above max " << m.roof_top.max_pct
-            << " %, walls max " << m.wall.max_pct << " % (p99 " << m.wall.p99_pct << ", "
-            << m.wall.pairs << " pairs, " << m.wall.pairs_straddled << " straddled), roofs max " << m.roof.max_pct << " % ("
-            << m.roof.pairs << "), table uniformity " << m.uniformity << "\n"
+  std::cout << label << ": table max " << m.table.max_pct << " % (p99 " << m.table.p99_pct << ", "
+            << m.table.pairs << " pairs, " << m.table.pairs_straddled << " straddled), shadow max "
+            << m.shadow.max_pct << " % (" << m.shadow.pairs << "), roofs from above max "
+            << m.roof_top.max_pct << " %, walls max " << m.wall.max_pct << " % (p99 "
+            << m.wall.p99_pct << ", " << m.wall.pairs << " pairs, " << m.wall.pairs_straddled
+            << " straddled), roofs max " << m.roof.max_pct << " % (" << m.roof.pairs
+            << "), table uniformity " << m.uniformity << "\n"
             << "  max at: table " << m.table.max_at.transpose() << ", wall "
             << m.wall.max_at.transpose() << ", roof " << m.roof.max_at.transpose() << "\n";
 }
@@ -185,8 +186,10 @@ TEST(BlendThroughWorldTest, NoVisibleStepOnTableWallsRoofsOrShadows) {
   Fixture f = MakeFixture();
   ASSERT_TRUE(f.world);
   BlendOptions options;
-  if (const char* step = std::getenv("SANDTABLE_BLEND_STEP")) options.grid_step_px = std::atoi(step);
-  if (const char* plain = std::getenv("SANDTABLE_BLEND_PLAIN"); plain && *plain) options.incidence_weight = false;
+  if (const char* step = std::getenv("SANDTABLE_BLEND_STEP"))
+    options.grid_step_px = std::atoi(step);
+  if (const char* plain = std::getenv("SANDTABLE_BLEND_PLAIN"); plain && *plain)
+    options.incidence_weight = false;
   ASSERT_TRUE(options.Check().ok());
   const auto start = std::chrono::steady_clock::now();
   std::map<NodeId, DistanceField> fields;
@@ -225,7 +228,8 @@ TEST(BlendThroughWorldTest, NoVisibleStepOnTableWallsRoofsOrShadows) {
   for (auto& [id, blender] : blenders) {
     ASSERT_TRUE(f.world->SetProjectorFrame(id, Encode(blender->Factor(level))).ok());
     if (const char* dir = std::getenv("SANDTABLE_BLEND_DEBUG_DIR")) {
-      cv::imwrite(std::string(dir) + "/factor" + std::to_string(id) + ".png", Encode(blender->Factor(level)));
+      cv::imwrite(std::string(dir) + "/factor" + std::to_string(id) + ".png",
+                  Encode(blender->Factor(level)));
       cv::Mat a;
       blender->Alpha().convertTo(a, CV_8UC1, 255.0);
       cv::imwrite(std::string(dir) + "/alpha" + std::to_string(id) + ".png", a);

@@ -186,7 +186,7 @@ TEST(NodeServicesTest, PeerRequestsReachTheirServiceAndOthersAreRejectedWithARea
   EXPECT_EQ(r1->peer_status_reply().member_list_version(), 4242u);
 
   wire::Envelope unserved;
-  unserved.mutable_overlap_map();
+  unserved.mutable_blend_share();
   std::optional<wire::Envelope> r2 = ask(unserved);
   ASSERT_TRUE(r2.has_value());
   ASSERT_TRUE(r2->has_rejected());

@@ -1,0 +1,349 @@
+#include "node/blend/blend_service.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <utility>
+#include <vector>
+
+#include "common/base/log.h"
+#include "common/io/image_file.h"
+#include "node/net/node_runtime.h"
+#include "proto/convert.h"
+
+namespace sandtable::node {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+int64_t SteadyNs(Clock::time_point t) {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(t.time_since_epoch()).count();
+}
+double MsSince(Clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+}  // namespace
+
+wire::BlendShare ShareFromField(const DistanceField& field, uint64_t round) {
+  wire::BlendShare share;
+  share.set_projector_id(field.unit);
+  share.set_calibration_round(round);
+  *share.mutable_projector_model() = proto::ToWire(field.projector);
+  *share.mutable_projector_from_table() = proto::ToWire(field.projector_from_table);
+  share.set_step_px(static_cast<uint32_t>(field.step_px));
+  share.set_cols(static_cast<uint32_t>(field.cols));
+  share.set_rows(static_cast<uint32_t>(field.rows));
+  share.mutable_distance_m()->Add(field.distance_m.begin(), field.distance_m.end());
+  return share;
+}
+
+Expected<DistanceField> FieldFromShare(const wire::BlendShare& share) {
+  DistanceField field;
+  field.unit = share.projector_id();
+  Expected<CameraModel> model = proto::FromWire(share.projector_model());
+  if (!model.ok()) return model.status().WithContext("blend share: projector_model");
+  Expected<Rigid3d> pose = proto::FromWire(share.projector_from_table());
+  if (!pose.ok()) return pose.status().WithContext("blend share: projector_from_table");
+  field.projector = *model;
+  field.projector_from_table = *pose;
+  if (share.step_px() > 64 || share.cols() > (1u << 16) || share.rows() > (1u << 16)) {
+    return InvalidArgumentError("blend share: grid out of range");
+  }
+  field.step_px = static_cast<int>(share.step_px());
+  field.cols = static_cast<int>(share.cols());
+  field.rows = static_cast<int>(share.rows());
+  field.distance_m.assign(share.distance_m().begin(), share.distance_m().end());
+  ST_RETURN_IF_ERROR(field.Check());
+  return field;
+}
+
+struct BlendService::Core {
+  std::mutex mutex;
+  std::shared_ptr<const Scene> scene;
+  std::unique_ptr<RayCaster> caster;
+  std::unique_ptr<Blender> blender;
+  DistanceField own;
+  uint64_t generation = 0;
+};
+
+BlendService::BlendService(std::shared_ptr<const Scene> model, RenderLoop* loop,
+                           BlendServiceOptions options, Print print)
+    : loop_(loop),
+      options_(std::move(options)),
+      print_(std::move(print)),
+      model_(std::move(model)),
+      core_(std::make_shared<Core>()) {}
+
+BlendService::~BlendService() = default;
+
+bool BlendService::ServesPeer(wire::Envelope::BodyCase body) const {
+  return body == wire::Envelope::kBlendShare;
+}
+
+void BlendService::SetCalibration(const UnitCalibration& calibration, uint64_t round,
+                                  std::optional<std::set<NodeId>> neighbours, NodeRuntime& node) {
+  if (!calibration.table_from_projector) return;
+  id_ = node.id();
+  round_ = round;
+  const uint64_t generation = ++generation_;
+  ready_ = false;
+  sent_to_.clear();
+  holding_.clear();
+  neighbours_ = std::move(neighbours);
+  struct Cast {
+    Status status = OkStatus();
+    double bound = 0.0, compute_ms = 0.0;
+  };
+  // Fields already received (a neighbour that calibrated first) are applied with the cast.
+  auto fields = std::make_shared<std::map<NodeId, DistanceField>>(fields_);
+  node.workers().Run<Cast>(
+      [core = core_, model = model_, calibration, options = options_.blend, generation, fields,
+       id = id_] {
+        Cast out;
+        const Clock::time_point start = Clock::now();
+        auto scene = std::make_shared<const Scene>(RenderLoop::SceneFor(model.get(), calibration));
+        Expected<std::unique_ptr<RayCaster>> caster = RayCaster::Create(scene, "threads=1");
+        if (!caster.ok()) {
+          out.status = caster.status();
+          return out;
+        }
+        const Rigid3d projector_from_table = calibration.table_from_projector->Inverse();
+        DistanceField own = ComputeDistanceField(id, calibration.projector, projector_from_table,
+                                                 **caster, options);
+        ProjectorSurface surface =
+            CastProjectorSurface(calibration.projector, projector_from_table, **caster, options);
+        auto blender = std::make_unique<Blender>(std::move(surface), own, caster->get(), options);
+        for (const auto& [unit, field] : *fields) {
+          if (unit != id) blender->SetNeighbour(field);
+        }
+        out.bound = blender->LevelBound();
+        std::lock_guard<std::mutex> lock(core->mutex);
+        core->scene = std::move(scene);
+        core->caster = std::move(*caster);
+        core->blender = std::move(blender);
+        core->own = std::move(own);
+        core->generation = generation;
+        out.compute_ms = MsSince(start);
+        return out;
+      },
+      [this, generation, fields, &node](Cast cast) {
+        if (generation != generation_) return;  // a newer calibration is on its way
+        if (!cast.status.ok()) {
+          ST_LOG(kError) << "blend: " << cast.status.ToString();
+          return;
+        }
+        ready_ = true;
+        cast_ms_ = cast.compute_ms;
+        for (const auto& [unit, field] : *fields) {
+          if (unit != id_) holding_.insert(unit);
+        }
+        // Fields that came in during the cast.
+        for (const auto& [unit, field] : fields_) {
+          if (unit != id_ && !fields->count(unit)) ApplyField(unit, field, node);
+        }
+        bounds_[id_] = cast.bound;
+        ST_LOG(kInfo) << "blend: field and surface cast in " << cast.compute_ms
+                      << " ms, level bound " << cast.bound << " / m^2";
+        // The own field to the neighbours, asking each for theirs.
+        std::set<NodeId> to;
+        if (neighbours_) {
+          to = *neighbours_;
+        } else {
+          for (const auto& [peer, info] : node.peers()) to.insert(peer);
+        }
+        for (NodeId peer : to) {
+          if (peer != id_) SendShare(peer, /*with_field=*/true, /*answer=*/true, node);
+        }
+        Compose(node, "calibrated", kInvalidNodeId, Clock::now());
+      });
+}
+
+void BlendService::SendShare(NodeId to, bool with_field, bool answer, NodeRuntime& node) {
+  wire::Envelope envelope;
+  wire::BlendShare* share = envelope.mutable_blend_share();
+  if (with_field) {
+    std::lock_guard<std::mutex> lock(core_->mutex);
+    *share = ShareFromField(core_->own, round_);
+    sent_to_.insert(to);
+  } else {
+    share->set_projector_id(id_);
+    share->set_calibration_round(round_);
+  }
+  double known = std::numeric_limits<double>::infinity();
+  for (const auto& [unit, bound] : bounds_) known = std::min(known, bound);
+  share->set_level_bound_per_m2(bounds_.count(id_) ? bounds_.at(id_) : 0.0);
+  share->set_level_known_per_m2(std::isfinite(known) ? known : 0.0);
+  share->set_answer(answer);
+  bytes_sent_ += envelope.ByteSizeLong();
+  if (Status sent = node.SendToPeer(to, std::move(envelope)); !sent.ok()) {
+    ST_LOG(kWarning) << "blend: to node " << to << ": " << sent.ToString();
+  }
+}
+
+void BlendService::OnPeerMessage(net::Incoming request, NodeRuntime& node) {
+  const NodeId from = request.envelope.sender_id();
+  const wire::BlendShare& share = request.envelope.blend_share();
+  bytes_received_ += request.envelope.ByteSizeLong();
+  if (share.projector_id() != from || from == node.id()) {
+    ++bad_shares_;
+    ST_LOG(kWarning) << "blend: a share from node " << from << " for projector "
+                     << share.projector_id() << " dropped";
+    return;
+  }
+  // Levels: the lowest bound anyone has heard of.
+  double heard = share.level_known_per_m2();
+  if (share.level_bound_per_m2() > 0) heard = std::min(heard, share.level_bound_per_m2());
+  const bool level_news =
+      heard > 0 && std::isfinite(heard) && (!bounds_.count(from) || heard < bounds_.at(from));
+  if (level_news) bounds_[from] = heard;
+  const bool with_field = share.distance_m_size() > 0;
+  if (with_field) {
+    Expected<DistanceField> field = FieldFromShare(share);
+    if (!field.ok()) {
+      ++bad_shares_;
+      ST_LOG(kWarning) << "blend: node " << from << ": " << field.status().ToString();
+      return;
+    }
+    fields_[from] = *field;
+    if (ready_ && share.answer() && !sent_to_.count(from)) {
+      SendShare(from, /*with_field=*/true, /*answer=*/false, node);
+    }
+    if (ready_) ApplyField(from, *field, node);  // else: applied once the cast is done
+    return;
+  }
+  if (level_news && ready_) Compose(node, "level", from, Clock::now());
+}
+
+void BlendService::ApplyField(NodeId from, const DistanceField& field, NodeRuntime& node) {
+  const uint64_t generation = generation_;
+  node.workers().Run<bool>(
+      [core = core_, field, generation] {
+        std::lock_guard<std::mutex> lock(core->mutex);
+        if (!core->blender || core->generation != generation) return false;
+        core->blender->SetNeighbour(field);
+        return true;
+      },
+      [this, from, generation, &node](bool applied) {
+        if (!applied || generation != generation_) return;
+        holding_.insert(from);
+        Compose(node, "share", from, Clock::now());
+      });
+}
+
+Status BlendService::OnStep(NodeRuntime& node) {
+  if (!ready_) return OkStatus();
+  // Neighbours that left: silent past peer_silence, or no longer a peer.
+  const Clock::time_point now = Clock::now();
+  for (auto it = holding_.begin(); it != holding_.end();) {
+    const NodeId peer = *it;
+    auto info = node.peers().find(peer);
+    const bool gone =
+        info == node.peers().end() || (info->second.last_heard != Clock::time_point{} &&
+                                       now - info->second.last_heard > options_.peer_silence);
+    if (!gone) {
+      ++it;
+      continue;
+    }
+    it = holding_.erase(it);
+    fields_.erase(peer);
+    ST_LOG(kInfo) << "blend: node " << peer << " left; re-blending without it";
+    const uint64_t generation = generation_;
+    node.workers().Run<bool>(
+        [core = core_, peer, generation] {
+          std::lock_guard<std::mutex> lock(core->mutex);
+          if (!core->blender || core->generation != generation) return false;
+          return core->blender->RemoveNeighbour(peer);
+        },
+        [this, peer, now, &node](bool removed) {
+          if (removed) Compose(node, "left", peer, now);
+        });
+  }
+  return OkStatus();
+}
+
+void BlendService::TellLevel(NodeRuntime& node) {
+  double known = std::numeric_limits<double>::infinity();
+  for (const auto& [unit, bound] : bounds_) known = std::min(known, bound);
+  if (!std::isfinite(known) || (level_told_ > 0 && known >= level_told_)) return;
+  level_told_ = known;
+  for (NodeId peer : sent_to_) SendShare(peer, /*with_field=*/false, /*answer=*/false, node);
+}
+
+void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId peer,
+                           Clock::time_point detected) {
+  TellLevel(node);
+  double level = std::numeric_limits<double>::infinity();
+  for (const auto& [unit, bound] : bounds_) level = std::min(level, bound);
+  if (!std::isfinite(level) || level <= 0) return;
+  struct Shown {
+    bool stale = false;  // a newer calibration replaced the blender
+    Status status = OkStatus();
+    int64_t shown_ns = 0;
+    double compose_ms = 0.0;
+  };
+  const uint64_t generation = generation_;
+  const std::string png =
+      options_.export_dir.empty() || cause == "left"
+          ? std::string()
+          : (std::filesystem::path(options_.export_dir) / ("blend-" + std::to_string(id_) + ".png"))
+                .string();
+  node.workers().Run<Shown>(
+      [core = core_, loop = loop_, level, generation, png] {
+        Shown out;
+        const Clock::time_point start = Clock::now();
+        cv::Mat factor, alpha;
+        {
+          std::lock_guard<std::mutex> lock(core->mutex);
+          if (!core->blender || core->generation != generation) {
+            out.stale = true;
+            return out;
+          }
+          factor = core->blender->Factor(level);
+          if (!png.empty()) alpha = core->blender->Alpha();
+        }
+        out.compose_ms = MsSince(start);
+        if (!alpha.empty()) {
+          cv::Mat picture;
+          alpha.convertTo(picture, CV_8UC1, 255.0);
+          if (Status written = io::WritePngFile(png, picture); !written.ok()) {
+            ST_LOG(kWarning) << "blend: " << written.ToString();
+          }
+        }
+        if (!loop) return out;
+        Expected<int64_t> shown = loop->ShowBlend(factor);
+        if (!shown.ok()) {
+          out.status = shown.status();
+        } else {
+          out.shown_ns = *shown;
+        }
+        return out;
+      },
+      [this, cause, peer, detected, level](Shown shown) {
+        if (shown.stale) return;
+        if (!shown.status.ok()) {
+          ST_LOG(kWarning) << "blend: " << shown.status.ToString();
+          return;
+        }
+        nlohmann::json line = {{"blend", id_}};
+        if (cause == "left") {
+          line["reblend"] = "left";
+          line["peer"] = peer;
+          line["detected_ns"] = SteadyNs(detected);
+        } else {
+          line["blended"] = true;
+          line["cause"] = cause;
+        }
+        line["neighbours"] = std::vector<NodeId>(holding_.begin(), holding_.end());
+        line["level_per_m2"] = level;
+        line["compose_ms"] = shown.compose_ms;
+        line["cast_ms"] = cast_ms_;
+        line["shown_ns"] = shown.shown_ns;
+        line["bytes_sent"] = bytes_sent_;
+        line["bytes_received"] = bytes_received_;
+        print_(line);
+      });
+}
+
+}  // namespace sandtable::node

@@ -1,0 +1,107 @@
+// BlendService: the node's blend (docs/blend.md), computed with its overlapping neighbours.
+//
+// Once the unit holds a calibration (SetCalibration), a worker casts its projector into the
+// model as placed (node/blend/blend_field.h): its surface, its distance field, its level bound.
+// The field goes to the neighbours (the units whose footprints overlap, from the calibration
+// round; every linked peer when the round did not say) as a BlendShare; their fields come back
+// the same way. Each field received is looked up at this projector's pixels (a worker), and the
+// mask (alpha x intensity correction at the site's common level) goes to the render loop
+// between frames. The common level is the minimum of every projector's bound: each share
+// carries the lowest bound its sender knows, and a node that learns a lower one tells its
+// neighbours (a level-only share), so it spreads neighbour to neighbour.
+//
+// A neighbour that leaves (its heartbeats stop for `peer_silence`, or the member list drops it)
+// is forgotten: the mask is recomposed from what the node holds (no cast, no recalibration)
+// and shown at once. A newcomer's share asks for an answer; the node sends its own field back.
+// Bad shares (a field that does not fit its grid, a model that does not check) are logged,
+// counted and dropped.
+//
+// JSON lines (common/base/ready_line.h), for the lab:
+//   {"blend":ID,"blended":true,"neighbours":[..],"level_per_m2":..,"compute_ms":..,
+//    "shown_ns":..,"bytes_sent":..,"bytes_received":..}        each time a new mask is shown
+//   {"blend":ID,"reblend":"left","peer":K,"detected_ns":..,"shown_ns":..,"compose_ms":..}
+// Threading: network thread, except the casts and lookups, which run on the node's workers
+// under the service's own lock.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "common/io/unit_calibration_file.h"
+#include "common/scene/scene.h"
+#include "node/blend/blend_field.h"
+#include "node/net/node_service.h"
+#include "node/render/render_loop.h"
+#include "proto/envelope.pb.h"
+
+namespace sandtable::node {
+
+struct BlendServiceOptions {
+  BlendOptions blend;
+  // A neighbour silent this long (no heartbeat) has left.
+  std::chrono::milliseconds peer_silence{300};
+  std::string export_dir;  // blend-<id>.png (the alpha mask) is written here (empty: not)
+};
+
+// BlendShare <-> DistanceField (the field's grid checked against its projector).
+wire::BlendShare ShareFromField(const DistanceField& field, uint64_t round);
+Expected<DistanceField> FieldFromShare(const wire::BlendShare& share);
+
+class BlendService : public NodeService {
+ public:
+  using Print = std::function<void(const nlohmann::json&)>;
+  // `loop` (not owned) shows the masks; `model` (may be null: the table plane) as the render
+  // loop draws it.
+  BlendService(std::shared_ptr<const Scene> model, RenderLoop* loop, BlendServiceOptions options,
+               Print print);
+  ~BlendService() override;
+
+  const char* name() const override { return "blend"; }
+  bool ServesPeer(wire::Envelope::BodyCase body) const override;
+  void OnPeerMessage(net::Incoming request, NodeRuntime& node) override;
+  Status OnStep(NodeRuntime& node) override;
+
+  // The calibration the unit now holds (network thread). `neighbours`: the units whose
+  // footprints overlap its own (nullopt: unknown, every linked peer).
+  void SetCalibration(const UnitCalibration& calibration, uint64_t round,
+                      std::optional<std::set<NodeId>> neighbours, NodeRuntime& node);
+
+ private:
+  struct Core;  // what the workers touch, under its lock
+  void Compose(NodeRuntime& node, const std::string& cause, NodeId peer,
+               std::chrono::steady_clock::time_point detected);
+  void SendShare(NodeId to, bool with_field, bool answer, NodeRuntime& node);
+  // Looks a neighbour's field up at this projector's pixels (a worker), then recomposes.
+  void ApplyField(NodeId from, const DistanceField& field, NodeRuntime& node);
+  void TellLevel(NodeRuntime& node);
+
+  RenderLoop* loop_;
+  BlendServiceOptions options_;
+  Print print_;
+  std::shared_ptr<const Scene> model_;
+  std::shared_ptr<Core> core_;
+
+  NodeId id_ = kInvalidNodeId;
+  uint64_t round_ = 0;
+  uint64_t generation_ = 0;  // bumped by each calibration
+  bool ready_ = false;       // the own field is cast
+  std::optional<std::set<NodeId>> neighbours_;
+  std::set<NodeId> sent_to_;                // own field sent to, this calibration
+  std::map<NodeId, double> bounds_;         // level bounds heard (and own)
+  double level_told_ = 0.0;                 // the lowest level told to the neighbours
+  std::set<NodeId> holding_;                // neighbours whose field the blend holds
+  std::map<NodeId, DistanceField> fields_;  // received, by sender (kept across calibrations)
+  double cast_ms_ = 0.0;                    // the last calibration's cast
+  uint64_t bytes_sent_ = 0, bytes_received_ = 0, bad_shares_ = 0;
+};
+
+}  // namespace sandtable::node
