@@ -426,6 +426,13 @@ Blender::Blender(ProjectorSurface surface, DistanceField own, const RayCaster* c
                                    IncidenceWeight(surface_.cos_incidence[i], options_));
     own_reach_[i] = static_cast<float>(Reach(surface_.cos_incidence[i], options_));
   }
+  own_wr_.assign(n, 0.0f);
+  own_gain_.assign(n, 0.0f);
+  for (size_t i = 0; i < n; ++i) {
+    if (surface_.range_m[i] <= 0 || own_w_[i] <= 0) continue;
+    own_wr_[i] = own_w_[i] * own_reach_[i];
+    own_gain_[i] = static_cast<float>(own_w_[i] / CorrectedIrradiance(i));
+  }
 }
 
 double Reach(double cos_incidence, const BlendOptions& options) {
@@ -462,14 +469,14 @@ void Blender::SetNeighbour(const DistanceField& field) {
     if (!pixel || !field.projector.InImage(*pixel)) continue;
     w[i] = static_cast<float>((field.DistanceAtPixel(*pixel) + options_.distance_floor_m) *
                               IncidenceWeight(cos_incidence, options_));
-    reach[i] = static_cast<float>(Reach(cos_incidence, options_));
+    reach[i] = w[i] * static_cast<float>(Reach(cos_incidence, options_));  // w r
     candidates.push_back(i);
     from.push_back(x + options_.shadow_ray_offset_m * normal);
   }
   std::vector<uint8_t> occluded;
   caster_->OccludedToPoint(from, centre, 1e-5, &occluded);
   for (size_t k = 0; k < candidates.size(); ++k) {
-    if (occluded[k]) w[candidates[k]] = 0.0f;
+    if (occluded[k]) w[candidates[k]] = reach[candidates[k]] = 0.0f;
   }
   neighbour_w_[field.unit] = std::move(w);
   neighbour_reach_[field.unit] = std::move(reach);
@@ -523,17 +530,18 @@ cv::Mat Blender::Factor(double level) const {
   // A_i T / (E'_i R), R = sum_j A_j r_j: the share of the intended light the projectors lighting
   // the point deliver together (a projector past the correction limit delivers r < 1 of it);
   // dividing by R restores the level where one that faces the surface better can make it up.
-  // A_i / R = w_i / sum_j w_j r_j.
+  // A_i / R = w_i / sum_j w_j r_j. One pass over the pixels with the neighbours' w r gathered
+  // (a re-blend after a neighbour left is this alone).
   cv::Mat factor(surface_.height_px, surface_.width_px, CV_32FC1, cv::Scalar(0));
   float* f = factor.ptr<float>();
-  for (size_t i = 0; i < own_d_.size(); ++i) {
-    if (surface_.range_m[i] <= 0 || own_w_[i] <= 0) continue;
-    double delivered = own_w_[i] * own_reach_[i];
-    for (const auto& [unit, w] : neighbour_w_) {
-      delivered += w[i] * neighbour_reach_.at(unit)[i];
-    }
-    f[i] = static_cast<float>(
-        std::min(1.0, own_w_[i] * level / (CorrectedIrradiance(i) * std::max(delivered, 1e-30))));
+  std::vector<const float*> others;
+  for (const auto& [unit, wr] : neighbour_reach_) others.push_back(wr.data());
+  const size_t n = own_d_.size();
+  for (size_t i = 0; i < n; ++i) {
+    if (own_gain_[i] <= 0) continue;
+    float delivered = own_wr_[i];
+    for (const float* wr : others) delivered += wr[i];
+    f[i] = std::min(1.0f, static_cast<float>(level) * own_gain_[i] / std::max(delivered, 1e-30f));
   }
   return factor;
 }

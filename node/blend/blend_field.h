@@ -168,11 +168,12 @@ class Blender {
   DistanceField own_;
   const RayCaster* caster_;
   BlendOptions options_;
-  std::vector<float> own_d_;                          // per pixel (0 unlit)
-  std::vector<float> own_w_;                          // per pixel weight (0 unlit)
-  std::vector<float> own_reach_;                      // per pixel r (Reach)
-  std::map<NodeId, std::vector<float>> neighbour_w_;  // per pixel weight; 0: it does not light
-  std::map<NodeId, std::vector<float>> neighbour_reach_;
+  std::vector<float> own_d_;                              // per pixel (0 unlit)
+  std::vector<float> own_w_;                              // per pixel weight (0 unlit)
+  std::vector<float> own_reach_;                          // per pixel r (Reach)
+  std::vector<float> own_wr_, own_gain_;                  // w r, and w / E' (Factor's terms)
+  std::map<NodeId, std::vector<float>> neighbour_w_;      // per pixel weight; 0: it does not light
+  std::map<NodeId, std::vector<float>> neighbour_reach_;  // per pixel w r
 };
 
 }  // namespace sandtable::node

@@ -234,20 +234,36 @@ void BlendService::ApplyField(NodeId from, const DistanceField& field, NodeRunti
 
 Status BlendService::OnStep(NodeRuntime& node) {
   if (!ready_) return OkStatus();
-  // Neighbours that left: silent past peer_silence, or no longer a peer.
   const Clock::time_point now = Clock::now();
+  // A neighbour dropped on a connection loss that is heard again: ask for its field anew.
+  for (auto it = dropped_.begin(); it != dropped_.end();) {
+    auto info = node.peers().find(it->first);
+    if (info != node.peers().end() && info->second.disconnected_at == Clock::time_point{} &&
+        info->second.last_heard > it->second) {
+      ST_LOG(kInfo) << "blend: node " << it->first << " is back; asking for its field";
+      SendShare(it->first, /*with_field=*/true, /*answer=*/true, node);
+      it = dropped_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  // Neighbours that left: their connection dropped (a process that dies closes its socket),
+  // silent past peer_silence, or no longer a peer.
   for (auto it = holding_.begin(); it != holding_.end();) {
     const NodeId peer = *it;
     auto info = node.peers().find(peer);
-    const bool gone =
-        info == node.peers().end() || (info->second.last_heard != Clock::time_point{} &&
-                                       now - info->second.last_heard > options_.peer_silence);
+    const bool gone = info == node.peers().end() ||
+                      info->second.disconnected_at != Clock::time_point{} ||
+                      (info->second.last_heard != Clock::time_point{} &&
+                       now - info->second.last_heard > options_.peer_silence);
     if (!gone) {
       ++it;
       continue;
     }
     it = holding_.erase(it);
     fields_.erase(peer);
+    sent_to_.erase(peer);
+    dropped_[peer] = now;
     ST_LOG(kInfo) << "blend: node " << peer << " left; re-blending without it";
     const uint64_t generation = generation_;
     node.workers().Run<bool>(

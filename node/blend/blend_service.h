@@ -10,11 +10,12 @@
 // carries the lowest bound its sender knows, and a node that learns a lower one tells its
 // neighbours (a level-only share), so it spreads neighbour to neighbour.
 //
-// A neighbour that leaves (its heartbeats stop for `peer_silence`, or the member list drops it)
-// is forgotten: the mask is recomposed from what the node holds (no cast, no recalibration)
-// and shown at once. A newcomer's share asks for an answer; the node sends its own field back.
-// Bad shares (a field that does not fit its grid, a model that does not check) are logged,
-// counted and dropped.
+// A neighbour that leaves (its connection drops: a process that dies closes its socket at once;
+// its heartbeats stop for `peer_silence`; or the member list drops it) is forgotten: the mask is
+// recomposed from what the node holds (no cast, no recalibration) and shown at once. If it is heard
+// again (a connection that came back), its field is asked for anew. A newcomer's share asks for an
+// answer; the node sends its own field back. Bad shares (a field that does not fit its grid, a
+// model that does not check) are logged, counted and dropped.
 //
 // JSON lines (common/base/ready_line.h), for the lab:
 //   {"blend":ID,"blended":true,"neighbours":[..],"level_per_m2":..,"compute_ms":..,
@@ -100,7 +101,8 @@ class BlendService : public NodeService {
   double level_told_ = 0.0;                 // the lowest level told to the neighbours
   std::set<NodeId> holding_;                // neighbours whose field the blend holds
   std::map<NodeId, DistanceField> fields_;  // received, by sender (kept across calibrations)
-  double cast_ms_ = 0.0;                    // the last calibration's cast
+  std::map<NodeId, std::chrono::steady_clock::time_point> dropped_;  // left, and when
+  double cast_ms_ = 0.0;                                             // the last calibration's cast
   uint64_t bytes_sent_ = 0, bytes_received_ = 0, bad_shares_ = 0;
 };
 

@@ -1,5 +1,7 @@
 #include "node/net/node_runtime.h"
 
+#include <cstring>
+
 #include <algorithm>
 #include <cstdlib>
 #include <utility>
@@ -228,9 +230,12 @@ void NodeRuntime::SendTimers(Clock::time_point now) {
 Status NodeRuntime::Step(std::chrono::milliseconds max_wait) {
   ST_CHECK(coordinator_ != nullptr) << "NodeRuntime::Step before a successful Start()";
   SendTimers(Clock::now());
-  const auto wait = std::min(max_wait, options_.heartbeat_period / 4);
+  // Every heartbeat_period / 10 at least: the peers' connection monitors are read here (a
+  // neighbour that died is noticed within a step; the blend reacts within a frame).
+  const auto wait = std::min(max_wait, options_.heartbeat_period / 10);
   ST_RETURN_IF_ERROR(loop_.RunOnce(wait));
   DrainPeerDealers();
+  DrainPeerMonitors();
   workers_.RunCompletions();
   for (NodeService* service : services_) {
     if (Status stepped = service->OnStep(*this); !stepped.ok()) {
@@ -355,11 +360,53 @@ void NodeRuntime::ApplyMemberList(const wire::MemberList& list) {
                        << member->endpoints().peer_router();
       continue;
     }
+    // Connection events of the DEALER on an inproc PAIR (zmq_socket_monitor), polled in Step.
+    std::unique_ptr<zmq::socket_t> monitor;
+    const std::string monitor_endpoint =
+        "inproc://peer-monitor-" + std::to_string(id) + "-" + std::to_string(++monitors_made_);
+    if (zmq_socket_monitor((*dealer)->raw().handle(), monitor_endpoint.c_str(),
+                           ZMQ_EVENT_DISCONNECTED | ZMQ_EVENT_HANDSHAKE_SUCCEEDED) == 0) {
+      try {
+        monitor = std::make_unique<zmq::socket_t>(context_, zmq::socket_type::pair);
+        monitor->set(zmq::sockopt::linger, 0);
+        monitor->connect(monitor_endpoint);
+      } catch (const zmq::error_t& e) {
+        ST_LOG(kWarning) << "peer " << id << ": no connection monitor: " << e.what();
+        monitor.reset();
+      }
+    }
     PeerInfo& peer = peers_[id];
     peer.endpoint = member->endpoints().peer_router();
     peer.incarnation = member->incarnation();
     peer.to_peer = std::make_unique<net::Channel>(std::move(*dealer), options_.id, incarnation_,
                                                   &counters_, options_.limits);
+    peer.monitor = std::move(monitor);
+  }
+}
+
+void NodeRuntime::DrainPeerMonitors() {
+  for (auto& [id, peer] : peers_) {
+    if (!peer.monitor) continue;
+    // Each event is two frames: 6 bytes (uint16 event, uint32 value) and the endpoint.
+    for (int i = 0; i < kMaxPeerDrain; ++i) {
+      zmq::message_t event, address;
+      zmq::recv_result_t got;
+      try {
+        got = peer.monitor->recv(event, zmq::recv_flags::dontwait);
+        if (!got) break;
+        if (event.more()) (void)peer.monitor->recv(address, zmq::recv_flags::dontwait);
+      } catch (const zmq::error_t&) {
+        break;
+      }
+      if (event.size() < 2) continue;
+      uint16_t code = 0;
+      std::memcpy(&code, event.data(), sizeof(code));
+      if (code == ZMQ_EVENT_DISCONNECTED) {
+        if (peer.disconnected_at == Clock::time_point{}) peer.disconnected_at = Clock::now();
+      } else if (code == ZMQ_EVENT_HANDSHAKE_SUCCEEDED) {
+        peer.disconnected_at = Clock::time_point{};
+      }
+    }
   }
 }
 

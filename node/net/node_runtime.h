@@ -77,6 +77,12 @@ struct PeerInfo {
   Clock::time_point last_heard{};         // last heartbeat it sent us
   uint64_t heartbeats_received = 0;
   wire::CalibrationState calibration_state = wire::CALIBRATION_STATE_UNSPECIFIED;  // its last
+  // The DEALER's connection events (zmq_socket_monitor): a peer whose process died closes its
+  // socket at once, long before its heartbeats are missed. Set when the connection dropped and
+  // has not come back (cleared by the next handshake); services that must react within a frame
+  // (the blend) read it. Destroyed before to_peer (declared after it).
+  Clock::time_point disconnected_at{};
+  std::unique_ptr<zmq::socket_t> monitor;
 };
 
 class NodeRuntime {
@@ -133,6 +139,7 @@ class NodeRuntime {
   void SendTimers(Clock::time_point now);
   void SetRegistered(bool registered);
   void DrainPeerDealers();
+  void DrainPeerMonitors();
   NodeService* CoordinatorServiceFor(wire::Envelope::BodyCase body) const;
   wire::Envelope MakeHello() const;
   net::SocketOptions ClientSocketOptions() const;
@@ -149,6 +156,7 @@ class NodeRuntime {
   net::ServerLoop loop_;
   std::string peer_endpoint_;
   std::map<NodeId, PeerInfo> peers_;
+  uint64_t monitors_made_ = 0;
   std::optional<std::set<NodeId>> neighbours_;
   std::optional<wire::MemberList> last_member_list_;
   std::vector<NodeService*> services_;
