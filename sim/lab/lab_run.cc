@@ -49,6 +49,12 @@ using std::chrono::milliseconds;
 constexpr double kStepSpacing_m = 0.005;
 constexpr double kLitAmbientFactor = 3.0;
 
+int64_t SteadyNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
 constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2, kExitInterrupted = 130;
 constexpr int kLogTailLines = 20;
 
@@ -242,12 +248,29 @@ class LabRun {
         [&] { return Missing(nodes_ready_); });
   }
 
-  // The late unit (--join-late): started once the others hold their calibration; done when it
-  // holds its own, and 2 s more so that a round that recalibrated the others would show.
+  // The late unit (--join-late): started once the others hold their calibration (and their
+  // blend has settled); done when it holds its own, and 2 s more so that a round that
+  // recalibrated the others would show. Frames given to the others are counted from its start
+  // to its calibration.
   bool Join() {
     if (options_.join_late < 0) return true;
     Phase("join", 1);
     const NodeId late = static_cast<NodeId>(options_.join_late);
+    // A calibrated site is also blended: the held units' masks settle first (a blend line from
+    // each, then none for 1.5 s), so the frames counted below are the join's own.
+    if (options_.render != "off" && options_.blend != "off") {
+      const WaitOutcome blended = supervisor_.WaitUntil(
+          [&] {
+            for (const auto& [id, line] : calibrated_) {
+              if (!blend_.count(id) && !render_unavailable_.count(id)) return false;
+            }
+            return std::chrono::steady_clock::now() - last_blend_line_ > milliseconds(1500);
+          },
+          ToMs(60), stop_, Handler());
+      if (blended != WaitOutcome::kDone && blended != WaitOutcome::kDeadline) {
+        return Failed("join", blended, "", nullptr);
+      }
+    }
     const std::map<NodeId, json> before = calibrated_;
     const auto t0 = std::chrono::steady_clock::now();
     const int64_t t0_ms = SystemMs();
@@ -266,6 +289,9 @@ class LabRun {
     }
     const double wall_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    // The frames the join itself gave the others: up to the late unit's calibration (after it,
+    // its neighbours re-blend with its field: live.join_reblend).
+    const int64_t t1_ms = SystemMs();
     const bool never = false;
     const WaitOutcome settled =
         supervisor_.WaitUntil([&] { return never; }, ToMs(2.0), stop_, Handler());
@@ -276,7 +302,6 @@ class LabRun {
         recalibrated.push_back(id);
     }
     // What every projector was given meanwhile, from the world's own record.
-    const int64_t t1_ms = SystemMs();
     std::map<NodeId, int> frames;
     std::map<NodeId, std::set<std::string>> distinct;
     std::map<NodeId, std::string> hash_before, hash_after;
@@ -884,6 +909,26 @@ class LabRun {
         p["pictures"]["alpha"][std::to_string(id)] = fs::relative(alpha, dir).string();
       }
     }
+    // A late unit's join: from its calibrated line to each neighbour's first mask with it.
+    if (join_calibrated_ns_ > 0) {
+      const NodeId late = static_cast<NodeId>(options_.join_late);
+      json join = json::object();
+      double join_max_ms = 0.0;
+      for (const json& line : blended_lines_) {
+        const NodeId id = line.value("blend", kInvalidNodeId);
+        if (id == late || join.contains(std::to_string(id)) || !line.contains("neighbours"))
+          continue;
+        const auto& n = line["neighbours"];
+        if (std::find(n.begin(), n.end(), late) == n.end()) continue;
+        const double ms = (line.value("shown_ns", int64_t{0}) - join_calibrated_ns_) * 1e-6;
+        join[std::to_string(id)] = ms;
+        join_max_ms = std::max(join_max_ms, ms);
+      }
+      if (!join.empty()) {
+        result_.live["join_reblend_ms"] = join_max_ms;
+        result_.live["join_reblend"] = join;
+      }
+    }
     result_.photometric = p;
     Status set = SetPattern("none");
     if (!set.ok()) return FailedWith("blend", "test pattern: " + set.ToString());
@@ -1258,6 +1303,7 @@ class LabRun {
           reblends_.push_back(line);
         } else {
           blend_[id] = line;
+          blended_lines_.push_back(line);
         }
       } else if (child.spec().role == "node" && line.contains("verification") &&
                  line["verification"].is_number_unsigned()) {
@@ -1266,6 +1312,10 @@ class LabRun {
                  line["calibrated"].is_number_unsigned() && line.contains("json") &&
                  line["json"].is_string()) {
         calibrated_[line["calibrated"].get<NodeId>()] = line;
+        if (options_.join_late >= 0 &&
+            line["calibrated"].get<NodeId>() == static_cast<NodeId>(options_.join_late)) {
+          join_calibrated_ns_ = SteadyNowNs();
+        }
         if (progress_phase_ == "calibration held") {
           progress_.Update(static_cast<int>(calibrated_.size()));
         }
@@ -1360,6 +1410,8 @@ class LabRun {
   std::map<NodeId, std::string> render_pattern_;  // the last pattern each node showed
   std::map<NodeId, json> blend_;                  // the last blended line of each node
   std::vector<json> reblends_;                    // {"blend":..,"reblend":..} lines
+  std::vector<json> blended_lines_;               // every {"blend":..,"blended":..} line
+  int64_t join_calibrated_ns_ = 0;  // when the late unit's calibrated line came (--join-late)
   std::chrono::steady_clock::time_point last_blend_line_{};
   int64_t kill_ns_ = 0;                               // steady time of the kill
   std::map<NodeId, std::string> render_unavailable_;  // nodes that cannot render, and why

@@ -171,6 +171,48 @@ TEST(RenderLoopTest, DrawsOnChangeOnlyAndStepsAsideForCalibration) {
   EXPECT_GT(summary.frame_ms_p50, 0.0);
 }
 
+// The blend's factor multiplies white in linear light (a 2.2 display: 0.5 shows as 186), the
+// join's blanking multiplies it, and a new calibration drops the blend (it was computed for the
+// old one) but keeps the blanking.
+TEST(RenderLoopTest, BlendMaskComposesWithTheBlankingAndDropsWithANewCalibration) {
+  constexpr int kHalfCode = 186;     // 255 x 0.5^(1 / 2.2)
+  constexpr int kCodeTolerance = 2;  // 8-bit rounding, the mask's 16-bit texture
+  KeptFrames projector(cv::Size(320, 200));
+  auto model = std::make_shared<const Scene>(testing::RenderTestScene());
+  RenderLoopOptions options;
+  options.max_fps = 200.0;
+  options.floor_samples = 0;
+  Expected<std::unique_ptr<RenderLoop>> loop = RenderLoop::Start(&projector, model, options);
+  ASSERT_TRUE(loop.ok()) << loop.status().ToString();
+  ASSERT_TRUE((*loop)->ShowCalibration(TestCalibration()).ok());
+  ShowInputs inputs;
+  inputs.pattern = TestPattern::kWhite;
+  (*loop)->SetInputs(inputs);
+  const cv::Mat half(200, 320, CV_32FC1, cv::Scalar(0.5));
+  Expected<int64_t> shown = (*loop)->ShowBlend(half);
+  ASSERT_TRUE(shown.ok()) << shown.status().ToString();
+  EXPECT_GT(*shown, 0);
+  auto brightest = [](const cv::Mat& frame) {
+    cv::Mat grey;
+    cv::extractChannel(frame, grey, 1);
+    double lo = 0, hi = 0;
+    cv::minMaxLoc(grey, &lo, &hi);
+    return hi;
+  };
+  EXPECT_NEAR(brightest(projector.last()), kHalfCode, kCodeTolerance);
+  cv::Mat blank(200, 320, CV_8UC1, cv::Scalar(255));
+  blank.colRange(0, 160).setTo(0);
+  ASSERT_TRUE((*loop)->ShowMask(blank).ok());
+  cv::Mat both = projector.last();
+  EXPECT_EQ(cv::countNonZero(both.colRange(0, 160).reshape(1)), 0);
+  EXPECT_NEAR(brightest(both.colRange(160, 320)), kHalfCode, kCodeTolerance);
+  ASSERT_TRUE((*loop)->ShowCalibration(TestCalibration()).ok());
+  const cv::Mat recalibrated = projector.last();
+  EXPECT_EQ(cv::countNonZero(recalibrated.colRange(0, 160).reshape(1)), 0);
+  EXPECT_EQ(brightest(recalibrated.colRange(160, 320)), 255);
+  EXPECT_FALSE((*loop)->ShowBlend(cv::Mat(200, 320, CV_8UC1)).ok());  // not a factor
+}
+
 TEST(RenderLoopTest, RefusesACalibrationOfAnotherSize) {
   KeptFrames projector(cv::Size(640, 400));
   Expected<std::unique_ptr<RenderLoop>> loop = RenderLoop::Start(&projector, nullptr, {});

@@ -123,6 +123,10 @@ constexpr double kGridMatch_mm = 0.1;
 // Every node evaluates the coordinator's timeline at the same instant to within (one machine,
 // clock offsets estimated over localhost).
 constexpr double kTimelineSkew_ms = 5.0;
+// The blend: the eye's threshold for a step on the table (the bound, on the 99th
+// percentile here), and what raw white shows at least at footprint and shadow edges.
+constexpr double kTableStep_pct = 1.5;
+constexpr double kUnblendedStep_pct = 20.0;
 
 // Also the restart: the saved calibrations checked and kept, then one unit moved and the site
 // calibrated again.
@@ -197,6 +201,28 @@ TEST_F(LabRunTest, Sandtable3SelfCalibratesAndFindsTheModel) {
   EXPECT_GT(render["timeline_skew"]["instants"].get<int>(), 50);
   EXPECT_TRUE(std::filesystem::exists(dir_ / "show_grid_top.png"));
   EXPECT_TRUE(std::filesystem::exists(dir_ / "show_top.png"));
+
+  // The blend (docs/blend.md): raw white has the footprint and shadow steps, the blended white
+  // none above the eye's threshold on the table (99th percentile: the largest steps are
+  // single-pixel lines at silhouettes), every unit blended with both others, the report's
+  // pictures written.
+  const json& p = report["photometric"];
+  ASSERT_TRUE(p.contains("table")) << p.dump();
+  EXPECT_GT(p["table_unblended"]["max_pct"].get<double>(), kUnblendedStep_pct);
+  EXPECT_GT(p["table"]["pairs"].get<int>(), 1000000);
+  EXPECT_LT(p["table"]["p99_pct"].get<double>(), kTableStep_pct);
+  EXPECT_GT(p["uniformity_min_over_max"].get<double>(), p["uniformity_unblended"].get<double>());
+  EXPECT_GT(p["walls"]["pairs"].get<int>(), 1000);
+  EXPECT_GT(p["level_per_m2"].get<double>(), 0.0);
+  for (const char* id : {"0", "1", "2"}) {
+    EXPECT_EQ(p["nodes"][id]["neighbours"].size(), 2u) << p["nodes"][id].dump();
+    ASSERT_TRUE(p["pictures"]["alpha"].contains(id)) << p["pictures"].dump();
+    EXPECT_TRUE(std::filesystem::exists(dir_ / p["pictures"]["alpha"][id].get<std::string>()));
+  }
+  for (const char* picture : {"before", "after", "steps_over_1pct"}) {
+    EXPECT_TRUE(std::filesystem::exists(dir_ / p["pictures"][picture].get<std::string>()))
+        << picture;
+  }
 
   // Restart with the saved calibrations: each checked in two frames, no round, the same figures.
   const std::string saved = (dir_ / "calibration").string();
@@ -370,6 +396,15 @@ TEST_F(LabRunTest, Sandtable3NodeThatLeavesCausesNoRecalibration) {
   const json& kill = report["calibration"]["kill"];
   EXPECT_FALSE(kill["during_calibration"].get<bool>()) << kill.dump();
   EXPECT_TRUE(kill["others_recalibrated_after_the_kill"].empty()) << kill.dump();
+  // Its neighbours re-blend from what they hold (no recalibration), each once.
+  const json& live = report["live"];
+  ASSERT_TRUE(live.contains("reblend")) << live.dump();
+  for (const char* id : {"0", "1"}) {
+    ASSERT_TRUE(live["reblend"].contains(id)) << live.dump();
+    EXPECT_GT(live["reblend"][id]["shown_ms"].get<double>(),
+              live["reblend"][id]["detected_ms"].get<double>());
+  }
+  EXPECT_EQ(live["recalibrated_after_the_kill"].get<int>(), 0);
   EXPECT_TRUE(AllProcessesGone(ReadJson("processes.json")));
 }
 
@@ -380,6 +415,11 @@ TEST_F(LabRunTest, Sandtable3NodeThatLeavesCausesNoRecalibration) {
 TEST_F(LabRunTest, Sandtable3LateUnitJoinsWithoutRecalibratingTheOthers) {
   json report;
   ASSERT_TRUE(RunToEnd(LabArgs({"--join-late", "2"}), "", &report));
+  // Its neighbours re-blend with its field (docs/blend.md).
+  ASSERT_TRUE(report["live"].contains("join_reblend")) << report["live"].dump();
+  for (const char* id : {"0", "1"}) {
+    EXPECT_GT(report["live"]["join_reblend"][id].get<double>(), 0.0) << id;
+  }
   const json& c = report["calibration"];
   ASSERT_TRUE(c.contains("join")) << c.dump();
   const json& join = c["join"];
@@ -497,10 +537,10 @@ TEST_F(LabRunTest, HelpListsEveryFlag) {
   std::string text;
   while (std::optional<std::string> line = lab.ReadLine(kRunDeadline)) text += *line + "\n";
   EXPECT_EQ(lab.Wait(), 0);
-  for (const char* flag :
-       {"--site", "--scene", "--out", "--seed", "--hold-s", "--bin-dir", "--samples",
-        "--start-timeout-s", "--calibration-timeout-s", "--image-width", "--progress",
-        "--calibration", "--model", "--saved-calibration", "--calibration-path", "--join-late"}) {
+  for (const char* flag : {"--site", "--scene", "--out", "--seed", "--hold-s", "--bin-dir",
+                           "--samples", "--start-timeout-s", "--calibration-timeout-s",
+                           "--image-width", "--progress", "--calibration", "--model",
+                           "--saved-calibration", "--calibration-path", "--join-late", "--blend"}) {
     EXPECT_NE(text.find(flag), std::string::npos) << flag;
   }
 }
