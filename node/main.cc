@@ -357,10 +357,22 @@ static int Run(int argc, char** argv) {
         *calibration, projector.get(), model, sc,
         [&, id = options.id](const node::SelfCalibrationOutcome& outcome) {
           calibration = outcome.calibration;
-          if (blend)
-            blend->SetCalibration(outcome.calibration, outcome.round, outcome.overlapping, runtime);
-          if (export_dir.empty()) return;
+          // The blend starts once the export is written (the runner then rewrites its MPCDI
+          // export with every unit's alpha map).
+          auto start_blend = [&] {
+            if (!blend) return;
+            if (outcome.site_mpcdi && !export_dir.empty()) {
+              blend->SetSiteMpcdi(outcome.site_mpcdi, export_dir + "/site.mpcdi");
+            }
+            blend->SetCalibration(outcome.calibration, outcome.round, outcome.overlapping, runtime,
+                                  outcome.report.value("runner", kInvalidNodeId));
+          };
+          if (export_dir.empty()) {
+            start_blend();
+            return;
+          }
           Expected<nlohmann::json> line = node::ExportSelfCalibration(outcome, id, export_dir);
+          start_blend();
           if (!line.ok()) {
             ST_LOG(kError) << "cannot export the calibration: " << line.status().ToString();
             return;

@@ -79,14 +79,70 @@ BlendService::BlendService(std::shared_ptr<const Scene> model, RenderLoop* loop,
 BlendService::~BlendService() = default;
 
 bool BlendService::ServesPeer(wire::Envelope::BodyCase body) const {
-  return body == wire::Envelope::kBlendShare;
+  return body == wire::Envelope::kBlendShare || body == wire::Envelope::kBlendAlpha;
+}
+
+void BlendService::SetSiteMpcdi(std::shared_ptr<const MpcdiSite> site, std::string path) {
+  site_mpcdi_ = site ? std::make_shared<MpcdiSite>(*site) : nullptr;
+  site_mpcdi_path_ = std::move(path);
+}
+
+void BlendService::TakeAlpha(NodeId unit, int width_px, int height_px, std::string values,
+                             NodeRuntime& node) {
+  if (!site_mpcdi_ || site_mpcdi_path_.empty()) return;
+  const std::string id = "unit-" + std::to_string(unit);
+  MpcdiRegion* region = nullptr;
+  for (MpcdiRegion& r : site_mpcdi_->regions) {
+    if (r.id == id) region = &r;
+  }
+  if (!region || width_px != region->x_resolution_px || height_px != region->y_resolution_px) {
+    ++bad_shares_;
+    ST_LOG(kWarning) << "blend: an alpha map of " << width_px << "x" << height_px << " for " << id
+                     << " fits no region of the site's MPCDI export";
+    return;
+  }
+  MpcdiBlendMap alpha;
+  alpha.width_px = width_px;
+  alpha.height_px = height_px;
+  alpha.values.assign(values.begin(), values.end());
+  alpha.gamma_embedded = 1.0;
+  region->alpha = std::move(alpha);
+  mpcdi_dirty_ = true;
+  if (mpcdi_writing_) return;  // written again when the write in flight is done
+  mpcdi_writing_ = true;
+  mpcdi_dirty_ = false;
+  node.workers().Run<Status>(
+      [site = MpcdiSite(*site_mpcdi_), path = site_mpcdi_path_] { return WriteMpcdi(path, site); },
+      [this, unit, &node](Status written) {
+        mpcdi_writing_ = false;
+        if (!written.ok()) {
+          ST_LOG(kWarning) << "blend: the MPCDI export: " << written.ToString();
+          return;
+        }
+        if (mpcdi_dirty_) {
+          // Alphas came in meanwhile: write once more (with what the site holds now).
+          mpcdi_dirty_ = false;
+          mpcdi_writing_ = true;
+          node.workers().Run<Status>([site = MpcdiSite(*site_mpcdi_),
+                                      path = site_mpcdi_path_] { return WriteMpcdi(path, site); },
+                                     [this](Status again) {
+                                       mpcdi_writing_ = false;
+                                       if (!again.ok())
+                                         ST_LOG(kWarning)
+                                             << "blend: the MPCDI export: " << again.ToString();
+                                     });
+        }
+        print_({{"blend", id_}, {"mpcdi", site_mpcdi_path_}, {"alpha_from", unit}});
+      });
 }
 
 void BlendService::SetCalibration(const UnitCalibration& calibration, uint64_t round,
-                                  std::optional<std::set<NodeId>> neighbours, NodeRuntime& node) {
+                                  std::optional<std::set<NodeId>> neighbours, NodeRuntime& node,
+                                  NodeId runner) {
   if (!calibration.table_from_projector) return;
   id_ = node.id();
   round_ = round;
+  runner_ = runner;
   const uint64_t generation = ++generation_;
   ready_ = false;
   sent_to_.clear();
@@ -184,8 +240,21 @@ void BlendService::SendShare(NodeId to, bool with_field, bool answer, NodeRuntim
 
 void BlendService::OnPeerMessage(net::Incoming request, NodeRuntime& node) {
   const NodeId from = request.envelope.sender_id();
-  const wire::BlendShare& share = request.envelope.blend_share();
   bytes_received_ += request.envelope.ByteSizeLong();
+  if (request.envelope.has_blend_alpha()) {
+    const wire::BlendAlpha& a = request.envelope.blend_alpha();
+    const uint64_t w = a.width_px(), h = a.height_px();
+    if (a.projector_id() != from || w == 0 || h == 0 || w > 8192 || h > 8192 ||
+        a.values().size() != w * h) {
+      ++bad_shares_;
+      ST_LOG(kWarning) << "blend: an alpha map from node " << from << " dropped (" << w << "x" << h
+                       << ", " << a.values().size() << " bytes)";
+      return;
+    }
+    TakeAlpha(from, static_cast<int>(w), static_cast<int>(h), a.values(), node);
+    return;
+  }
+  const wire::BlendShare& share = request.envelope.blend_share();
   if (share.projector_id() != from || from == node.id()) {
     ++bad_shares_;
     ST_LOG(kWarning) << "blend: a share from node " << from << " for projector "
@@ -294,7 +363,9 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
   for (const auto& [unit, bound] : bounds_) level = std::min(level, bound);
   if (!std::isfinite(level) || level <= 0) return;
   struct Shown {
-    bool stale = false;  // a newer calibration replaced the blender
+    bool stale = false;        // a newer calibration replaced the blender
+    std::string alpha_values;  // the mask, 8-bit (for the MPCDI export)
+    int width_px = 0, height_px = 0;
     Status status = OkStatus();
     int64_t shown_ns = 0;
     double compose_ms = 0.0;
@@ -306,7 +377,7 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           : (std::filesystem::path(options_.export_dir) / ("blend-" + std::to_string(id_) + ".png"))
                 .string();
   node.workers().Run<Shown>(
-      [core = core_, loop = loop_, level, generation, png] {
+      [core = core_, loop = loop_, level, generation, png, to_runner = runner_ != kInvalidNodeId] {
         Shown out;
         const Clock::time_point start = Clock::now();
         cv::Mat factor, alpha;
@@ -320,6 +391,13 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           if (!png.empty()) alpha = core->blender->Alpha();
         }
         out.compose_ms = MsSince(start);
+        if (to_runner) {
+          cv::Mat bytes;
+          factor.convertTo(bytes, CV_8UC1, 255.0);
+          out.width_px = bytes.cols;
+          out.height_px = bytes.rows;
+          out.alpha_values.assign(reinterpret_cast<const char*>(bytes.data), bytes.total());
+        }
         if (!alpha.empty()) {
           cv::Mat picture;
           alpha.convertTo(picture, CV_8UC1, 255.0);
@@ -336,11 +414,28 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
         }
         return out;
       },
-      [this, cause, peer, detected, level](Shown shown) {
+      [this, cause, peer, detected, level, &node](Shown shown) {
         if (shown.stale) return;
         if (!shown.status.ok()) {
           ST_LOG(kWarning) << "blend: " << shown.status.ToString();
           return;
+        }
+        if (!shown.alpha_values.empty()) {
+          if (runner_ == id_) {
+            TakeAlpha(id_, shown.width_px, shown.height_px, std::move(shown.alpha_values), node);
+          } else {
+            wire::Envelope envelope;
+            wire::BlendAlpha* a = envelope.mutable_blend_alpha();
+            a->set_projector_id(id_);
+            a->set_calibration_round(round_);
+            a->set_width_px(static_cast<uint32_t>(shown.width_px));
+            a->set_height_px(static_cast<uint32_t>(shown.height_px));
+            a->set_values(std::move(shown.alpha_values));
+            bytes_sent_ += envelope.ByteSizeLong();
+            if (Status sent = node.SendToPeer(runner_, std::move(envelope)); !sent.ok()) {
+              ST_LOG(kWarning) << "blend: alpha to node " << runner_ << ": " << sent.ToString();
+            }
+          }
         }
         nlohmann::json line = {{"blend", id_}};
         if (cause == "left") {

@@ -37,6 +37,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "common/io/mpcdi.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/scene.h"
 #include "node/blend/blend_field.h"
@@ -73,8 +74,14 @@ class BlendService : public NodeService {
 
   // The calibration the unit now holds (network thread). `neighbours`: the units whose
   // footprints overlap its own (nullopt: unknown, every linked peer).
+  // `runner`: the node that ran the round (it writes the site's MPCDI export); each mask shown
+  // goes to it as a BlendAlpha (kInvalidNodeId: none).
   void SetCalibration(const UnitCalibration& calibration, uint64_t round,
-                      std::optional<std::set<NodeId>> neighbours, NodeRuntime& node);
+                      std::optional<std::set<NodeId>> neighbours, NodeRuntime& node,
+                      NodeId runner = kInvalidNodeId);
+  // The runner only: the site's MPCDI export (its regions "unit-<id>"), rewritten at `path` with
+  // each region's alpha map as the masks come in.
+  void SetSiteMpcdi(std::shared_ptr<const MpcdiSite> site, std::string path);
 
  private:
   struct Core;  // what the workers touch, under its lock
@@ -84,6 +91,7 @@ class BlendService : public NodeService {
   // Looks a neighbour's field up at this projector's pixels (a worker), then recomposes.
   void ApplyField(NodeId from, const DistanceField& field, NodeRuntime& node);
   void TellLevel(NodeRuntime& node);
+  void TakeAlpha(NodeId unit, int width_px, int height_px, std::string values, NodeRuntime& node);
 
   RenderLoop* loop_;
   BlendServiceOptions options_;
@@ -103,6 +111,10 @@ class BlendService : public NodeService {
   std::map<NodeId, DistanceField> fields_;  // received, by sender (kept across calibrations)
   std::map<NodeId, std::chrono::steady_clock::time_point> dropped_;  // left, and when
   double cast_ms_ = 0.0;                                             // the last calibration's cast
+  NodeId runner_ = kInvalidNodeId;
+  std::shared_ptr<MpcdiSite> site_mpcdi_;  // the runner's export, with the alphas received
+  std::string site_mpcdi_path_;
+  bool mpcdi_writing_ = false, mpcdi_dirty_ = false;
   uint64_t bytes_sent_ = 0, bytes_received_ = 0, bad_shares_ = 0;
 };
 

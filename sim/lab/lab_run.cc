@@ -49,6 +49,14 @@ using std::chrono::milliseconds;
 constexpr double kStepSpacing_m = 0.005;
 constexpr double kLitAmbientFactor = 3.0;
 
+// Mean of an MPCDI region's alpha map in [0, 1] (-1 without one): 1 until the blend fills it.
+double AlphaMean(const MpcdiRegion& region) {
+  if (!region.alpha || region.alpha->values.empty()) return -1.0;
+  double sum = 0.0;
+  for (uint8_t v : region.alpha->values) sum += v;
+  return sum / (255.0 * static_cast<double>(region.alpha->values.size()));
+}
+
 int64_t SteadyNowNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::steady_clock::now().time_since_epoch())
@@ -1131,7 +1139,8 @@ class LabRun {
                            {"resolution_px", {region.x_resolution_px, region.y_resolution_px}},
                            {"warp_samples", samples},
                            {"warp_samples_on_surface", hits},
-                           {"alpha", region.alpha.has_value()}});
+                           {"alpha", region.alpha.has_value()},
+                           {"alpha_mean", AlphaMean(region)}});
       }
       sc["mpcdi"] = {{"path", path}, {"profile", site->profile}, {"regions", regions}};
     }
