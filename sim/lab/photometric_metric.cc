@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <map>
 #include <numbers>
@@ -91,6 +92,28 @@ cv::Mat InnerPixels(const cv::Mat& luminance, const cv::Mat& face_ids, const Fac
   return inner;
 }
 
+// Casts a top view's pixels straight down, a row at a time (one coherent batch each), and
+// hands each row's hits to `row`.
+void CastTopViewRows(
+    const RayCaster& truth, const Eigen::Vector2d& area_min_m, const Eigen::Vector2d& area_max_m,
+    cv::Size size, const std::function<void(int, const std::vector<std::optional<RayHit>>&)>& row) {
+  const Eigen::Vector2d span = area_max_m - area_min_m;
+  const double top_m = truth.scene().Bounds().max().z() + 1.0;
+  std::vector<Ray> rays(static_cast<size_t>(size.width));
+  std::vector<std::optional<RayHit>> hits;
+  for (int y = 0; y < size.height; ++y) {
+    for (int x = 0; x < size.width; ++x) {
+      const Eigen::Vector2d xy =
+          area_min_m + Eigen::Vector2d((x + 0.5) / size.width * span.x(),
+                                       (1.0 - (y + 0.5) / size.height) * span.y());
+      rays[x].origin_in_table_m = Eigen::Vector3d(xy.x(), xy.y(), top_m);
+      rays[x].direction_in_table = -Eigen::Vector3d::UnitZ();
+    }
+    truth.IntersectBatch(rays, &hits, /*coherent=*/true);
+    row(y, hits);
+  }
+}
+
 }  // namespace
 
 const char* SurfaceKindName(SurfaceKind kind) {
@@ -160,25 +183,14 @@ cv::Mat TopViewFaceIds(const RayCaster& truth, const FaceGroups& faces,
                        const Eigen::Vector2d& area_min_m, const Eigen::Vector2d& area_max_m,
                        cv::Size size) {
   cv::Mat ids(size, CV_32SC1, cv::Scalar(-1));
-  const Eigen::Vector2d span = area_max_m - area_min_m;
-  const double top_m = truth.scene().Bounds().max().z() + 1.0;
-  std::vector<Ray> rays(static_cast<size_t>(size.width));
-  std::vector<std::optional<RayHit>> hits;
-  for (int y = 0; y < size.height; ++y) {
-    for (int x = 0; x < size.width; ++x) {
-      const Eigen::Vector2d xy =
-          area_min_m + Eigen::Vector2d((x + 0.5) / size.width * span.x(),
-                                       (1.0 - (y + 0.5) / size.height) * span.y());
-      rays[x].origin_in_table_m = Eigen::Vector3d(xy.x(), xy.y(), top_m);
-      rays[x].direction_in_table = -Eigen::Vector3d::UnitZ();
-    }
-    truth.IntersectBatch(rays, &hits, /*coherent=*/true);
-    for (int x = 0; x < size.width; ++x) {
-      if (hits[x] && hits[x]->front_face) {
-        ids.at<int32_t>(y, x) = faces.group_of_triangle[hits[x]->triangle];
-      }
-    }
-  }
+  CastTopViewRows(truth, area_min_m, area_max_m, size,
+                  [&](int y, const std::vector<std::optional<RayHit>>& hits) {
+                    for (int x = 0; x < size.width; ++x) {
+                      if (hits[x] && hits[x]->front_face) {
+                        ids.at<int32_t>(y, x) = faces.group_of_triangle[hits[x]->triangle];
+                      }
+                    }
+                  });
   return ids;
 }
 
@@ -244,23 +256,14 @@ cv::Mat TopViewStraddled(const RayCaster& truth, const StraddleTest& test,
                          const Eigen::Vector2d& area_min_m, const Eigen::Vector2d& area_max_m,
                          cv::Size size) {
   cv::Mat out(size, CV_8UC1, cv::Scalar(0));
-  const Eigen::Vector2d span = area_max_m - area_min_m;
-  const double top_m = truth.scene().Bounds().max().z() + 1.0;
-  std::vector<Ray> rays(static_cast<size_t>(size.width));
-  std::vector<std::optional<RayHit>> hits;
-  for (int y = 0; y < size.height; ++y) {
-    for (int x = 0; x < size.width; ++x) {
-      const Eigen::Vector2d xy =
-          area_min_m + Eigen::Vector2d((x + 0.5) / size.width * span.x(),
-                                       (1.0 - (y + 0.5) / size.height) * span.y());
-      rays[x].origin_in_table_m = Eigen::Vector3d(xy.x(), xy.y(), top_m);
-      rays[x].direction_in_table = -Eigen::Vector3d::UnitZ();
-    }
-    truth.IntersectBatch(rays, &hits, /*coherent=*/true);
-    for (int x = 0; x < size.width; ++x) {
-      if (hits[x] && test.Straddled(hits[x]->point_in_table_m)) out.at<uint8_t>(y, x) = 255;
-    }
-  }
+  CastTopViewRows(truth, area_min_m, area_max_m, size,
+                  [&](int y, const std::vector<std::optional<RayHit>>& hits) {
+                    for (int x = 0; x < size.width; ++x) {
+                      if (hits[x] && test.Straddled(hits[x]->point_in_table_m)) {
+                        out.at<uint8_t>(y, x) = 255;
+                      }
+                    }
+                  });
   return out;
 }
 

@@ -106,13 +106,18 @@ UnitCalibration TestCalibration() {
   return c;
 }
 
-TEST(RenderLoopTest, DrawsOnChangeOnlyAndStepsAsideForCalibration) {
-  KeptFrames projector(cv::Size(320, 200));
+// A loop on the test scene at up to 200 frames a second.
+Expected<std::unique_ptr<RenderLoop>> StartTestLoop(KeptFrames* projector, int floor_samples) {
   auto model = std::make_shared<const Scene>(testing::RenderTestScene());
   RenderLoopOptions options;
   options.max_fps = 200.0;
-  options.floor_samples = 3;
-  Expected<std::unique_ptr<RenderLoop>> loop = RenderLoop::Start(&projector, model, options);
+  options.floor_samples = floor_samples;
+  return RenderLoop::Start(projector, model, options);
+}
+
+TEST(RenderLoopTest, DrawsOnChangeOnlyAndStepsAsideForCalibration) {
+  KeptFrames projector(cv::Size(320, 200));
+  Expected<std::unique_ptr<RenderLoop>> loop = StartTestLoop(&projector, 3);
   ASSERT_TRUE(loop.ok()) << loop.status().ToString();
   // Nothing before a calibration.
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
@@ -178,11 +183,7 @@ TEST(RenderLoopTest, BlendMaskComposesWithTheBlankingAndDropsWithANewCalibration
   constexpr int kHalfCode = 186;     // 255 x 0.5^(1 / 2.2)
   constexpr int kCodeTolerance = 2;  // 8-bit rounding, the mask's 16-bit texture
   KeptFrames projector(cv::Size(320, 200));
-  auto model = std::make_shared<const Scene>(testing::RenderTestScene());
-  RenderLoopOptions options;
-  options.max_fps = 200.0;
-  options.floor_samples = 0;
-  Expected<std::unique_ptr<RenderLoop>> loop = RenderLoop::Start(&projector, model, options);
+  Expected<std::unique_ptr<RenderLoop>> loop = StartTestLoop(&projector, 0);
   ASSERT_TRUE(loop.ok()) << loop.status().ToString();
   ASSERT_TRUE((*loop)->ShowCalibration(TestCalibration()).ok());
   ShowInputs inputs;
