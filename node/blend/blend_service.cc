@@ -447,6 +447,14 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           line["cause"] = cause;
         }
         line["neighbours"] = std::vector<NodeId>(holding_.begin(), holding_.end());
+        // The overlapping units whose field it does not hold yet (a blend still to come).
+        std::vector<NodeId> waiting;
+        if (neighbours_) {
+          for (NodeId n : *neighbours_) {
+            if (n != id_ && !holding_.count(n) && !dropped_.count(n)) waiting.push_back(n);
+          }
+        }
+        line["waiting_for"] = waiting;
         line["level_per_m2"] = level;
         line["compose_ms"] = shown.compose_ms;
         line["cast_ms"] = cast_ms_;

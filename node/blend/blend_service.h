@@ -18,8 +18,11 @@
 // model that does not check) are logged, counted and dropped.
 //
 // JSON lines (common/base/ready_line.h), for the lab:
-//   {"blend":ID,"blended":true,"neighbours":[..],"level_per_m2":..,"compute_ms":..,
-//    "shown_ns":..,"bytes_sent":..,"bytes_received":..}        each time a new mask is shown
+//   {"blend":ID,"blended":true,"cause":..,"neighbours":[..],"waiting_for":[..],"level_per_m2":..,
+//    "cast_ms":..,"compose_ms":..,"shown_ns":..,"bytes_sent":..,"bytes_received":..}
+//                                   each time a new mask is shown (waiting_for: overlapping
+//                                   units whose field it does not hold yet)
+//   {"blend":ID,"mpcdi":PATH,"alpha_from":K}   the runner, each time it rewrote the MPCDI export
 //   {"blend":ID,"reblend":"left","peer":K,"detected_ns":..,"shown_ns":..,"compose_ms":..}
 // Threading: network thread, except the casts and lookups, which run on the node's workers
 // under the service's own lock.

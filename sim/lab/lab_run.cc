@@ -770,18 +770,36 @@ class LabRun {
     const fs::path dir(options_.out_dir);
     // 1. Every calibrated node has shown a blend and none has changed it for settle.
     const auto settle = std::chrono::milliseconds(1500);
+    // Settled: every node's last mask holds the field of every unit it overlaps (none is
+    // `waiting_for` one), and no node has shown a new one for `settle`. A node still waiting
+    // after a minute is measured as it is and named in `photometric.unsettled`.
+    auto waiting = [&](const json& line) {
+      return line.contains("waiting_for") && line["waiting_for"].is_array() &&
+             !line["waiting_for"].empty();
+    };
     const WaitOutcome settled = supervisor_.WaitUntil(
         [&] {
           progress_.Update(static_cast<int>(blend_.size()));
           for (const auto& [id, line] : calibrated_) {
-            if (!blend_.count(id)) return false;
+            auto it = blend_.find(id);
+            if (it == blend_.end() || waiting(it->second)) return false;
           }
           return std::chrono::steady_clock::now() - last_blend_line_ > settle;
         },
-        ToMs(120), stop_, Handler());
-    if (settled != WaitOutcome::kDone) {
-      return Failed("blend", settled, "not every calibrated node blended", nullptr);
+        ToMs(60), stop_, Handler());
+    if (settled != WaitOutcome::kDone && settled != WaitOutcome::kDeadline) {
+      return Failed("blend", settled, "", nullptr);
     }
+    json unsettled = json::object();
+    for (const auto& [id, line] : calibrated_) {
+      auto it = blend_.find(id);
+      if (it == blend_.end()) {
+        unsettled[std::to_string(id)] = "no blend shown";
+      } else if (waiting(it->second)) {
+        unsettled[std::to_string(id)] = it->second["waiting_for"];
+      }
+    }
+    if (blend_.empty()) return FailedWith("blend", "no node showed a blend within a minute");
     // 2. Raw white, then white through the full pipeline (the blend), seen from above.
     struct Views {
       std::optional<TopView> view;
@@ -937,6 +955,7 @@ class LabRun {
         result_.live["join_reblend"] = join;
       }
     }
+    if (!unsettled.empty()) p["unsettled"] = unsettled;
     result_.photometric = p;
     Status set = SetPattern("none");
     if (!set.ok()) return FailedWith("blend", "test pattern: " + set.ToString());
@@ -1310,7 +1329,7 @@ class LabRun {
         last_blend_line_ = std::chrono::steady_clock::now();
         if (line.contains("reblend")) {
           reblends_.push_back(line);
-        } else {
+        } else if (line.contains("blended")) {
           blend_[id] = line;
           blended_lines_.push_back(line);
         }
