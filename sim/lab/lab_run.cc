@@ -773,9 +773,13 @@ class LabRun {
     // Settled: every node's last mask holds the field of every unit it overlaps (none is
     // `waiting_for` one), and no node has shown a new one for `settle`. A node still waiting
     // after a minute is measured as it is and named in `photometric.unsettled`.
+    // Only units that calibrated count: one that failed (or was killed) never shares a field.
     auto waiting = [&](const json& line) {
-      return line.contains("waiting_for") && line["waiting_for"].is_array() &&
-             !line["waiting_for"].empty();
+      if (!line.contains("waiting_for") || !line["waiting_for"].is_array()) return false;
+      for (const json& unit : line["waiting_for"]) {
+        if (unit.is_number_unsigned() && calibrated_.count(unit.get<NodeId>())) return true;
+      }
+      return false;
     };
     const WaitOutcome settled = supervisor_.WaitUntil(
         [&] {
