@@ -54,7 +54,6 @@ struct Cast {
   Eigen::Vector3d point = Eigen::Vector3d::Zero();
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
   double range_m = 0.0;  // 0: lights nothing
-  double irradiance = 0.0;
   double cos_incidence = 0.0;
   double albedo = 1.0;
 };
@@ -93,7 +92,6 @@ std::vector<Cast> CastPixels(const std::vector<Eigen::Vector2d>& pixels, const R
     out[i].point = hits[i]->point_in_table_m;
     out[i].normal = hits[i]->normal_in_table;
     out[i].range_m = hits[i]->distance_m;
-    out[i].irradiance = cos_incidence / (out[i].range_m * out[i].range_m);
     out[i].cos_incidence = cos_incidence;
     out[i].albedo = SurfaceAlbedo(caster.scene(), hits[i]->triangle);
   }
@@ -163,7 +161,6 @@ ProjectorSurface CastProjectorSurface(const CameraModel& projector,
   s.point_in_table_m.assign(n, Eigen::Vector3f::Zero());
   s.normal_in_table.assign(n, Eigen::Vector3f::UnitZ());
   s.range_m.assign(n, 0.0f);
-  s.irradiance.assign(n, 0.0f);
   s.cos_incidence.assign(n, 0.0f);
   s.albedo.assign(n, 1.0f);
   const RayTable rays(projector, options.grid_step_px);
@@ -184,7 +181,6 @@ ProjectorSurface CastProjectorSurface(const CameraModel& projector,
       s.point_in_table_m[i] = casts[k].point.cast<float>();
       s.normal_in_table[i] = casts[k].normal.cast<float>();
       s.range_m[i] = static_cast<float>(casts[k].range_m);
-      s.irradiance[i] = static_cast<float>(casts[k].irradiance);
       s.cos_incidence[i] = static_cast<float>(casts[k].cos_incidence);
       s.albedo[i] = static_cast<float>(casts[k].albedo);
       ++s.lit_pixels;

@@ -77,8 +77,7 @@ struct ProjectorSurface {
   std::vector<Eigen::Vector3f> point_in_table_m;
   std::vector<Eigen::Vector3f> normal_in_table;  // unit, facing the projector
   std::vector<float> range_m;                    // from the projector's centre; 0: lights nothing
-  std::vector<float> irradiance;  // cos(incidence) / range^2, 1 / m^2; 0: lights nothing
-  std::vector<float> cos_incidence;
+  std::vector<float> cos_incidence;              // E = albedo cos / range^2 follows (Blender)
   std::vector<float> albedo;  // the model's material (base colour factor, Rec. 709), [0, 1]
   size_t lit_pixels = 0;
 };

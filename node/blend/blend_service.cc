@@ -108,31 +108,23 @@ void BlendService::TakeAlpha(NodeId unit, int width_px, int height_px, std::stri
   alpha.gamma_embedded = 1.0;
   region->alpha = std::move(alpha);
   mpcdi_dirty_ = true;
-  if (mpcdi_writing_) return;  // written again when the write in flight is done
+  if (!mpcdi_writing_) WriteSiteMpcdi(unit, node);  // else: written again after the one in flight
+}
+
+void BlendService::WriteSiteMpcdi(NodeId latest, NodeRuntime& node) {
   mpcdi_writing_ = true;
   mpcdi_dirty_ = false;
   node.workers().Run<Status>(
       [site = MpcdiSite(*site_mpcdi_), path = site_mpcdi_path_] { return WriteMpcdi(path, site); },
-      [this, unit, &node](Status written) {
+      [this, latest, &node](Status written) {
         mpcdi_writing_ = false;
         if (!written.ok()) {
           ST_LOG(kWarning) << "blend: the MPCDI export: " << written.ToString();
-          return;
+        } else {
+          print_({{"blend", id_}, {"mpcdi", site_mpcdi_path_}, {"alpha_from", latest}});
         }
-        if (mpcdi_dirty_) {
-          // Alphas came in meanwhile: write once more (with what the site holds now).
-          mpcdi_dirty_ = false;
-          mpcdi_writing_ = true;
-          node.workers().Run<Status>([site = MpcdiSite(*site_mpcdi_),
-                                      path = site_mpcdi_path_] { return WriteMpcdi(path, site); },
-                                     [this](Status again) {
-                                       mpcdi_writing_ = false;
-                                       if (!again.ok())
-                                         ST_LOG(kWarning)
-                                             << "blend: the MPCDI export: " << again.ToString();
-                                     });
-        }
-        print_({{"blend", id_}, {"mpcdi", site_mpcdi_path_}, {"alpha_from", unit}});
+        // Alphas that came in meanwhile: once more, with what the site holds now.
+        if (mpcdi_dirty_) WriteSiteMpcdi(latest, node);
       });
 }
 

@@ -95,6 +95,7 @@ class BlendService : public NodeService {
   void ApplyField(NodeId from, const DistanceField& field, NodeRuntime& node);
   void TellLevel(NodeRuntime& node);
   void TakeAlpha(NodeId unit, int width_px, int height_px, std::string values, NodeRuntime& node);
+  void WriteSiteMpcdi(NodeId latest, NodeRuntime& node);  // on a worker; repeats while dirty
 
   RenderLoop* loop_;
   BlendServiceOptions options_;
