@@ -137,6 +137,7 @@ void BlendService::SetCalibration(const UnitCalibration& calibration, uint64_t r
   runner_ = runner;
   const uint64_t generation = ++generation_;
   ready_ = false;
+  pending_alpha_.reset();
   sent_to_.clear();
   holding_.clear();
   neighbours_ = std::move(neighbours);
@@ -268,9 +269,9 @@ void BlendService::OnPeerMessage(net::Incoming request, NodeRuntime& node) {
       return;
     }
     fields_[from] = *field;
-    if (ready_ && share.answer() && !sent_to_.count(from)) {
-      SendShare(from, /*with_field=*/true, /*answer=*/false, node);
-    }
+    // Asked for the own field: answer, even when it was sent before (a node that dropped this
+    // one on a silence asks again; only its answer ends its wait).
+    if (ready_ && share.answer()) SendShare(from, /*with_field=*/true, /*answer=*/false, node);
     if (ready_) ApplyField(from, *field, node);  // else: applied once the cast is done
     return;
   }
@@ -293,9 +294,30 @@ void BlendService::ApplyField(NodeId from, const DistanceField& field, NodeRunti
       });
 }
 
+void BlendService::SendAlpha(NodeRuntime& node) {
+  PendingAlpha alpha = std::move(*pending_alpha_);
+  pending_alpha_.reset();
+  if (runner_ == id_) {
+    TakeAlpha(id_, alpha.width_px, alpha.height_px, std::move(alpha.values), node);
+    return;
+  }
+  wire::Envelope envelope;
+  wire::BlendAlpha* a = envelope.mutable_blend_alpha();
+  a->set_projector_id(id_);
+  a->set_calibration_round(round_);
+  a->set_width_px(static_cast<uint32_t>(alpha.width_px));
+  a->set_height_px(static_cast<uint32_t>(alpha.height_px));
+  a->set_values(std::move(alpha.values));
+  bytes_sent_ += envelope.ByteSizeLong();
+  if (Status sent = node.SendToPeer(runner_, std::move(envelope)); !sent.ok()) {
+    ST_LOG(kWarning) << "blend: alpha to node " << runner_ << ": " << sent.ToString();
+  }
+}
+
 Status BlendService::OnStep(NodeRuntime& node) {
   if (!ready_) return OkStatus();
   const Clock::time_point now = Clock::now();
+  if (pending_alpha_ && now - pending_alpha_->composed >= options_.alpha_quiet) SendAlpha(node);
   // A neighbour dropped on a connection loss that is heard again: ask for its field anew.
   for (auto it = dropped_.begin(); it != dropped_.end();) {
     auto info = node.peers().find(it->first);
@@ -413,21 +435,8 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           return;
         }
         if (!shown.alpha_values.empty()) {
-          if (runner_ == id_) {
-            TakeAlpha(id_, shown.width_px, shown.height_px, std::move(shown.alpha_values), node);
-          } else {
-            wire::Envelope envelope;
-            wire::BlendAlpha* a = envelope.mutable_blend_alpha();
-            a->set_projector_id(id_);
-            a->set_calibration_round(round_);
-            a->set_width_px(static_cast<uint32_t>(shown.width_px));
-            a->set_height_px(static_cast<uint32_t>(shown.height_px));
-            a->set_values(std::move(shown.alpha_values));
-            bytes_sent_ += envelope.ByteSizeLong();
-            if (Status sent = node.SendToPeer(runner_, std::move(envelope)); !sent.ok()) {
-              ST_LOG(kWarning) << "blend: alpha to node " << runner_ << ": " << sent.ToString();
-            }
-          }
+          pending_alpha_ = PendingAlpha{shown.width_px, shown.height_px,
+                                        std::move(shown.alpha_values), Clock::now()};
         }
         nlohmann::json line = {{"blend", id_}};
         if (cause == "left") {

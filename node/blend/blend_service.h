@@ -52,9 +52,14 @@ namespace sandtable::node {
 
 struct BlendServiceOptions {
   BlendOptions blend;
-  // A neighbour silent this long (no heartbeat) has left.
-  std::chrono::milliseconds peer_silence{300};
+  // A neighbour silent this long (no heartbeat) has left. A killed process is noticed sooner,
+  // when its socket closes; this catches a stalled one. 10 heartbeats: 8 nodes on 2 loaded
+  // cores miss 300 ms now and then.
+  std::chrono::milliseconds peer_silence{1000};
   std::string export_dir;  // blend-<id>.png (the alpha mask) is written here (empty: not)
+  // The mask goes to the round's runner (the MPCDI export) once no new one was composed for this
+  // long: a site settling sends one map per node, not one per share heard.
+  std::chrono::milliseconds alpha_quiet{1000};
 };
 
 // BlendShare <-> DistanceField (the field's grid checked against its projector).
@@ -77,8 +82,8 @@ class BlendService : public NodeService {
 
   // The calibration the unit now holds (network thread). `neighbours`: the units whose
   // footprints overlap its own (nullopt: unknown, every linked peer).
-  // `runner`: the node that ran the round (it writes the site's MPCDI export); each mask shown
-  // goes to it as a BlendAlpha (kInvalidNodeId: none).
+  // `runner`: the node that ran the round (it writes the site's MPCDI export); the mask shown
+  // goes to it as a BlendAlpha once none newer came for `alpha_quiet` (kInvalidNodeId: none).
   void SetCalibration(const UnitCalibration& calibration, uint64_t round,
                       std::optional<std::set<NodeId>> neighbours, NodeRuntime& node,
                       NodeId runner = kInvalidNodeId);
@@ -96,6 +101,7 @@ class BlendService : public NodeService {
   void TellLevel(NodeRuntime& node);
   void TakeAlpha(NodeId unit, int width_px, int height_px, std::string values, NodeRuntime& node);
   void WriteSiteMpcdi(NodeId latest, NodeRuntime& node);  // on a worker; repeats while dirty
+  void SendAlpha(NodeRuntime& node);                      // the pending mask to the runner
 
   RenderLoop* loop_;
   BlendServiceOptions options_;
@@ -119,6 +125,12 @@ class BlendService : public NodeService {
   std::shared_ptr<MpcdiSite> site_mpcdi_;  // the runner's export, with the alphas received
   std::string site_mpcdi_path_;
   bool mpcdi_writing_ = false, mpcdi_dirty_ = false;
+  struct PendingAlpha {
+    int width_px = 0, height_px = 0;
+    std::string values;  // 8-bit, row-major
+    std::chrono::steady_clock::time_point composed;
+  };
+  std::optional<PendingAlpha> pending_alpha_;  // the last mask, not yet sent to the runner
   uint64_t bytes_sent_ = 0, bytes_received_ = 0, bad_shares_ = 0;
 };
 
