@@ -56,6 +56,13 @@ Status UnitCalibration::Check() const {
   if (!FiniteNonNegative(camera_rms_px) || !FiniteNonNegative(projector_rms_px)) {
     return InvalidArgumentError("camera_rms_px and projector_rms_px must be finite and >= 0");
   }
+  if (projector_response &&
+      (!(projector_response->gamma >= 0.5 && projector_response->gamma <= 5.0) ||
+       !(projector_response->black_level < 1.0))) {
+    return InvalidArgumentError(
+        "projector_response: gamma = " + std::to_string(projector_response->gamma) +
+        " must be in [0.5, 5] and black_level < 1");
+  }
   if (unit_id != kInvalidNodeId && !IsValidNodeId(unit_id)) {
     return InvalidArgumentError("unit_id = " + std::to_string(unit_id) +
                                 " is a reserved sender id, not a node id");
@@ -78,6 +85,12 @@ json UnitCalibrationToJsonValue(const UnitCalibration& c) {
     root["camera_rms_px"] = c.camera_rms_px;
     root["projector_rms_px"] = c.projector_rms_px;
     root["poses_used"] = c.poses_used;
+  }
+  if (c.projector_response) {
+    root["projector_response"] = {{"gamma", c.projector_response->gamma}};
+    if (c.projector_response->black_level >= 0.0) {
+      root["projector_response"]["black_level"] = c.projector_response->black_level;
+    }
   }
   return root;
 }
@@ -121,6 +134,15 @@ Expected<UnitCalibration> UnitCalibrationFromJson(const json& j, std::string_vie
   ST_RETURN_IF_ERROR(ReadRms(&root, "camera_rms_px", &c.camera_rms_px));
   ST_RETURN_IF_ERROR(ReadRms(&root, "projector_rms_px", &c.projector_rms_px));
   ST_RETURN_IF_ERROR(root.Strings("poses_used", &c.poses_used, io::Presence::kOptional));
+  if (root.Has("projector_response")) {
+    Expected<io::ObjectReader> response = root.Object("projector_response");
+    if (!response.ok()) return response.status();
+    ProjectorResponseRecord r;
+    ST_RETURN_IF_ERROR(response->Number("gamma", &r.gamma, io::Presence::kRequired));
+    ST_RETURN_IF_ERROR(response->Number("black_level", &r.black_level, io::Presence::kOptional));
+    ST_RETURN_IF_ERROR(response->End());
+    c.projector_response = r;
+  }
   ST_RETURN_IF_ERROR(root.End());
   if (Status valid = c.Check(); !valid.ok()) return valid.WithContext(source);
   return c;

@@ -15,7 +15,8 @@
 //   {"format": "sandtable.unit_calibration", "version": 2, "unit_id": 3, "source": "factory",
 //    "camera": CAMERA_MODEL, "projector": CAMERA_MODEL, "projector_from_camera": RIGID,
 //    "table_from_projector": RIGID, "table_from_model": RIGID,          (optional)
-//    "camera_rms_px": 0.12, "projector_rms_px": 0.31, "poses_used": ["capture_0", ...]}
+//    "camera_rms_px": 0.12, "projector_rms_px": 0.31, "poses_used": ["capture_0", ...],
+//    "projector_response": {"gamma": 2.21, "black_level": 0.002}}  (optional; black_level too)
 // unit_id, source, table_from_* and the rms/poses fields are optional (rms and poses are written
 // when the calibration came from poses). Also loaded: version 1 files
 // ("format": "sandtable-unit-calibration", 3x3 rotation, camera_matrix intrinsics; source
@@ -53,6 +54,13 @@ inline constexpr char kSourceFactory[] = "factory";
 inline constexpr char kSourceFactoryTruePose[] = "factory+true_pose";  // lab test mode only
 inline constexpr char kSourceStructuredLight[] = "structured_light";
 
+// The projector's response as its own camera measured it (the self-calibration's pre-pass,
+// node/calibration/projector_response.h): input level v emits b + (1 - b) (v / 255)^gamma.
+struct ProjectorResponseRecord {
+  double gamma = 2.2;
+  double black_level = -1.0;  // fraction of peak; < 0: not measured
+};
+
 struct UnitCalibration {
   NodeId unit_id = kInvalidNodeId;  // kInvalidNodeId: not written
   std::string source;               // one of the kSource* values above; empty: not written
@@ -64,6 +72,7 @@ struct UnitCalibration {
   double camera_rms_px = 0.0;     // chessboard corners in the camera, joint refinement
   double projector_rms_px = 0.0;  // dense decoded points in the projector, joint refinement
   std::vector<std::string> poses_used;
+  std::optional<ProjectorResponseRecord> projector_response;  // once measured
 
   // Both models valid (CameraModel::Check), transforms finite, rms finite and >= 0, unit_id a
   // node id or kInvalidNodeId. The message names the field ("projector: fx_px = -3 ...").

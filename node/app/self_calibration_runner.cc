@@ -21,6 +21,8 @@ namespace {
 
 constexpr uint32_t kBlackSlot = 1;
 constexpr uint32_t kWhiteSlot = 2;
+constexpr uint32_t kMutedSlot = 3;
+constexpr uint32_t kGreySlot = 10;  // kGreySlot + i: response level i
 
 wire::CalibrationStep MakeStep(uint64_t round, wire::CalibrationAction action) {
   wire::CalibrationStep s;
@@ -158,12 +160,48 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
       s.set_has_about_projector(true);
       capture.commands.push_back({c, s, p});
     }
+    r.stages.push_back(white);
+    r.stages.push_back(capture);
+    // The projector's response, by its own camera (projector_response.h).
+    if (!options_.response_levels.empty()) {
+      std::vector<std::pair<wire::CalibrationStep, uint32_t>> shows;  // (show, slot)
+      for (size_t i = 0; i < options_.response_levels.size(); ++i) {
+        wire::CalibrationStep grey = MakeStep(r.round, wire::CALIBRATION_ACTION_SHOW);
+        grey.set_show(wire::SHOW_WHAT_GREY);
+        grey.set_grey_level(static_cast<uint32_t>(options_.response_levels[i]));
+        shows.emplace_back(grey, kGreySlot + static_cast<uint32_t>(i));
+      }
+      wire::CalibrationStep muted = MakeStep(r.round, wire::CALIBRATION_ACTION_SHOW);
+      muted.set_show(wire::SHOW_WHAT_MUTED);
+      shows.emplace_back(muted, kMutedSlot);
+      for (const auto& [show_step, slot] : shows) {
+        Runner::Stage show_stage, capture_stage;
+        show_stage.label = "pre-pass response " + std::to_string(p);
+        show_stage.commands.push_back({p, show_step});
+        capture_stage.label = show_stage.label + " capture";
+        wire::CalibrationStep s = MakeStep(r.round, wire::CALIBRATION_ACTION_CAPTURE);
+        s.set_slot(slot);
+        capture_stage.commands.push_back({p, s});
+        r.stages.push_back(show_stage);
+        r.stages.push_back(capture_stage);
+      }
+      Runner::Stage fit;
+      fit.label = "pre-pass response fit " + std::to_string(p);
+      wire::CalibrationStep f = MakeStep(r.round, wire::CALIBRATION_ACTION_RESPONSE);
+      f.set_reference_slot(kBlackSlot);
+      f.set_white_slot(kWhiteSlot);
+      f.set_muted_slot(kMutedSlot);
+      f.set_slot(kGreySlot);
+      for (int level : options_.response_levels) f.add_grey_levels(static_cast<uint32_t>(level));
+      fit.commands.push_back({p, f});
+      r.stages.push_back(fit);
+      r.response_frames = static_cast<int>(shows.size());
+      r.prepass_frames += r.response_frames;
+    }
     off.label = "pre-pass off " + std::to_string(p);
     wire::CalibrationStep dark = MakeStep(r.round, wire::CALIBRATION_ACTION_SHOW);
     dark.set_show(wire::SHOW_WHAT_BLACK);
     off.commands.push_back({p, dark});
-    r.stages.push_back(white);
-    r.stages.push_back(capture);
     r.stages.push_back(off);
     ++r.prepass_frames;
   }
@@ -403,6 +441,15 @@ void SelfCalibrationService::RunnerDone(NodeId from, const wire::CalibrationStep
     for (uint32_t other : done.overlapping_projectors()) {
       r.overlaps.insert(
           {std::min<NodeId>(other, command.about), std::max<NodeId>(other, command.about)});
+    }
+  }
+  if (command.step.action() == wire::CALIBRATION_ACTION_RESPONSE) {
+    if (done.response_gamma() > 0) {
+      r.response[from] = {{"gamma", done.response_gamma()},
+                          {"black_level", done.response_black_level()},
+                          {"camera_pixels", done.response_pixels()}};
+    } else {
+      r.response[from] = {{"error", done.message()}};
     }
   }
   if (command.step.action() == wire::CALIBRATION_ACTION_BLANK && command.step.blank_on()) {
@@ -710,7 +757,8 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
         {"colour", r.colours[p]},
         {"cameras", seeing},
         {"frames", frames},
-        {"device_time_s", (frames + 1) * period},  // its sequence + its pre-pass white
+        // its sequence, its pre-pass white and its response frames
+        {"device_time_s", (frames + 1 + r.response_frames) * period},
         {"gray_lsb_skip", plan.gray_lsb_skip},
         {"phase_steps", plan.phase_steps},
         {"phase_period_px", plan.phase_period_px},
@@ -718,6 +766,9 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
         {"compute_s", r.compute_s[p]}};
   }
   report["projectors"] = per_projector;
+  nlohmann::json response = nlohmann::json::object();
+  for (const auto& [id, fitted] : r.response) response[std::to_string(id)] = fitted;
+  report["projector_response"] = response;
   nlohmann::json planarity = nlohmann::json::object();
   for (const auto& [id, input] : r.inputs) {
     const wire::PlanarityProbe& p = input.planarity();

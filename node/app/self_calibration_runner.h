@@ -66,8 +66,10 @@ struct SelfCalibrationService::Runner {
 
   // Inputs and the solve.
   std::map<NodeId, wire::CalibrationInput> inputs;
-  std::map<NodeId, double> compute_s;     // per node, from the step answers
-  std::map<NodeId, uint32_t> blanked_px;  // join round: what each neighbour blanked
+  std::map<NodeId, double> compute_s;         // per node, from the step answers
+  std::map<NodeId, uint32_t> blanked_px;      // join round: what each neighbour blanked
+  std::map<NodeId, nlohmann::json> response;  // each projector's response as its camera fitted it
+  int response_frames = 0;                    // pre-pass frames per projector for it
   std::string path;  // "planar" or "full" (docs/calibration.md, "Planar sites")
   std::string path_reason;
   bool solving = false;

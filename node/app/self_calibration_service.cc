@@ -1,5 +1,7 @@
 #include "node/app/self_calibration_service.h"
 
+#include "node/calibration/projector_response.h"
+
 #include "common/base/file_io.h"
 #include "common/base/log.h"
 #include "common/base/thread_cpu_time.h"
@@ -7,6 +9,7 @@
 #include "node/app/self_calibration_runner.h"
 #include "node/calibration/cluster_initializer.h"
 #include "node/calibration/display_frames.h"
+#include "node/calibration/projector_response.h"
 #include "proto/convert.h"
 
 namespace sandtable::node {
@@ -336,7 +339,11 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
       if (!projector_) return fail("no projector");
       cv::Mat frame;
       const cv::Size size = projector_->size();
-      if (step.show() == wire::SHOW_WHAT_WHITE) {
+      const bool mute = step.show() == wire::SHOW_WHAT_MUTED;
+      if (step.show() == wire::SHOW_WHAT_GREY) {
+        if (step.grey_level() > 255) return fail("grey level over 255");
+        frame = cv::Mat(size, CV_8UC1, cv::Scalar(static_cast<int>(step.grey_level())));
+      } else if (step.show() == wire::SHOW_WHAT_WHITE) {
         frame = cv::Mat(size, CV_8UC1, cv::Scalar(255));
       } else if (step.show() == wire::SHOW_WHAT_PATTERN) {
         const std::vector<cv::Mat>* frames = PatternFrames(step.plan());
@@ -348,14 +355,66 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
       }
       ProjectorOutput* projector = projector_;
       node.workers().Run<Status>(
-          [projector, frame, loop = render_loop_] {
+          [projector, frame, mute, loop = render_loop_] {
             if (loop) loop->Suspend();  // calibration takes the projector from the show
-            Expected<ShownFrame> shown = projector->Show(frame);
+            Expected<ShownFrame> shown = mute ? projector->Mute() : projector->Show(frame);
+            if (mute && !shown.ok()) {
+              // No AV mute: black instead; the response step then leaves the black level out.
+              ST_LOG(kWarning) << "self-calibration: " << shown.status().message();
+              shown = projector->Show(cv::Mat::zeros(projector->size(), CV_8UC1));
+              if (shown.ok()) return UnavailableError("no mute");
+            }
             return shown.ok() ? OkStatus() : shown.status();
           },
-          [this, from, done, &node](Status shown) mutable {
+          [this, from, done, mute, &node](Status shown) mutable {
+            if (mute) {
+              muted_ok_ =
+                  !(shown.code() == StatusCode::kUnavailable && shown.message() == "no mute");
+              if (!muted_ok_) shown = OkStatus();
+            }
             done.set_ok(shown.ok());
             if (!shown.ok()) done.set_message(shown.message());
+            Answer(from, done, node);
+          });
+      return;
+    }
+    case wire::CALIBRATION_ACTION_RESPONSE: {
+      // The own projector's response from the pre-pass captures (projector_response.h).
+      auto slot = [&](uint32_t s) {
+        auto it = slots_.find(s);
+        return it == slots_.end() ? cv::Mat() : it->second;
+      };
+      const cv::Mat black = slot(step.reference_slot()), white = slot(step.white_slot());
+      cv::Mat muted = step.muted_slot() != 0 && muted_ok_ ? slot(step.muted_slot()) : cv::Mat();
+      std::vector<std::pair<int, cv::Mat>> greys;
+      for (int i = 0; i < step.grey_levels_size(); ++i) {
+        greys.emplace_back(static_cast<int>(step.grey_levels(i)),
+                           slot(step.slot() + static_cast<uint32_t>(i)));
+      }
+      cv::Mat lit;
+      if (auto m = lit_masks_.find(node.id()); m != lit_masks_.end()) lit = m->second;
+      node.workers().Run<Expected<ProjectorResponse>>(
+          [black, white, muted, greys, lit] {
+            return FitProjectorResponse(black, white, muted, greys, lit);
+          },
+          [this, from, done, &node](Expected<ProjectorResponse> fitted) mutable {
+            // A response that cannot be measured is not a failed calibration: the renderer
+            // keeps its default (2.2) and the report says why.
+            if (!fitted.ok()) {
+              ST_LOG(kWarning) << "self-calibration: projector response: "
+                               << fitted.status().ToString();
+              response_.reset();
+              done.set_message(fitted.status().message());
+            } else {
+              response_ = ProjectorResponseRecord{fitted->gamma, fitted->black_level};
+              done.set_response_gamma(fitted->gamma);
+              done.set_response_black_level(fitted->black_level);
+              done.set_response_pixels(static_cast<uint32_t>(fitted->pixels));
+              ST_LOG(kInfo) << "self-calibration: projector response gamma " << fitted->gamma
+                            << ", black level " << fitted->black_level << " (" << fitted->pixels
+                            << " camera px, fit rms " << fitted->fit_rms << ")";
+            }
+            done.set_ok(true);
             Answer(from, done, node);
           });
       return;
@@ -732,6 +791,7 @@ void SelfCalibrationService::HandleResult(const wire::CalibrationResult& result,
   c.projector_from_camera = *projector_from_table * camera_from_table->Inverse();
   c.projector_rms_px = result.reprojection_rms_px();
   c.camera_rms_px = result.camera_rms_px();
+  c.projector_response = response_;
   if (result.has_table_from_model()) {
     Expected<Rigid3d> table_from_model = proto::FromWire(result.table_from_model());
     if (table_from_model.ok()) c.table_from_model = *table_from_model;

@@ -60,6 +60,10 @@ struct SelfCalibrationOptions {
   // Cameras other than the projector's own see its footprint obliquely: the plan assumes
   // they resolve this factor worse than the own camera's measured resolution.
   double neighbour_resolution_factor = 1.4;
+  // Each projector's response (projector_response.h), measured by its own camera in the
+  // pre-pass: these grey levels, then the light cut (muted) for the black level. Empty: not
+  // measured (the renderer assumes 2.2).
+  std::vector<int> response_levels{64, 128, 192};
   int grid_step_px = 16;     // projector grid spacing (docs/calibration.md: error against step)
   int lit_threshold = 20;    // 8-bit levels, white - black
   int min_lit_pixels = 500;  // a camera "sees" a projector above this
@@ -180,8 +184,10 @@ class SelfCalibrationService : public NodeService {
 
   // Node side state of the current round.
   uint64_t round_ = 0;
-  std::map<uint32_t, cv::Mat> slots_;    // captures (8 bit)
-  std::map<NodeId, cv::Mat> lit_masks_;  // per projector, from the pre-pass
+  std::map<uint32_t, cv::Mat> slots_;                // captures (8 bit)
+  std::map<NodeId, cv::Mat> lit_masks_;              // per projector, from the pre-pass
+  bool muted_ok_ = true;                             // the last SHOW muted did cut the light
+  std::optional<ProjectorResponseRecord> response_;  // the own projector's, last measured
   std::map<std::string, std::vector<cv::Mat>> pattern_cache_;
   std::map<NodeId, wire::CorrespondenceSet> received_;  // by camera, for own projector
   std::deque<std::pair<wire::CalibrationStep, NodeId>> deferred_;

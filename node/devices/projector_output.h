@@ -50,6 +50,12 @@ class ProjectorOutput {
   // Returns once the frame is on the output (a world's reply, a window's swap), so a capture
   // started after Show() returns sees this frame.
   virtual Expected<ShownFrame> Show(const cv::Mat& frame) = 0;
+  // Cuts the light altogether (an AV mute or shutter: not even the black level a black frame
+  // emits) until the next Show(). The self-calibration measures the black level against it.
+  // UNAVAILABLE where the device has no such control (a window); the output stays usable.
+  virtual Expected<ShownFrame> Mute() {
+    return UnavailableError(description() + ": no way to cut the light (no AV mute)");
+  }
 };
 
 // OK when `frame` is GRAY8 or RGB8 of exactly `size`; INVALID_ARGUMENT naming `who`, the

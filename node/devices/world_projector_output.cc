@@ -43,6 +43,22 @@ Expected<ShownFrame> WorldProjectorOutput::Show(const cv::Mat& frame) {
     std::memcpy(pixels->data() + row_bytes * static_cast<size_t>(y), frame.ptr(y), row_bytes);
   }
 
+  return Send(std::move(request));
+}
+
+Expected<ShownFrame> WorldProjectorOutput::Mute() {
+  wire::Envelope request;
+  wire::SetFrameRequest* set = request.mutable_set_frame_request();
+  set->set_projector_id(projector_id_);
+  set->set_width_px(static_cast<uint32_t>(size_px_.width));
+  set->set_height_px(static_cast<uint32_t>(size_px_.height));
+  set->set_encoding(wire::PIXEL_ENCODING_GRAY8);
+  set->set_frame_index(frames_shown_ + 1);
+  set->set_muted(true);
+  return Send(std::move(request));
+}
+
+Expected<ShownFrame> WorldProjectorOutput::Send(wire::Envelope request) {
   Expected<wire::Envelope> reply = link_->Ask(std::move(request), wire::Envelope::kSetFrameReply);
   if (!reply.ok()) return reply.status();
   const wire::SetFrameReply& answer = reply->set_frame_reply();

@@ -28,6 +28,7 @@ class WorldProjectorOutput : public ProjectorOutput {
   cv::Size size() const override { return size_px_; }
   std::string description() const override;
   Expected<ShownFrame> Show(const cv::Mat& frame) override;
+  Expected<ShownFrame> Mute() override;  // a SetFrameRequest with `muted`: the world's "off"
 
  private:
   WorldProjectorOutput(std::shared_ptr<WorldLink> link, ProjectorId id, cv::Size size_px)
@@ -36,6 +37,7 @@ class WorldProjectorOutput : public ProjectorOutput {
   std::shared_ptr<WorldLink> link_;
   ProjectorId projector_id_;
   cv::Size size_px_;
+  Expected<ShownFrame> Send(wire::Envelope request);
   uint64_t frames_shown_ = 0;
 };
 

@@ -160,6 +160,13 @@ wire::Envelope WorldServer::SetFrame(const wire::SetFrameRequest& request) {
   }
   const UnitSpec* unit = world_->site().FindUnit(request.projector_id());
   if (!unit) return fail("no such projector in site '" + world_->site().name + "'");
+  if (request.muted()) {  // the light cut; the frame it showed is kept for the next unmute
+    const Status off = world_->SetProjectorOn(request.projector_id(), false);
+    if (!off.ok()) return fail(off.message());
+    ++stats_.frames_set;
+    reply->set_ok(true);
+    return envelope;
+  }
   const uint64_t expected_bytes =
       uint64_t{request.width_px()} * request.height_px() * static_cast<uint64_t>(channels);
   if (request.pixels().size() != expected_bytes) {
@@ -182,6 +189,9 @@ wire::Envelope WorldServer::SetFrame(const wire::SetFrameRequest& request) {
   if (channels == 3) cv::cvtColor(frame, bgr, cv::COLOR_RGB2BGR);
   const Status set = world_->SetProjectorFrame(request.projector_id(), channels == 3 ? bgr : frame);
   if (!set.ok()) return fail(set.message());
+  if (Status on = world_->SetProjectorOn(request.projector_id(), true); !on.ok()) {
+    return fail(on.message());
+  }
   ++stats_.frames_set;
   if (frame_log_.is_open()) {
     uint64_t hash = 1469598103934665603ull;  // FNV-1a 64
