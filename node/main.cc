@@ -9,6 +9,7 @@
 //                  [--render auto|on|off] [--timeline TRACKS.csv] [--sun on|off]
 //                  [--sun-start-h H] [--sun-hours-per-s R] [--render-max-fps F]
 //                  [--render-log FILE] [--blend on|off] [--blend-step-px N]
+//                  [--black-match on|off]
 //                  [--bind ENDPOINT] [--curve-keys FILE] [--heartbeat-ms N] [--workers N]
 //   (--world E is short for --projector world:E --camera world:E; node/devices/device_factory.h)
 //   sandtable-node calibrate-unit --poses DIR -o unit.json ...   (the unit's factory calibration)
@@ -91,6 +92,7 @@ static int Run(int argc, char** argv) {
   double render_max_fps = 30.0;
   std::string blend_mode = "on";
   int blend_step_px = node::BlendOptions{}.grid_step_px;
+  std::string black_match = "off";
   app.add_option("--id", id, "this unit's node id (below 4294967280)")
       ->check(cli::Integer<uint32_t>(0, kFirstReservedSenderId - 1));
   app.add_option("--coordinator", coordinator,
@@ -160,6 +162,10 @@ static int Run(int argc, char** argv) {
       ->check(CLI::IsMember({"on", "off"}));
   app.add_option("--blend-step-px", blend_step_px, "the blend's distance field grid step, px")
       ->check(cli::Integer(1, 64));
+  app.add_option("--black-match", black_match,
+                 "raise the black where fewer projectors overlap to the site's highest (needs "
+                 "the black level measured in self-calibration): on or off")
+      ->check(CLI::IsMember({"on", "off"}));
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
   if (calibrate->parsed()) return node::RunCalibrateUnit(calibrate->remaining());
   if (render_frame->parsed()) return node::RunRenderFrame(render_frame->remaining());
@@ -341,6 +347,7 @@ static int Run(int argc, char** argv) {
     node::BlendServiceOptions blend_options;
     blend_options.blend.grid_step_px = blend_step_px;
     blend_options.export_dir = export_dir;
+    blend_options.black_match = black_match == "on";
     blend = std::make_unique<node::BlendService>(
         model, render_loop.get(), blend_options,
         [](const nlohmann::json& line) { WriteJsonLine(std::cout, line); });

@@ -5,7 +5,7 @@
 namespace sandtable::coordinator {
 
 bool IsTestPatternName(const std::string& name) {
-  for (const char* known : {"none", "id", "grid", "white", "raw-white", "bars"}) {
+  for (const char* known : {"none", "id", "grid", "white", "raw-white", "bars", "black"}) {
     if (name == known) return true;
   }
   return false;
@@ -17,7 +17,7 @@ void TestPatternService::OnRequest(net::Incoming request, CoordinatorServer& ser
   const bool clear = !r.all_nodes() && r.pattern().empty();
   if (!clear && !IsTestPatternName(r.pattern())) {
     reason = "unknown test pattern '" + r.pattern().substr(0, 64) +
-             "' (none, id, grid, white, raw-white, bars)";
+             "' (none, id, grid, white, raw-white, bars, black)";
   } else if (!r.all_nodes() && !IsValidNodeId(r.node_id())) {
     reason = "node id " + std::to_string(r.node_id()) + " is reserved";
   } else if (!r.all_nodes() && !clear && state_.node_patterns().size() >= kMaxNodePatterns &&

@@ -20,7 +20,8 @@ namespace sandtable::coordinator {
 
 inline constexpr size_t kMaxNodePatterns = 4096;
 
-// True for the names the renderer knows ("none", "id", "grid", "white", "raw-white", "bars").
+// True for the names the renderer knows ("none", "id", "grid", "white", "raw-white", "bars",
+// "black").
 bool IsTestPatternName(const std::string& name);
 
 class TestPatternService : public CoordinatorService {

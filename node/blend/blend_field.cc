@@ -446,7 +446,7 @@ double IncidenceWeight(double cos_incidence, const BlendOptions& options) {
 
 void Blender::SetNeighbour(const DistanceField& field) {
   const size_t n = surface_.range_m.size();
-  std::vector<float> w(n, 0.0f), reach(n, 0.0f);
+  std::vector<float> w(n, 0.0f), reach(n, 0.0f), gain(n, 0.0f);
   // Which lit pixels fall in the neighbour's image facing it: those then cast shadow rays to
   // its centre, in one coherent batch.
   const Eigen::Vector3d centre = field.projector_from_table.Inverse().translation;
@@ -466,20 +466,23 @@ void Blender::SetNeighbour(const DistanceField& field) {
     w[i] = static_cast<float>((field.DistanceAtPixel(*pixel) + options_.distance_floor_m) *
                               IncidenceWeight(cos_incidence, options_));
     reach[i] = w[i] * static_cast<float>(Reach(cos_incidence, options_));  // w r
+    gain[i] = static_cast<float>(cos_incidence / to_centre.squaredNorm());
     candidates.push_back(i);
     from.push_back(x + options_.shadow_ray_offset_m * normal);
   }
   std::vector<uint8_t> occluded;
   caster_->OccludedToPoint(from, centre, 1e-5, &occluded);
   for (size_t k = 0; k < candidates.size(); ++k) {
-    if (occluded[k]) w[candidates[k]] = reach[candidates[k]] = 0.0f;
+    if (occluded[k]) w[candidates[k]] = reach[candidates[k]] = gain[candidates[k]] = 0.0f;
   }
   neighbour_w_[field.unit] = std::move(w);
   neighbour_reach_[field.unit] = std::move(reach);
+  neighbour_gain_[field.unit] = std::move(gain);
 }
 
 bool Blender::RemoveNeighbour(NodeId unit) {
   neighbour_reach_.erase(unit);
+  neighbour_gain_.erase(unit);
   return neighbour_w_.erase(unit) > 0;
 }
 
@@ -540,6 +543,49 @@ cv::Mat Blender::Factor(double level) const {
     f[i] = std::min(1.0f, static_cast<float>(level) * own_gain_[i] / std::max(delivered, 1e-30f));
   }
   return factor;
+}
+
+std::vector<double> Blender::BlackLight(double own_black,
+                                        const std::map<NodeId, double>& black) const {
+  const size_t n = own_d_.size();
+  std::vector<double> light(n, 0.0);
+  for (size_t i = 0; i < n; ++i) {
+    const double r = surface_.range_m[i];
+    if (r > 0) light[i] = own_black * surface_.cos_incidence[i] / (r * r);
+  }
+  for (const auto& [unit, gain] : neighbour_gain_) {
+    auto it = black.find(unit);
+    const double b = it == black.end() ? own_black : it->second;
+    for (size_t i = 0; i < n; ++i) light[i] += b * gain[i];
+  }
+  return light;
+}
+
+double Blender::BlackPeak(double own_black, const std::map<NodeId, double>& black) const {
+  const std::vector<double> light = BlackLight(own_black, black);
+  double peak = 0.0;
+  for (size_t i = 0; i < light.size(); ++i) {
+    if (own_w_[i] > 0) peak = std::max(peak, light[i]);
+  }
+  return peak;
+}
+
+cv::Mat Blender::Lift(double target, double own_black, const std::map<NodeId, double>& black,
+                      double max_lift) const {
+  cv::Mat lift(surface_.height_px, surface_.width_px, CV_32FC1, cv::Scalar(0));
+  float* out = lift.ptr<float>();
+  const std::vector<double> light = BlackLight(own_black, black);
+  const double range = 1.0 - own_black;  // emission per unit of frame value above black
+  for (size_t i = 0; i < light.size(); ++i) {
+    const double r = surface_.range_m[i];
+    if (own_w_[i] <= 0 || r <= 0 || light[i] >= target) continue;
+    double sum = own_w_[i];
+    for (const auto& [unit, w] : neighbour_w_) sum += w[i];
+    const double gain = surface_.cos_incidence[i] / (r * r);
+    const double emission = own_w_[i] / sum * (target - light[i]) / gain;
+    out[i] = static_cast<float>(std::min(max_lift, emission / range));
+  }
+  return lift;
 }
 
 }  // namespace sandtable::node

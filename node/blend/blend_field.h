@@ -153,6 +153,19 @@ class Blender {
   cv::Mat Alpha() const;
   cv::Mat Factor(double level) const;
 
+  // Black-level matching. A projector showing black still emits its black level b; where
+  // footprints overlap those add up. Black light at a lit pixel's point: sum over the
+  // projectors lighting it of b_k cos_k / d_k^2 (1 / m^2; the albedo multiplies all alike).
+  // `black`: each neighbour's b (one missing counts as `own_black`).
+  // BlackPeak: the largest black light over this projector's lit pixels.
+  double BlackPeak(double own_black, const std::map<NodeId, double>& black) const;
+  // The lift (CV_32FC1, linear emission as a fraction of the projector's range above black,
+  // added to every frame) that raises the black light to `target` everywhere this projector
+  // lights, shared with the neighbours by alpha: A_i (target - black light) / (cos_i / d_i^2),
+  // at most `max_lift` (a grazing surface is left short rather than washed out).
+  cv::Mat Lift(double target, double own_black, const std::map<NodeId, double>& black,
+               double max_lift) const;
+
   const ProjectorSurface& surface() const { return surface_; }
   const DistanceField& own_field() const { return own_; }
   const std::vector<float>& own_distance() const { return own_d_; }
@@ -173,6 +186,9 @@ class Blender {
   std::vector<float> own_wr_, own_gain_;                  // w r, and w / E' (Factor's terms)
   std::map<NodeId, std::vector<float>> neighbour_w_;      // per pixel weight; 0: it does not light
   std::map<NodeId, std::vector<float>> neighbour_reach_;  // per pixel w r
+  std::map<NodeId, std::vector<float>> neighbour_gain_;   // per pixel cos / d^2 (0: not lit)
+  // Black light at each lit pixel's point (BlackPeak, Lift).
+  std::vector<double> BlackLight(double own_black, const std::map<NodeId, double>& black) const;
 };
 
 }  // namespace sandtable::node

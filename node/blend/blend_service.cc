@@ -133,6 +133,7 @@ void BlendService::SetCalibration(const UnitCalibration& calibration, uint64_t r
                                   NodeId runner) {
   if (!calibration.table_from_projector) return;
   id_ = node.id();
+  own_black_ = calibration.projector_response ? calibration.projector_response->black_level : -1.0;
   round_ = round;
   runner_ = runner;
   const uint64_t generation = ++generation_;
@@ -225,6 +226,10 @@ void BlendService::SendShare(NodeId to, bool with_field, bool answer, NodeRuntim
   share->set_level_bound_per_m2(bounds_.count(id_) ? bounds_.at(id_) : 0.0);
   share->set_level_known_per_m2(std::isfinite(known) ? known : 0.0);
   share->set_answer(answer);
+  share->set_black_level(own_black_);
+  double black_peak = 0.0;
+  for (const auto& [unit, peak] : black_peaks_) black_peak = std::max(black_peak, peak);
+  share->set_black_peak_known_per_m2(black_peak);
   bytes_sent_ += envelope.ByteSizeLong();
   if (Status sent = node.SendToPeer(to, std::move(envelope)); !sent.ok()) {
     ST_LOG(kWarning) << "blend: to node " << to << ": " << sent.ToString();
@@ -260,6 +265,13 @@ void BlendService::OnPeerMessage(net::Incoming request, NodeRuntime& node) {
   const bool level_news =
       heard > 0 && std::isfinite(heard) && (!bounds_.count(from) || heard < bounds_.at(from));
   if (level_news) bounds_[from] = heard;
+  // Black levels: the sender's own, and the highest black light anyone has heard of.
+  if (share.black_level() >= 0 && share.black_level() < 1) blacks_[from] = share.black_level();
+  double black_known = 0.0;
+  for (const auto& [unit, peak] : black_peaks_) black_known = std::max(black_known, peak);
+  const double black_heard = share.black_peak_known_per_m2();
+  const bool black_news = std::isfinite(black_heard) && black_heard > black_known * (1 + 1e-9);
+  if (black_news) black_peaks_[from] = black_heard;
   const bool with_field = share.distance_m_size() > 0;
   if (with_field) {
     Expected<DistanceField> field = FieldFromShare(share);
@@ -275,7 +287,9 @@ void BlendService::OnPeerMessage(net::Incoming request, NodeRuntime& node) {
     if (ready_) ApplyField(from, *field, node);  // else: applied once the cast is done
     return;
   }
-  if (level_news && ready_) Compose(node, "level", from, Clock::now());
+  if ((level_news || (black_news && options_.black_match)) && ready_) {
+    Compose(node, level_news ? "level" : "black", from, Clock::now());
+  }
 }
 
 void BlendService::ApplyField(NodeId from, const DistanceField& field, NodeRuntime& node) {
@@ -365,8 +379,13 @@ Status BlendService::OnStep(NodeRuntime& node) {
 void BlendService::TellLevel(NodeRuntime& node) {
   double known = std::numeric_limits<double>::infinity();
   for (const auto& [unit, bound] : bounds_) known = std::min(known, bound);
-  if (!std::isfinite(known) || (level_told_ > 0 && known >= level_told_)) return;
-  level_told_ = known;
+  double black = 0.0;
+  for (const auto& [unit, peak] : black_peaks_) black = std::max(black, peak);
+  const bool level_news = std::isfinite(known) && (level_told_ <= 0 || known < level_told_);
+  const bool black_news = options_.black_match && black > black_told_ * (1 + 1e-9);
+  if (!level_news && !black_news) return;
+  if (level_news) level_told_ = known;
+  if (black_news) black_told_ = black;
   for (NodeId peer : sent_to_) SendShare(peer, /*with_field=*/false, /*answer=*/false, node);
 }
 
@@ -376,6 +395,10 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
   double level = std::numeric_limits<double>::infinity();
   for (const auto& [unit, bound] : bounds_) level = std::min(level, bound);
   if (!std::isfinite(level) || level <= 0) return;
+  // Black-level matching: the highest black light heard; the worker raises it to its own peak.
+  const bool match = options_.black_match && own_black_ >= 0;
+  double black_target = 0.0;
+  for (const auto& [unit, peak] : black_peaks_) black_target = std::max(black_target, peak);
   struct Shown {
     bool stale = false;        // a newer calibration replaced the blender
     std::string alpha_values;  // the mask, 8-bit (for the MPCDI export)
@@ -383,6 +406,7 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
     Status status = OkStatus();
     int64_t shown_ns = 0;
     double compose_ms = 0.0;
+    double black_peak = 0.0, black_target = 0.0, lift_max = 0.0;
   };
   const uint64_t generation = generation_;
   const std::string png =
@@ -391,10 +415,12 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           : (std::filesystem::path(options_.export_dir) / ("blend-" + std::to_string(id_) + ".png"))
                 .string();
   node.workers().Run<Shown>(
-      [core = core_, loop = loop_, level, generation, png, to_runner = runner_ != kInvalidNodeId] {
+      [core = core_, loop = loop_, level, generation, png, to_runner = runner_ != kInvalidNodeId,
+       match, black_target, own_black = own_black_, blacks = blacks_,
+       max_lift = options_.max_lift] {
         Shown out;
         const Clock::time_point start = Clock::now();
-        cv::Mat factor, alpha;
+        cv::Mat factor, alpha, lift;
         {
           std::lock_guard<std::mutex> lock(core->mutex);
           if (!core->blender || core->generation != generation) {
@@ -403,6 +429,12 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           }
           factor = core->blender->Factor(level);
           if (!png.empty()) alpha = core->blender->Alpha();
+          if (match) {
+            out.black_peak = core->blender->BlackPeak(own_black, blacks);
+            out.black_target = std::max(black_target, out.black_peak);
+            lift = core->blender->Lift(out.black_target, own_black, blacks, max_lift);
+            cv::minMaxLoc(lift, nullptr, &out.lift_max);
+          }
         }
         out.compose_ms = MsSince(start);
         if (to_runner) {
@@ -420,7 +452,7 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           }
         }
         if (!loop) return out;
-        Expected<int64_t> shown = loop->ShowBlend(factor);
+        Expected<int64_t> shown = loop->ShowBlend(factor, lift);
         if (!shown.ok()) {
           out.status = shown.status();
         } else {
@@ -433,6 +465,10 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
         if (!shown.status.ok()) {
           ST_LOG(kWarning) << "blend: " << shown.status.ToString();
           return;
+        }
+        if (shown.black_peak > 0) {
+          black_peaks_[id_] = std::max(black_peaks_[id_], shown.black_peak);
+          TellLevel(node);
         }
         if (!shown.alpha_values.empty()) {
           pending_alpha_ = PendingAlpha{shown.width_px, shown.height_px,
@@ -457,6 +493,10 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
         }
         line["waiting_for"] = waiting;
         line["level_per_m2"] = level;
+        if (shown.black_target > 0) {
+          line["black_target_per_m2"] = shown.black_target;
+          line["lift_max"] = shown.lift_max;
+        }
         line["compose_ms"] = shown.compose_ms;
         line["cast_ms"] = cast_ms_;
         line["shown_ns"] = shown.shown_ns;

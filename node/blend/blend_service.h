@@ -60,6 +60,11 @@ struct BlendServiceOptions {
   // The mask goes to the round's runner (the MPCDI export) once no new one was composed for this
   // long: a site settling sends one map per node, not one per share heard.
   std::chrono::milliseconds alpha_quiet{1000};
+  // Black-level matching (docs/blend.md): raise the black where fewer projectors overlap to the
+  // site's highest black light, by at most max_lift of the projector's range. Needs the black
+  // level the unit's camera measured (calibration.projector_response).
+  bool black_match = false;
+  double max_lift = 0.05;
 };
 
 // BlendShare <-> DistanceField (the field's grid checked against its projector).
@@ -98,7 +103,7 @@ class BlendService : public NodeService {
   void SendShare(NodeId to, bool with_field, bool answer, NodeRuntime& node);
   // Looks a neighbour's field up at this projector's pixels (a worker), then recomposes.
   void ApplyField(NodeId from, const DistanceField& field, NodeRuntime& node);
-  void TellLevel(NodeRuntime& node);
+  void TellLevel(NodeRuntime& node);  // the lowest level and the highest black light heard
   void TakeAlpha(NodeId unit, int width_px, int height_px, std::string values, NodeRuntime& node);
   void WriteSiteMpcdi(NodeId latest, NodeRuntime& node);  // on a worker; repeats while dirty
   void SendAlpha(NodeRuntime& node);                      // the pending mask to the runner
@@ -117,6 +122,10 @@ class BlendService : public NodeService {
   std::set<NodeId> sent_to_;                // own field sent to, this calibration
   std::map<NodeId, double> bounds_;         // level bounds heard (and own)
   double level_told_ = 0.0;                 // the lowest level told to the neighbours
+  double own_black_ = -1.0;                 // this projector's black level (< 0: unknown)
+  std::map<NodeId, double> blacks_;         // the neighbours' black levels
+  std::map<NodeId, double> black_peaks_;    // highest black light heard (and own), 1 / m^2
+  double black_told_ = 0.0;                 // the highest black light told to the neighbours
   std::set<NodeId> holding_;                // neighbours whose field the blend holds
   std::map<NodeId, DistanceField> fields_;  // received, by sender (kept across calibrations)
   std::map<NodeId, std::chrono::steady_clock::time_point> dropped_;  // left, and when

@@ -18,13 +18,16 @@ const char* TestPatternName(TestPattern pattern) {
       return "raw-white";
     case TestPattern::kColourBars:
       return "bars";
+    case TestPattern::kBlack:
+      return "black";
   }
   return "none";
 }
 
 std::optional<TestPattern> TestPatternFromName(const std::string& name) {
-  for (TestPattern p : {TestPattern::kNone, TestPattern::kProjectorId, TestPattern::kTableGrid,
-                        TestPattern::kWhite, TestPattern::kRawWhite, TestPattern::kColourBars}) {
+  for (TestPattern p :
+       {TestPattern::kNone, TestPattern::kProjectorId, TestPattern::kTableGrid, TestPattern::kWhite,
+        TestPattern::kRawWhite, TestPattern::kColourBars, TestPattern::kBlack}) {
     if (name == TestPatternName(p)) return p;
   }
   return std::nullopt;

@@ -22,9 +22,12 @@ enum class TestPattern {
   kWhite,        // white on the model through the full pipeline (shows blending)
   kRawWhite,     // every pixel at 255, nothing else
   kColourBars,   // eight vertical bars (raw)
+  kBlack,        // black on the model through the full pipeline: each projector's black
+                 // level, plus the blend's black-level lift where the site matches black
 };
 
-// "none", "id", "grid", "white", "raw-white", "bars" (the names on the command line and wire).
+// "none", "id", "grid", "white", "raw-white", "bars", "black" (the names on the command line and
+// wire).
 const char* TestPatternName(TestPattern pattern);
 std::optional<TestPattern> TestPatternFromName(const std::string& name);
 

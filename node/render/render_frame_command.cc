@@ -31,8 +31,9 @@ int RunRenderFrame(const std::vector<std::string>& args) {
   app.add_option("-o,--output", output_path, "the PNG to write")->required();
   app.add_option("--model", model_path, "the glTF model (placed with table_from_model)")
       ->check(CLI::ExistingFile);
-  app.add_option("--pattern", pattern_name, "none (the show), id, grid, white, raw-white, bars")
-      ->check(CLI::IsMember({"none", "id", "grid", "white", "raw-white", "bars"}));
+  app.add_option("--pattern", pattern_name,
+                 "none (the show), id, grid, white, raw-white, bars, black")
+      ->check(CLI::IsMember({"none", "id", "grid", "white", "raw-white", "bars", "black"}));
   app.add_option("--timeline", timeline_path, "personnel tracks (CSV) drawn as traces")
       ->check(CLI::ExistingFile);
   app.add_option("--media-s", media_s, "the media time drawn, s")->check(CLI::Range(0.0, 1e9));

@@ -2,7 +2,7 @@
 // (docs/render.md): what the unit would give its projector, for operators and the docs.
 //
 //   sandtable-node render-frame --calibration unit.json -o frame.png [--model scene.gltf]
-//       [--pattern none|id|grid|white|raw-white|bars] [--timeline TRACKS.csv] [--media-s T]
+//       [--pattern none|id|grid|white|raw-white|bars|black] [--timeline TRACKS.csv] [--media-s T]
 //       [--sun on|off] [--sun-start-h H] [--sun-hours-per-s R] [--id N]
 //
 // The calibration must be a site calibration (table_from_projector; table_from_model places the

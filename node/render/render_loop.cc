@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <vector>
 
 #include "common/base/log.h"
 #include "common/scene/procedural_scene.h"
@@ -154,10 +155,13 @@ Status RenderLoop::ShowCalibration(const UnitCalibration& calibration,
     pending_view_ = std::move(*view);
     pending_scene_ = std::move(scene);
     pending_tracks_ = std::move(draped);
+    display_gamma_ = calibration.projector_response ? calibration.projector_response->gamma
+                                                    : options_.renderer.display_gamma;
     suspended_ = false;
     // The blend belongs to the calibration it was computed with.
     if (!blend_factor_.empty()) {
       blend_factor_.release();
+      blend_lift_.release();
       pending_mask_ = ComposedMask();
     }
     generation = ++generation_;
@@ -168,11 +172,20 @@ Status RenderLoop::ShowCalibration(const UnitCalibration& calibration,
 }
 
 cv::Mat RenderLoop::ComposedMask() const {
-  if (blank_factor_.empty()) return blend_factor_.clone();
-  if (blend_factor_.empty() || blend_factor_.size() != blank_factor_.size()) {
+  cv::Mat factor, lift;
+  if (blank_factor_.empty()) {
+    factor = blend_factor_.clone();
+    lift = blend_lift_.clone();
+  } else if (blend_factor_.empty() || blend_factor_.size() != blank_factor_.size()) {
     return blank_factor_.clone();
+  } else {
+    factor = blank_factor_.mul(blend_factor_);
+    if (!blend_lift_.empty()) lift = blank_factor_.mul(blend_lift_);  // blanked: no light at all
   }
-  return blank_factor_.mul(blend_factor_);
+  if (factor.empty() || lift.empty()) return factor;
+  cv::Mat both;
+  cv::merge(std::vector<cv::Mat>{factor, lift}, both);
+  return both;
 }
 
 Status RenderLoop::ShowMask(const cv::Mat& mask, std::chrono::milliseconds timeout) {
@@ -193,14 +206,19 @@ Status RenderLoop::ShowMask(const cv::Mat& mask, std::chrono::milliseconds timeo
   return WaitForShown(generation, timeout);
 }
 
-Expected<int64_t> RenderLoop::ShowBlend(const cv::Mat& factor, std::chrono::milliseconds timeout) {
+Expected<int64_t> RenderLoop::ShowBlend(const cv::Mat& factor, const cv::Mat& lift,
+                                        std::chrono::milliseconds timeout) {
   if (!factor.empty() && factor.type() != CV_32FC1) {
     return InvalidArgumentError("render: a blend factor must be CV_32FC1");
+  }
+  if (!lift.empty() && (lift.type() != CV_32FC1 || lift.size() != factor.size())) {
+    return InvalidArgumentError("render: a black-level lift must be CV_32FC1 of the factor's size");
   }
   uint64_t generation = 0;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     blend_factor_ = factor.clone();
+    blend_lift_ = lift.clone();
     pending_mask_ = ComposedMask();
     generation = ++generation_;
   }
@@ -309,8 +327,13 @@ void RenderLoop::Run(std::promise<Status>* started) {
 
     Status status = OkStatus();
     if (scene) {
+      RendererOptions renderer_options = options_.renderer;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (display_gamma_ > 0) renderer_options.display_gamma = display_gamma_;
+      }
       Expected<std::unique_ptr<Renderer>> made =
-          Renderer::Create(context->get(), *scene, options_.renderer);
+          Renderer::Create(context->get(), *scene, renderer_options);
       if (!made.ok()) {
         ST_LOG(kError) << "render: " << made.status().ToString();
         std::lock_guard<std::mutex> lock(mutex_);

@@ -95,8 +95,9 @@ class RenderLoop {
   void SetTimeline(const TimelineView& timeline);
 
   // Swaps the calibration in, resumes, and waits (up to `timeout`) until a frame drawn with it
-  // is shown. Errors: the calibration's (no table_from_projector, a projector of another size),
-  // UNAVAILABLE when no frame was shown in time.
+  // is shown. A measured projector response (calibration.projector_response) sets the gamma
+  // the frames are encoded with. Errors: the calibration's (no table_from_projector, a projector of
+  // another size), UNAVAILABLE when no frame was shown in time.
   Status ShowCalibration(const UnitCalibration& calibration,
                          std::chrono::milliseconds timeout = std::chrono::seconds(10));
   // Multiplies the frame by `mask` (renderer.h SetMask; empty: none; a join's blanking) and
@@ -105,8 +106,10 @@ class RenderLoop {
                   std::chrono::milliseconds timeout = std::chrono::seconds(10));
   // The blend factor (node/blend: alpha x intensity correction, CV_32FC1 linear; empty: none),
   // multiplied with ShowMask's; waits until a frame drawn with it is shown (not held back by
-  // max_fps) and returns that frame's steady time (ns). A new calibration drops it.
-  Expected<int64_t> ShowBlend(const cv::Mat& factor,
+  // max_fps) and returns that frame's steady time (ns). A new calibration drops it. `lift`
+  // (CV_32FC1 of the same size, linear; empty: none): the black-level lift added after it
+  // (renderer.h SetMask), blanked with it.
+  Expected<int64_t> ShowBlend(const cv::Mat& factor, const cv::Mat& lift = cv::Mat(),
                               std::chrono::milliseconds timeout = std::chrono::seconds(10));
   void Suspend();
   void Resume();
@@ -146,9 +149,13 @@ class RenderLoop {
   TimelineView timeline_;
   std::optional<ProjectorView> pending_view_;
   std::optional<Scene> pending_scene_;
+  // The display gamma of the calibration shown (its measured projector response; else
+  // options_.renderer's): the renderer is made with it.
+  double display_gamma_ = 0.0;
   std::shared_ptr<const std::vector<DrapedTrack>> pending_tracks_, draped_tracks_;
   std::optional<cv::Mat> pending_mask_;
-  cv::Mat blank_factor_, blend_factor_;      // CV_32FC1 or empty; their product is the mask
+  cv::Mat blank_factor_, blend_factor_,
+      blend_lift_;                           // CV_32FC1 or empty; their product is the mask
   cv::Mat current_mask_;                     // the composed mask (re-applied to a new renderer)
   int64_t last_shown_ns_ = 0;                // steady time of the last shown frame
   cv::Mat ComposedMask() const;              // under mutex_

@@ -85,7 +85,7 @@ void main() {
 }
 )";
 
-// MODE: 0 the show, 1 white, 2 the table grid, 3 table positions (float targets).
+// MODE: 0 the show, 1 white, 2 the table grid, 3 table positions (float targets), 4 black.
 // Colours are display-encoded; u_base_colour is encoded, the light is raised to 1 / gamma in the
 // vertex shader (in shadow and in the sun; the shadow lookup mixes the two) and the mask on
 // upload. The shadow map is looked up with one nearest compare (four cost 2 ms more a frame).
@@ -96,6 +96,7 @@ uniform sampler2DShadow u_shadow;
 uniform float u_grid_spacing_m;
 uniform float u_grid_half_line_m;
 uniform sampler2D u_mask;
+uniform float u_lift_gamma;
 in vec3 v_position;
 in vec2 v_uv;
 in vec3 v_sun;
@@ -108,6 +109,8 @@ void main() {
 #endif
 #if MODE == 1
   vec3 c = vec3(1.0);
+#elif MODE == 4
+  vec3 c = vec3(0.0);
 #elif MODE == 2
   vec2 cells = v_position.xy / u_grid_spacing_m;
   vec2 off_m = abs(cells - round(cells)) * u_grid_spacing_m;
@@ -123,7 +126,11 @@ void main() {
 #endif
 #endif
 #if MASKED
-  c *= texelFetch(u_mask, ivec2(gl_FragCoord.xy), 0).r;
+  vec2 m = texelFetch(u_mask, ivec2(gl_FragCoord.xy), 0).rg;
+  c *= m.r;
+#if LIFTED
+  c = pow(pow(c, vec3(u_lift_gamma)) + m.g, vec3(1.0 / u_lift_gamma));
+#endif
 #endif
   o_colour = vec4(c, 1.0);
 }
@@ -152,12 +159,17 @@ void main() {
 )";
 constexpr const char* kOverlayFragment = R"(
 uniform sampler2D u_mask;
+uniform float u_lift_gamma;
 in vec4 v_colour;
 out vec4 o_colour;
 void main() {
   o_colour = v_colour;
 #if MASKED
-  o_colour.rgb *= texelFetch(u_mask, ivec2(gl_FragCoord.xy), 0).r;
+  vec2 m = texelFetch(u_mask, ivec2(gl_FragCoord.xy), 0).rg;
+  o_colour.rgb *= m.r;
+#if LIFTED
+  o_colour.rgb = pow(pow(o_colour.rgb, vec3(u_lift_gamma)) + m.g, vec3(1.0 / u_lift_gamma));
+#endif
 #endif
 }
 )";
@@ -168,6 +180,7 @@ constexpr const char* kWarpFragment = R"(
 uniform sampler2D u_image;
 uniform sampler2D u_source;
 uniform sampler2D u_mask;
+uniform float u_lift_gamma;
 out vec4 o_colour;
 void main() {
   ivec2 p = ivec2(gl_FragCoord.xy);
@@ -179,7 +192,11 @@ void main() {
   vec3 c = texelFetch(u_image, p, 0).rgb;
 #endif
 #if MASKED
-  c *= texelFetch(u_mask, p, 0).r;
+  vec2 m = texelFetch(u_mask, p, 0).rg;
+  c *= m.r;
+#if LIFTED
+  c = pow(pow(c, vec3(u_lift_gamma)) + m.g, vec3(1.0 / u_lift_gamma));
+#endif
 #endif
   o_colour = vec4(c, 1.0);
 }
@@ -583,38 +600,60 @@ Status Renderer::SetView(const ProjectorView& view) {
 Status Renderer::SetMask(const cv::Mat& mask) {
   ST_RETURN_IF_ERROR(context_->MakeCurrent());
   if (mask.empty()) {
-    has_mask_ = false;
+    has_mask_ = has_lift_ = false;
     return OkStatus();
   }
-  if (mask.size() != size_ || (mask.type() != CV_32FC1 && mask.type() != CV_8UC1)) {
+  if (mask.size() != size_ ||
+      (mask.type() != CV_32FC1 && mask.type() != CV_8UC1 && mask.type() != CV_32FC2)) {
     return InvalidArgumentError(
-        "renderer: a mask must be CV_32FC1 or CV_8UC1 of the output's "
+        "renderer: a mask must be CV_32FC1, CV_8UC1 or CV_32FC2 (factor, lift) of the output's "
         "size " +
         std::to_string(size_.width) + "x" + std::to_string(size_.height));
   }
-  cv::Mat factor;
+  cv::Mat factor, lift;
   if (mask.type() == CV_8UC1) {
     mask.convertTo(factor, CV_32F, 1.0 / 255.0);
+  } else if (mask.type() == CV_32FC2) {
+    cv::Mat channels[2];
+    cv::split(mask, channels);
+    factor = channels[0];
+    lift = channels[1];
   } else {
     factor = mask.clone();
   }
   cv::max(cv::min(factor, 1.0), 0.0, factor);
   // Encoded once here (the colour note in renderer.h); a float target holds linear values.
   if (!context_->float_output()) cv::pow(factor, 1.0 / options_.display_gamma, factor);
-  const cv::Mat gl_rows = FlippedContinuous(factor);
+  // The lift stays linear (added in linear light in the shader).
+  double lift_max = 0.0;
+  if (lift.empty()) {
+    lift = cv::Mat::zeros(factor.size(), CV_32FC1);
+  } else {
+    cv::max(cv::min(lift, 1.0), 0.0, lift);
+    cv::minMaxLoc(lift, nullptr, &lift_max);
+  }
+  cv::Mat both;
+  cv::merge(std::vector<cv::Mat>{factor, lift}, both);
+  const cv::Mat gl_rows = FlippedContinuous(both);
   if (!mask_texture_) {
     // 16-bit normalized (a float output keeps the float values for tests).
-    mask_texture_ = MakeTexture2D(context_->float_output() ? GL_R32F : GL_R16, size_.width,
-                                  size_.height, GL_RED, GL_FLOAT, gl_rows.data, GL_NEAREST);
+    mask_texture_ = MakeTexture2D(context_->float_output() ? GL_RG32F : GL_RG16, size_.width,
+                                  size_.height, GL_RG, GL_FLOAT, gl_rows.data, GL_NEAREST);
   } else {
     glBindTexture(GL_TEXTURE_2D, mask_texture_);
     glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
-    glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, size_.width, size_.height, GL_RED, GL_FLOAT,
+    glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, size_.width, size_.height, GL_RG, GL_FLOAT,
                     gl_rows.data);
   }
   has_mask_ = true;
+  has_lift_ = lift_max > 0.0;
   if (!options_.fold_prewarp) ST_RETURN_IF_ERROR(EnsureIdealTarget());
   return CheckGl("setting the mask");
+}
+
+float Renderer::LiftGamma() const {
+  // Encoded output: the lift is added in linear light; a float target is linear already.
+  return context_->float_output() ? 1.0f : static_cast<float>(options_.display_gamma);
 }
 
 Status Renderer::EnsureIdealTarget() {
@@ -766,13 +805,15 @@ void Renderer::SetDistortionUniforms(unsigned int program, bool distort) {
 
 Expected<unsigned int> Renderer::Variant(ProgramKind kind, int mode, bool textured, bool sun,
                                          bool masked, bool distort) {
-  const int key =
-      static_cast<int>(kind) | mode << 2 | textured << 4 | sun << 5 | masked << 6 | distort << 7;
+  const bool lifted = masked && has_lift_;
+  const int key = static_cast<int>(kind) | mode << 2 | textured << 5 | sun << 6 | masked << 7 |
+                  distort << 8 | lifted << 9;
   if (auto it = variants_.find(key); it != variants_.end()) return it->second;
   const std::string defines = "#version 330 core\n#define MODE " + std::to_string(mode) +
                               "\n#define TEXTURED " + std::to_string(textured) + "\n#define SUN " +
                               std::to_string(sun) + "\n#define MASKED " + std::to_string(masked) +
-                              "\n#define DISTORT " + std::to_string(distort) + "\n";
+                              "\n#define DISTORT " + std::to_string(distort) + "\n#define LIFTED " +
+                              std::to_string(lifted) + "\n";
   std::string vertex, fragment;
   switch (kind) {
     case ProgramKind::kScene:
@@ -813,6 +854,7 @@ Status Renderer::DrawScene(const RenderContent& content, unsigned int target, bo
   const int mode = content.debug_positions                      ? 3
                    : content.pattern == TestPattern::kWhite     ? 1
                    : content.pattern == TestPattern::kTableGrid ? 2
+                   : content.pattern == TestPattern::kBlack     ? 4
                                                                 : 0;
   const bool sun = mode == 0 && content.sun_direction_in_table.has_value();
   // The sun below the horizon lights nothing: ambient only.
@@ -856,6 +898,7 @@ Status Renderer::DrawScene(const RenderContent& content, unsigned int target, bo
       glUniform1f(loc("u_inverse_gamma"), static_cast<float>(1.0 / options_.display_gamma));
       SetDistortionUniforms(current, distort);
       glUniform1i(loc("u_mask"), 2);
+      glUniform1f(loc("u_lift_gamma"), LiftGamma());
       glUniform1f(loc("u_grid_spacing_m"), static_cast<float>(options_.grid_spacing_m));
       glUniform1f(loc("u_grid_half_line_m"), static_cast<float>(0.5 * options_.grid_line_width_m));
       glUniform1i(loc("u_texture"), 0);
@@ -897,6 +940,7 @@ Status Renderer::DrawOverlay(const RenderContent& content, bool fold, FrameStats
                      glm::value_ptr(clip));
   SetDistortionUniforms(*program, distort);
   glUniform1i(glGetUniformLocation(*program, "u_mask"), 2);
+  glUniform1f(glGetUniformLocation(*program, "u_lift_gamma"), LiftGamma());
   glActiveTexture(GL_TEXTURE2);
   glBindTexture(GL_TEXTURE_2D, mask_texture_);
   glActiveTexture(GL_TEXTURE0);
@@ -918,6 +962,7 @@ Status Renderer::DrawWarp() {
   glUniform1i(loc("u_image"), 0);
   glUniform1i(loc("u_source"), 1);
   glUniform1i(loc("u_mask"), 2);
+  glUniform1f(loc("u_lift_gamma"), LiftGamma());
   glActiveTexture(GL_TEXTURE1);
   glBindTexture(GL_TEXTURE_2D, source_texture_);
   glActiveTexture(GL_TEXTURE2);

@@ -92,7 +92,9 @@ class Renderer {
   bool has_view() const { return has_view_; }
   // Per output pixel factor in [0, 1] (CV_32FC1 or CV_8UC1 / 255 of the context's size, row 0
   // at the top), applied in linear light: the blend mask times the intensity correction times
-  // a join's blanking. Empty: identity (the warp pass may be skipped).
+  // a join's blanking. Empty: identity (the warp pass may be skipped). CV_32FC2: (factor,
+  // lift): the lift, linear, is added after the factor (black-level matching, docs/blend.md:
+  // out = encode(decode(c) factor + lift)).
   Status SetMask(const cv::Mat& mask);
 
   // Draws one frame into the context's output framebuffer (not presented: GlContext::Present).
@@ -111,6 +113,7 @@ class Renderer {
   void SetDistortionUniforms(unsigned int program, bool distort);
   enum class ProgramKind { kScene = 0, kOverlay = 1, kWarp = 2 };
   // The program specialised for these features (compiled on first use, then cached).
+  float LiftGamma() const;  // the exponent the shaders add the lift under
   Expected<unsigned int> Variant(ProgramKind kind, int mode, bool textured, bool sun, bool masked,
                                  bool distort);
   Status DrawShadow(const Eigen::Vector3d& sun);
@@ -148,7 +151,8 @@ class Renderer {
   unsigned int source_texture_ = 0, mask_texture_ = 0, pattern_texture_ = 0;
   unsigned int floor_texture_ = 0;
   bool has_view_ = false, has_mask_ = false;
-  cv::Mat mask_linear_;  // the factor as given (CV_32FC1), for the unfolded warp pass
+  bool has_lift_ = false;  // the mask carries a black-level lift (SetMask, CV_32FC2)
+  cv::Mat mask_linear_;    // the factor as given (CV_32FC1), for the unfolded warp pass
   ProjectorView view_;
   std::optional<Eigen::Vector3d> shadow_sun_;  // the sun of the current shadow map
   Eigen::Matrix4d sun_clip_from_table_ = Eigen::Matrix4d::Identity();

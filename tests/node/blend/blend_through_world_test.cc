@@ -36,6 +36,11 @@ constexpr double kUnblendedTableStepPct = 20.0;
 constexpr double kStepSpacing_m = 0.005;
 constexpr int kTopViewWidth_px = 1600;  // ~1 mm per pixel over the sandtable scene
 constexpr double kDisplayGamma = 2.2;
+// Black-level matching: the black steps (footprint and shadow edges, where black levels add up
+// over the ambient) must drop at least this much in the 99th percentile; what stays are 8-bit
+// contours of the lift (a code near value 20 is ~10 % of the lift).
+constexpr double kBlackStepReduction = 3.0;
+constexpr double kMaxLift = 0.05;
 
 struct Fixture {
   sim::Site site;
@@ -252,6 +257,97 @@ TEST(BlendThroughWorldTest, NoVisibleStepOnTableWallsRoofsOrShadows) {
   EXPECT_GT(after.wall.pairs, 1000);
   EXPECT_LT(after.wall.p99_pct, kWallStepP99Pct);
   EXPECT_LT(after.wall.p99_pct, before.wall.max_pct);
+}
+
+// Black through the full pipeline: each projector's black level adds up where footprints
+// overlap; with the lift (Blender::Lift, every unit raised to the site's highest black light) the
+// table's black is flat but for the lift's 8-bit contours. Measured where raw white lights the
+// table (outside every footprint nothing can be lifted).
+TEST(BlendThroughWorldTest, BlackMatchFlattensTheBlackLevel) {
+  Fixture f = MakeFixture();
+  ASSERT_TRUE(f.world);
+  BlendOptions options;
+  std::map<NodeId, DistanceField> fields;
+  std::map<NodeId, std::unique_ptr<Blender>> blenders;
+  std::map<NodeId, double> black;
+  for (const sim::UnitSpec& unit : f.site.units) {
+    const Rigid3d projector_from_table = unit.projector.table_from_projector.Inverse();
+    fields[unit.id] = ComputeDistanceField(unit.id, unit.projector.model, projector_from_table,
+                                           *f.caster, options);
+    blenders[unit.id] = std::make_unique<Blender>(
+        CastProjectorSurface(unit.projector.model, projector_from_table, *f.caster, options),
+        fields[unit.id], f.caster.get(), options);
+    black[unit.id] = unit.projector.black_level;
+  }
+  double target = 0.0;
+  for (auto& [id, blender] : blenders) {
+    for (const auto& [other, field] : fields) {
+      if (other != id) blender->SetNeighbour(field);
+    }
+    target = std::max(target, blender->BlackPeak(black.at(id), black));
+  }
+  ASSERT_GT(target, 0.0);
+  Expected<sim::View> view = sim::View::TopOver(f.scene->Bounds(), kTopViewWidth_px, 0);
+  ASSERT_TRUE(view.ok());
+  const Eigen::AlignedBox3d b = f.scene->Bounds();
+  // The display area: table pixels raw white lights (the black is measured inside it; outside
+  // every footprint nothing can be lifted).
+  for (const sim::UnitSpec& unit : f.site.units) {
+    ASSERT_TRUE(f.world->SetProjectorUniform(unit.id, 255).ok());
+  }
+  Expected<std::vector<float>> white = f.world->RenderLuminanceLit(*view, {});
+  ASSERT_TRUE(white.ok());
+  const cv::Mat lit_white =
+      cv::Mat(view->height_px(), view->width_px(), CV_32FC1, white->data()) > f.lit_nits;
+  auto black_steps = [&]() {
+    Expected<std::vector<float>> lum = f.world->RenderLuminanceLit(*view, {});
+    EXPECT_TRUE(lum.ok());
+    cv::Mat luminance(view->height_px(), view->width_px(), CV_32FC1, lum->data());
+    luminance = luminance.clone();
+    cv::Mat ids = sim::TopViewFaceIds(*f.caster, f.faces, b.min().head<2>(), b.max().head<2>(),
+                                      luminance.size());
+    ids.setTo(-1, lit_white == 0);
+    const cv::Mat straddled = sim::TopViewStraddled(*f.caster, *f.straddle, b.min().head<2>(),
+                                                    b.max().head<2>(), luminance.size());
+    const int spacing_px = static_cast<int>(
+        std::lround(kStepSpacing_m / ((b.max().x() - b.min().x()) / luminance.cols)));
+    cv::Mat over;
+    sim::StepStats steps = sim::MeasureImageSteps(luminance, ids, f.faces, sim::SurfaceKind::kTable,
+                                                  spacing_px, 0.0, &over, straddled);
+    if (const char* dir = std::getenv("SANDTABLE_BLEND_DEBUG_DIR")) {
+      static int n = 0;
+      cv::Mat shown;
+      double lo = 0, hi = 0;
+      cv::minMaxLoc(luminance, &lo, &hi);
+      std::cout << "black luminance " << lo << " .. " << hi << " nits\n";
+      cv::Mat(luminance / 12.0).convertTo(shown, CV_8UC1, 255.0);
+      cv::imwrite(std::string(dir) + "/black" + std::to_string(n) + ".png", shown);
+      cv::imwrite(std::string(dir) + "/black_over" + std::to_string(n++) + ".png", over);
+    }
+    return steps;
+  };
+  for (const sim::UnitSpec& unit : f.site.units) {
+    ASSERT_TRUE(f.world->SetProjectorUniform(unit.id, 0).ok());
+  }
+  const sim::StepStats before = black_steps();
+  double lift_max = 0.0;
+  for (auto& [id, blender] : blenders) {
+    const cv::Mat lift = blender->Lift(target, black.at(id), black, kMaxLift);
+    double most = 0.0;
+    cv::minMaxLoc(lift, nullptr, &most);
+    lift_max = std::max(lift_max, most);
+    ASSERT_TRUE(f.world->SetProjectorFrame(id, Encode(lift)).ok());
+  }
+  const sim::StepStats after = black_steps();
+  std::cout << "black: target " << target << " / m^2, lift at most " << lift_max
+            << "; table p99 step " << before.p99_pct << " % -> " << after.p99_pct << " %, max "
+            << before.max_pct << " % -> " << after.max_pct << " % (at pixel "
+            << after.max_at.head<2>().transpose() << ")\n";
+  EXPECT_GT(before.pairs, 1000000);
+  EXPECT_GT(lift_max, 0.0);
+  EXPECT_LE(lift_max, kMaxLift * (1 + 1e-6));
+  EXPECT_LT(after.p99_pct * kBlackStepReduction, before.p99_pct);
+  EXPECT_LT(after.max_pct, before.max_pct);
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
@@ -306,6 +307,45 @@ TEST(RendererTest, MaskMultipliesInLinearLight) {
   EXPECT_NEAR(image.at<cv::Vec3b>(left)[0], 186, 1);
 }
 
+// Black-level matching: a (factor, lift) mask adds the lift in linear light after the factor,
+// in the pre-warp pass and folded into the scene pass alike; "black" through the pipeline shows
+// the lift alone.
+TEST(RendererTest, MaskLiftAddsInLinearLight) {
+  std::unique_ptr<GlContext> context = MakeContext();
+  ASSERT_TRUE(context);
+  for (const bool fold : {false, true}) {
+    SCOPED_TRACE(fold ? "folded" : "pre-warp pass");
+    RendererOptions options;
+    options.fold_prewarp = fold;
+    std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), /*distortion=*/false, options);
+    ASSERT_TRUE(renderer);
+    cv::Mat factor(kH, kW, CV_32FC1, cv::Scalar(0.5)), lift(kH, kW, CV_32FC1, cv::Scalar(0.0));
+    lift.colRange(0, kW / 2).setTo(0.01);
+    cv::Mat mask;
+    cv::merge(std::vector<cv::Mat>{factor, lift}, mask);
+    ASSERT_TRUE(renderer->SetMask(mask).ok());
+    const cv::Point left = PixelOf({-0.4, -0.3, 0.0}, false);
+    const cv::Point right = PixelOf({0.4, -0.3, 0.0}, false);
+    ASSERT_LT(left.x, kW / 2);
+    ASSERT_GE(right.x, kW / 2);
+    RenderContent content;
+    content.pattern = TestPattern::kWhite;
+    cv::Mat image = RenderToImage(context.get(), renderer.get(), content);
+    // 255 (0.5 + 0.01)^(1 / 2.2) = 188.1 with the lift, 255 x 0.5^(1 / 2.2) = 186.1 without.
+    EXPECT_NEAR(image.at<cv::Vec3b>(left)[0], 188, 1);
+    EXPECT_NEAR(image.at<cv::Vec3b>(right)[0], 186, 1);
+    content.pattern = TestPattern::kBlack;
+    image = RenderToImage(context.get(), renderer.get(), content);
+    // 255 x 0.01^(1 / 2.2) = 31.7; no lift: 0.
+    EXPECT_NEAR(image.at<cv::Vec3b>(left)[0], 32, 1);
+    EXPECT_EQ(image.at<cv::Vec3b>(right), cv::Vec3b(0, 0, 0));
+    // A mask without a lift again: no lift anywhere.
+    ASSERT_TRUE(renderer->SetMask(factor).ok());
+    image = RenderToImage(context.get(), renderer.get(), content);
+    EXPECT_EQ(image.at<cv::Vec3b>(left), cv::Vec3b(0, 0, 0));
+  }
+}
+
 TEST(RendererTest, GoldenImagesOfEachPass) {
   std::unique_ptr<GlContext> context = MakeContext();
   ASSERT_TRUE(context);
@@ -350,6 +390,7 @@ TEST(RendererTest, RefusesAViewOfAnotherSizeAndABadMask) {
   EXPECT_EQ(refused.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(refused.message().find("640x400"), std::string::npos) << refused.message();
   EXPECT_EQ(renderer->SetMask(cv::Mat(10, 10, CV_32FC1)).code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(renderer->SetMask(cv::Mat(kH, kW, CV_32FC3)).code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(CreateEglContext(cv::Size(0, 10)).status().code(), StatusCode::kInvalidArgument);
 }
 
