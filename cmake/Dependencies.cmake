@@ -29,6 +29,9 @@ endif()
 # their pkg-config files (Debian libminizip-dev, libtinyxml2-dev).
 pkg_check_modules(MINIZIP REQUIRED IMPORTED_TARGET minizip)     # PkgConfig::MINIZIP
 pkg_check_modules(TINYXML2 REQUIRED IMPORTED_TARGET tinyxml2)   # PkgConfig::TINYXML2
+# The lab's report.html from its report.md (GitHub-flavoured tables): cmark-gfm, through its
+# pkg-config file (Debian libcmark-gfm-dev, libcmark-gfm-extensions-dev).
+pkg_check_modules(CMARK_GFM REQUIRED IMPORTED_TARGET libcmark-gfm)  # PkgConfig::CMARK_GFM
 
 if(SANDTABLE_BUILD_TESTS)
   find_package(GTest REQUIRED)                        # GTest::gtest, GTest::gmock

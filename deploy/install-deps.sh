@@ -25,6 +25,8 @@ PACKAGES=(
   libcli11-dev libcpp-httplib-dev libnanoflann-dev
   # MPCDI export: ZIP container, XML descriptor
   libminizip-dev libtinyxml2-dev
+  # the lab's report.html (markdown with tables to HTML)
+  libcmark-gfm-dev libcmark-gfm-extensions-dev
   # tests, benchmarks, plots
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox python3
 )

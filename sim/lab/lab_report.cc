@@ -1,5 +1,6 @@
 #include "sim/lab/lab_report.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <sstream>
@@ -7,6 +8,7 @@
 #include "common/base/file_io.h"
 #include "common/io/json_reader.h"
 #include "sim/lab/child_process.h"
+#include "sim/lab/lab_html.h"
 
 namespace sandtable::sim {
 
@@ -223,6 +225,88 @@ json LabReportJson(const LabResult& r) {
   return out;
 }
 
+namespace {
+
+// The one-screen summary: every headline figure beside its target (the issues' acceptance
+// numbers; "-" where a figure has none), pass or fail.
+std::string SummaryMarkdown(const LabResult& r) {
+  struct Row {
+    std::string figure, value, target, verdict;
+  };
+  std::vector<Row> rows;
+  auto add = [&](const std::string& figure, double value, int digits, const std::string& unit,
+                 double target, bool below) {
+    Row row{figure, Fixed(value, digits) + unit, "-", "-"};
+    if (target > 0) {
+      row.target = (below ? "< " : "> ") + Fixed(target, digits) + unit;
+      row.verdict = (below ? value < target : value > target) ? "pass" : "**fail**";
+    }
+    rows.push_back(row);
+  };
+  if (r.registration) {
+    const RegistrationReport& reg = *r.registration;
+    add("registration rms (site)", reg.site.all.rms_mm, 3, " mm", 0, true);
+    add("registration max (site)", reg.site.all.max_mm, 2, " mm", 0, true);
+  }
+  if (r.self_calibration.contains("runner_report")) {
+    const json& rr = r.self_calibration["runner_report"];
+    add("modeled projection, whole site", rr.value("device_time_s", 0.0), 2, " s", 0, true);
+    double per_projector = 0.0;
+    if (rr.contains("projectors") && rr["projectors"].is_object()) {
+      for (const auto& [id, p] : rr["projectors"].items()) {
+        per_projector = std::max(per_projector, p.value("device_time_s", 0.0));
+      }
+      add("modeled projection per projector (most)", per_projector, 3, " s", 1.0, true);
+    }
+    add("calibration round, wall time", rr.value("wall_s", 0.0), 1, " s", 0, true);
+  }
+  if (r.render.contains("frame_ms_p50")) {
+    add("frame time p50 (llvmpipe)", r.render.value("frame_ms_p50", 0.0), 1, " ms", 16, true);
+    const double floor = r.render.value("floor_ms", 0.0);
+    if (floor > 0) {
+      add("frame time p50 / floor", r.render.value("frame_ms_p50", 0.0) / floor, 2, "x", 2, true);
+    }
+  }
+  if (r.render.contains("timeline_skew_ms_p99")) {
+    add("timeline skew p99", r.render.value("timeline_skew_ms_p99", 0.0), 2, " ms", 0, true);
+  }
+  const json& p = r.photometric;
+  if (p.contains("max_step_pct_per_5mm")) {
+    const json& m = p["max_step_pct_per_5mm"];
+    add("largest step per 5 mm, table", m.value("table", 0.0), 2, " %", 1.5, true);
+    add("largest step per 5 mm, walls", m.value("walls", 0.0), 2, " %", 2, true);
+    if (p.contains("p99_step_pct_per_5mm")) {
+      add("p99 step per 5 mm, table", p["p99_step_pct_per_5mm"].value("table", 0.0), 2, " %", 0,
+          true);
+      add("p99 step per 5 mm, walls", p["p99_step_pct_per_5mm"].value("walls", 0.0), 2, " %", 0,
+          true);
+    }
+    add("table uniformity min/max", p.value("uniformity_min_over_max", 0.0), 3, "", 0, true);
+  }
+  if (p.contains("black_step_pct")) {
+    add("black level step, table", p.value("black_step_pct", 0.0), 1, " %", 0, true);
+  }
+  if (p.contains("gamma_error"))
+    add("gamma error (largest)", p.value("gamma_error", 0.0), 3, "", 0, true);
+  if (r.live.contains("reblend_ms_max")) {
+    add("re-blend after a kill", r.live.value("reblend_ms_max", 0.0), 0, " ms", 100, true);
+  }
+  if (r.live.contains("join_reblend_ms")) {
+    add("re-blend after a join", r.live.value("join_reblend_ms", 0.0), 0, " ms", 0, true);
+  }
+  if (rows.empty()) return "";
+  std::ostringstream md;
+  md << "## Summary\n\n| figure | value | target | |\n| --- | --- | --- | --- |\n";
+  for (const Row& row : rows) {
+    md << "| " << row.figure << " | " << row.value << " | " << row.target << " | " << row.verdict
+       << " |\n";
+  }
+  md << "\n";
+  return md.str();
+}
+
+}  // namespace
+
 std::string LabReportMarkdown(const LabResult& r) {
   std::ostringstream md;
   md << "# Site lab report: " << r.site_name << " / " << r.scene_label << "\n\n";
@@ -237,6 +321,7 @@ std::string LabReportMarkdown(const LabResult& r) {
       md << "```\n\n";
     }
   }
+  md << SummaryMarkdown(r);
   md << "## Site\n\n| site | units | scene | triangles | seed |\n| --- | --- | --- | --- | --- |\n"
      << "| " << r.site_name << " (`" << r.site_label << "`) | " << r.num_units << " | `"
      << r.scene_label << "` | " << r.scene_triangles << " | " << r.seed << " |\n\n";
@@ -473,7 +558,25 @@ std::string LabReportMarkdown(const LabResult& r) {
       md << "![the show from above](" << rd["show_top_png"].get<std::string>() << ")\n\n";
     }
   }
-  if (!r.photometric.empty()) {
+  if (!r.photometric.empty() && r.photometric.contains("response")) {
+    const json& p = r.photometric;
+    md << "## Projector response (docs/calibration.md, \"Response\")\n\n"
+       << "Each projector's gamma and black level as its own camera measured them in the "
+          "pre-pass (grey levels, then the light cut), against the world's truth. The renderer "
+          "encodes with the measured gamma.\n\n"
+       << "| unit | gamma | true | black level | true |\n| --- | --- | --- | --- | --- |\n";
+    for (const auto& [id, u] : p["response"].items()) {
+      md << "| " << id << " | " << Fixed(u.value("gamma", 0.0), 3) << " | "
+         << Fixed(u.value("true_gamma", 0.0), 3) << " | "
+         << (u.contains("black_level") ? Fixed(u.value("black_level", 0.0) * 100.0, 3) + " %"
+                                       : std::string("not measured"))
+         << " | " << Fixed(u.value("true_black_level", 0.0) * 100.0, 3) << " % |\n";
+    }
+    md << "\nLargest gamma error " << Fixed(p.value("gamma_error", 0.0), 3)
+       << "; largest black level error " << Fixed(p.value("black_level_error", 0.0) * 100.0, 4)
+       << " % of peak.\n\n";
+  }
+  if (!r.photometric.empty() && r.photometric.contains("table")) {
     const json& p = r.photometric;
     auto steps = [&](const char* key) {
       if (!p.contains(key)) return std::string("-");
@@ -493,7 +596,15 @@ std::string LabReportMarkdown(const LabResult& r) {
        << "| table | " << steps("table") << " |\n"
        << "| roofs (from above) | " << steps("roofs_from_above") << " |\n"
        << "| roofs (lattice) | " << steps("roofs") << " |\n"
-       << "| walls (lattice) | " << steps("walls") << " |\n\n"
+       << "| walls (lattice) | " << steps("walls") << " |\n"
+       << "| table, every projector black | " << steps("black") << " |\n\n"
+       << "The black row: every projector showing black through the full pipeline; where "
+          "footprints overlap their black levels add up over the site's ambient light "
+          "(`photometric.black_step_pct`), "
+       << (p.value("black_match", false)
+               ? "matched: each node raises its black where fewer projectors overlap "
+                 "(`--black-match on`).\n\n"
+               : "not matched (`--black-match off`).\n\n")
        << "Table uniformity (min / max): " << Fixed(p.value("uniformity_min_over_max", 0.0), 3)
        << " blended, " << Fixed(p.value("uniformity_unblended", 0.0), 3)
        << " raw white. Level: " << Fixed(p.value("level_per_m2", 0.0), 4)
@@ -529,7 +640,12 @@ std::string LabReportMarkdown(const LabResult& r) {
 Status WriteLabReport(const LabResult& result, const std::string& out_dir) {
   const std::filesystem::path dir(out_dir);
   ST_RETURN_IF_ERROR(io::WriteJsonFile(LabReportJson(result), (dir / "report.json").string()));
-  return WriteFileAtomically(dir / "report.md", LabReportMarkdown(result));
+  const std::string markdown = LabReportMarkdown(result);
+  ST_RETURN_IF_ERROR(WriteFileAtomically(dir / "report.md", markdown));
+  Expected<std::string> html = MarkdownToHtmlPage(
+      markdown, dir.string(), "Site lab report: " + result.site_name + " / " + result.scene_label);
+  if (!html.ok()) return html.status();
+  return WriteFileAtomically(dir / "report.html", *html);
 }
 
 }  // namespace sandtable::sim

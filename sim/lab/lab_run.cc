@@ -4,7 +4,9 @@
 
 #include <Eigen/Geometry>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <filesystem>
 #include <future>
@@ -384,6 +386,7 @@ class LabRun {
         argv.insert(argv.end(), {"--render", "off"});
       } else {
         if (options_.blend == "off") argv.insert(argv.end(), {"--blend", "off"});
+        if (options_.black_match == "on") argv.insert(argv.end(), {"--black-match", "on"});
         argv.insert(argv.end(),
                     {"--timeline", tracks_path_, "--render-max-fps",
                      std::to_string(options_.render_max_fps), "--render-log",
@@ -827,10 +830,12 @@ class LabRun {
           },
           out);
     };
-    Views before, after;
-    if (!top("raw-white", &before) || !top("white", &after)) return false;
-    if (!before.view || !after.view) {
-      return FailedWith("blend", "top view: " + before.error + after.error);
+    Views before, after, black;
+    if (!top("raw-white", &before) || !top("black", &black) || !top("white", &after)) {
+      return false;
+    }
+    if (!before.view || !after.view || !black.view) {
+      return FailedWith("blend", "top view: " + before.error + black.error + after.error);
     }
     // 3. Walls and roofs: the truth at lattice points, with white still shown.
     struct Measured {
@@ -841,7 +846,7 @@ class LabRun {
     Measured measured;
     if (!Watched<Measured>(
             "blend",
-            [this, &before, &after] {
+            [this, &before, &after, &black] {
               Measured m;
               const auto start = std::chrono::steady_clock::now();
               auto scene = std::make_shared<const Scene>(scene_);
@@ -876,6 +881,17 @@ class LabRun {
               const StepStats table_before =
                   MeasureImageSteps(b.luminance, ids, faces, SurfaceKind::kTable, spacing_px, lit,
                                     nullptr, straddled);
+              // Every projector black: where footprints overlap their black levels add up (on top
+              // of the site's ambient light). Measured on the table the blended white lights (the
+              // display area; outside every footprint nothing can be lifted), every pixel of it.
+              cv::Mat black_ids = ids.clone();
+              black_ids.setTo(-1, a.luminance <= lit);
+              const StepStats black_table =
+                  MeasureImageSteps(black.view->luminance, black_ids, faces, SurfaceKind::kTable,
+                                    spacing_px, 0.0, nullptr, straddled);
+              p["black"] = black_table.ToJson();
+              p["black_step_pct"] = black_table.max_pct;
+              p["black_match"] = options_.black_match == "on";
               p["table"] = table.ToJson();
               p["roofs_from_above"] = roof_top.ToJson();
               p["table_unblended"] = table_before.ToJson();
@@ -1016,6 +1032,27 @@ class LabRun {
       }
       sources.insert(calibration->source);
       if (calibration->table_from_model) units_have_model_ = true;
+      // The projector's response as its own camera measured it, against the world's.
+      if (calibration->projector_response) {
+        const ProjectorResponseRecord& r = *calibration->projector_response;
+        json response = {{"gamma", r.gamma},
+                         {"true_gamma", unit.projector.gamma},
+                         {"gamma_error", r.gamma - unit.projector.gamma},
+                         {"true_black_level", unit.projector.black_level}};
+        if (r.black_level >= 0) {
+          response["black_level"] = r.black_level;
+          response["black_level_error"] = r.black_level - unit.projector.black_level;
+        }
+        if (!result_.photometric.is_object()) result_.photometric = json::object();
+        json& p = result_.photometric;
+        p["response"][std::to_string(unit.id)] = response;
+        p["gamma_error"] =
+            std::max(p.value("gamma_error", 0.0), std::abs(r.gamma - unit.projector.gamma));
+        if (r.black_level >= 0) {
+          p["black_level_error"] = std::max(p.value("black_level_error", 0.0),
+                                            std::abs(r.black_level - unit.projector.black_level));
+        }
+      }
       estimates.push_back({unit.id, calibration->projector, *calibration->table_from_projector,
                            calibration->table_from_model.value_or(Rigid3d::Identity())});
     }

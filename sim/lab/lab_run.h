@@ -86,6 +86,8 @@ struct LabRunOptions {
   // overlapping neighbours; the lab measures the luminance from the world's truth, every node
   // showing raw white (before) and white through the full pipeline (after). "off": no blend.
   std::string blend = "on";
+  // Black-level matching (docs/blend.md): "on" passes --black-match on to the nodes.
+  std::string black_match = "off";
   std::string command_line;  // for the report
   Status Check() const;
 };

@@ -99,6 +99,10 @@ static int Run(int argc, char** argv) {
   run->add_option("--blend", options.blend,
                   "the nodes' blend: on (measured: raw white against blended white) or off")
       ->check(CLI::IsMember({"on", "off"}));
+  run->add_option("--black-match", options.black_match,
+                  "the nodes raise the black where fewer projectors overlap (measured: "
+                  "photometric.black_step_pct): on or off")
+      ->check(CLI::IsMember({"on", "off"}));
   run->add_option("--show-s", options.show_s, "how long the show plays (s)")
       ->check(CLI::Range(0.0, 3600.0));
   run->add_option("--render-max-fps", options.render_max_fps, "frames a second per node at most")
