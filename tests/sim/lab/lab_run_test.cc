@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iterator>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -130,6 +131,11 @@ constexpr double kUnblendedStep_pct = 20.0;
 // An MPCDI alpha map of the blend on sandtable-3 averages ~0.3 (three projectors, each dimmed
 // to the site's common level); ones would average 1.
 constexpr double kBlendedAlphaMeanAtMost = 0.9;
+// Each projector's response through its own camera (docs/calibration.md, "Response"):
+// node_calibration_projector_response_test bounds the fit itself tighter; here the whole path
+// (the pre-pass frames, mute, the node's slots) against the world's 2.2 and 0.2 %.
+constexpr double kGammaError = 0.05;
+constexpr double kBlackLevelError = 1e-3;  // fraction of peak
 
 // Also the restart: the saved calibrations checked and kept, then one unit moved and the site
 // calibrated again.
@@ -230,6 +236,29 @@ TEST_F(LabRunTest, Sandtable3SelfCalibratesAndFindsTheModel) {
   for (const char* picture : {"before", "after", "steps_over_1pct"}) {
     EXPECT_TRUE(std::filesystem::exists(dir_ / p["pictures"][picture].get<std::string>()))
         << picture;
+  }
+  // Black levels add up where footprints overlap: a step on the table, measured.
+  ASSERT_TRUE(p.contains("black")) << p.dump();
+  EXPECT_GT(p["black"]["pairs"].get<int>(), 1000000);
+  EXPECT_GT(p["black_step_pct"].get<double>(), 0.0);
+  // The response each projector's camera measured, in each unit's file and the report.
+  ASSERT_TRUE(p.contains("response")) << p.dump();
+  for (const char* id : {"0", "1", "2"}) {
+    ASSERT_TRUE(p["response"].contains(id)) << p["response"].dump();
+    const json& r = p["response"][id];
+    EXPECT_LT(std::abs(r["gamma_error"].get<double>()), kGammaError) << r.dump();
+    ASSERT_TRUE(r.contains("black_level_error")) << r.dump();
+    EXPECT_LT(std::abs(r["black_level_error"].get<double>()), kBlackLevelError) << r.dump();
+  }
+  EXPECT_LT(p["gamma_error"].get<double>(), kGammaError);
+  // The one-page HTML report: the markdown's tables rendered, every picture inlined.
+  {
+    std::ifstream in(dir_ / "report.html");
+    const std::string html((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_NE(html.find("<table>"), std::string::npos);
+    EXPECT_NE(html.find("Summary"), std::string::npos);
+    EXPECT_NE(html.find("<img src=\"data:image/png;base64,"), std::string::npos);
+    EXPECT_EQ(html.find("<img src=\"blend_"), std::string::npos) << "a picture not inlined";
   }
 
   // Restart with the saved calibrations: each checked in two frames, no round, the same figures.
