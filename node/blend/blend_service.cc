@@ -203,8 +203,13 @@ void BlendService::SetCalibration(const UnitCalibration& calibration, uint64_t r
         } else {
           for (const auto& [peer, info] : node.peers()) to.insert(peer);
         }
+        // And to every unit whose field came in before the cast was done: it asked for this
+        // one then, when there was none to answer with (its list of overlapping units may not
+        // hold this unit: it would wait for ever).
+        for (const auto& [unit, field] : fields_) to.insert(unit);
         for (NodeId peer : to) {
-          if (peer != id_) SendShare(peer, /*with_field=*/true, /*answer=*/true, node);
+          if (peer != id_)
+            SendShare(peer, /*with_field=*/true, /*answer=*/!fields_.count(peer), node);
         }
         Compose(node, "calibrated", kInvalidNodeId, Clock::now());
       });

@@ -30,8 +30,9 @@ using nlohmann::json;
 using std::chrono::milliseconds;
 using testing::ChildProcess;
 
-// Generous for a loaded 2-core machine: a sandtable-3 run takes a few seconds.
-constexpr milliseconds kRunDeadline{90000};
+// Generous for a loaded 2-core machine (ctest -j2 runs two labs at once): a sandtable-3 run
+// with its show and blend takes 40-60 s alone.
+constexpr milliseconds kRunDeadline{180000};
 constexpr milliseconds kProcessGoneDeadline{10000};
 
 class LabRunTest : public ::testing::Test {
