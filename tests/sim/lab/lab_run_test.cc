@@ -575,10 +575,11 @@ TEST_F(LabRunTest, HelpListsEveryFlag) {
   std::string text;
   while (std::optional<std::string> line = lab.ReadLine(kRunDeadline)) text += *line + "\n";
   EXPECT_EQ(lab.Wait(), 0);
-  for (const char* flag : {"--site", "--scene", "--out", "--seed", "--hold-s", "--bin-dir",
-                           "--samples", "--start-timeout-s", "--calibration-timeout-s",
-                           "--image-width", "--progress", "--calibration", "--model",
-                           "--saved-calibration", "--calibration-path", "--join-late", "--blend"}) {
+  for (const char* flag :
+       {"--site", "--scene", "--out", "--seed", "--hold-s", "--bin-dir", "--samples",
+        "--start-timeout-s", "--calibration-timeout-s", "--image-width", "--progress",
+        "--calibration", "--model", "--saved-calibration", "--calibration-path", "--join-late",
+        "--blend", "--black-match"}) {
     EXPECT_NE(text.find(flag), std::string::npos) << flag;
   }
 }
