@@ -374,7 +374,13 @@ void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
     // Members that left, or did not answer in time, are left out of the rest of the round.
     for (auto it = r.awaiting.begin(); it != r.awaiting.end();) {
       const NodeId to = it->second.to;
-      const bool gone = to != r.self && !node.peers().count(to);
+      bool gone = false;
+      if (to != r.self && !node.peers().count(to)) {
+        auto since = r.missing_since.emplace(to, now).first;
+        gone = now - since->second >= options_.member_grace;
+      } else {
+        r.missing_since.erase(to);
+      }
       const bool late = now - r.stage_started > options_.step_timeout;
       if (gone || late) {
         const std::string why =

@@ -51,6 +51,8 @@ namespace sandtable::node {
 struct SelfCalibrationOptions {
   std::chrono::milliseconds settle{1500};
   std::chrono::milliseconds step_timeout{60000};
+  // A unit awaited by the runner that is out of the member list this long has left the round.
+  std::chrono::milliseconds member_grace{3000};
   // Modeled device time: frames x (frame period + capture latency). The latency is that of a
   // hardware-triggered camera whose exposure fits inside the frame period: trigger and readout
   // overlap beyond the frame, stated as 2 ms.
