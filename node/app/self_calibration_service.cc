@@ -354,24 +354,27 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
         frame = cv::Mat::zeros(size, CV_8UC1);
       }
       ProjectorOutput* projector = projector_;
-      node.workers().Run<Status>(
+      struct Shown {
+        Status status = OkStatus();
+        bool muted = false;  // the light was cut (not black instead)
+      };
+      node.workers().Run<Shown>(
           [projector, frame, mute, loop = render_loop_] {
             if (loop) loop->Suspend();  // calibration takes the projector from the show
+            Shown out;
             Expected<ShownFrame> shown = mute ? projector->Mute() : projector->Show(frame);
+            out.muted = mute && shown.ok();
             if (mute && !shown.ok()) {
               // No AV mute: black instead; the response step then leaves the black level out.
               ST_LOG(kWarning) << "self-calibration: " << shown.status().message();
               shown = projector->Show(cv::Mat::zeros(projector->size(), CV_8UC1));
-              if (shown.ok()) return UnavailableError("no mute");
             }
-            return shown.ok() ? OkStatus() : shown.status();
+            if (!shown.ok()) out.status = shown.status();
+            return out;
           },
-          [this, from, done, mute, &node](Status shown) mutable {
-            if (mute) {
-              muted_ok_ =
-                  !(shown.code() == StatusCode::kUnavailable && shown.message() == "no mute");
-              if (!muted_ok_) shown = OkStatus();
-            }
+          [this, from, done, mute, &node](Shown result) mutable {
+            if (mute) muted_ok_ = result.muted;
+            const Status& shown = result.status;
             done.set_ok(shown.ok());
             if (!shown.ok()) done.set_message(shown.message());
             Answer(from, done, node);

@@ -575,14 +575,14 @@ cv::Mat Blender::Lift(double target, double own_black, const std::map<NodeId, do
   cv::Mat lift(surface_.height_px, surface_.width_px, CV_32FC1, cv::Scalar(0));
   float* out = lift.ptr<float>();
   const std::vector<double> light = BlackLight(own_black, black);
+  const cv::Mat alpha = Alpha();
+  const float* a = alpha.ptr<float>();
   const double range = 1.0 - own_black;  // emission per unit of frame value above black
   for (size_t i = 0; i < light.size(); ++i) {
     const double r = surface_.range_m[i];
     if (own_w_[i] <= 0 || r <= 0 || light[i] >= target) continue;
-    double sum = own_w_[i];
-    for (const auto& [unit, w] : neighbour_w_) sum += w[i];
     const double gain = surface_.cos_incidence[i] / (r * r);
-    const double emission = own_w_[i] / sum * (target - light[i]) / gain;
+    const double emission = a[i] * (target - light[i]) / gain;
     out[i] = static_cast<float>(std::min(max_lift, emission / range));
   }
   return lift;
