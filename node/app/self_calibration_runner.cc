@@ -83,14 +83,26 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
   if (runner_ || calibrated_) {
     if (!runner_) return;  // calibrated by another runner: that runner decides
     for (NodeId m : members) {
-      if (std::find(runner_->members.begin(), runner_->members.end(), m) ==
-              runner_->members.end() &&
-          state_of(m) != wire::CALIBRATION_STATE_VERIFIED) {
+      const bool new_member =
+          std::find(runner_->members.begin(), runner_->members.end(), m) == runner_->members.end();
+      // A unit the last round left out because it left (a loaded node dropped by the
+      // coordinator) is back: it is calibrated again, unless it already holds a calibration.
+      const bool came_back = runner_->departed.count(m) &&
+                             state_of(m) != wire::CALIBRATION_STATE_CALIBRATED &&
+                             node.peers().count(m);
+      if ((new_member || came_back) && state_of(m) != wire::CALIBRATION_STATE_VERIFIED) {
         joining.push_back(m);
       }
     }
     if (joining.empty()) return;
-    if (site_runner) {
+    // A site solved from one unit's view alone is weak (its depth rests on one short factory
+    // baseline: 25 mm rms measured on sandtable-3); units that join it calibrate all again.
+    const bool weak_site = site_runner && last_solution_->calibrations.size() < 2;
+    if (weak_site) {
+      ST_LOG(kInfo) << "self-calibration: " << joining.size()
+                    << " unit(s) joined a site solved from one unit alone; calibrating all again";
+      joining.clear();
+    } else if (site_runner) {
       ST_LOG(kInfo) << "self-calibration: " << joining.size()
                     << " unit(s) joined the calibrated site; calibrating them against it";
     } else {
@@ -390,6 +402,7 @@ void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
                         std::to_string(options_.step_timeout.count() / 1000) + " s");
         if (!r.left_out.count(to)) {
           r.left_out[to] = why;
+          if (gone) r.departed.insert(to);
           ST_LOG(kWarning) << "self-calibration: " << why;
         }
         it = r.awaiting.erase(it);
@@ -409,6 +422,13 @@ void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
     std::vector<Runner::Command> to_send;
     for (Runner::Command& c : stage.commands) {
       if (!r.Active(c.to)) continue;
+      if (c.step.action() == wire::CALIBRATION_ACTION_LOCAL) {
+        // The sets the projecting node waits for: from the cameras still in the round (one
+        // left out since the plan sends none; waiting for it would cost kLocalWaitForSets).
+        uint32_t expected = 0;
+        for (NodeId cam : r.cameras_seeing[c.to]) expected += r.Active(cam) ? 1 : 0;
+        c.step.set_frames(expected);
+      }
       c.step.set_step(r.next_step++);
       r.awaiting[c.step.step()] = c;
       to_send.push_back(c);
@@ -725,11 +745,32 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
         return s;
       },
       [this, &node](Solved s) {
+        if (RoundAgainForReturners(s.solution ? &*s.solution : nullptr, node)) return;
         site_mpcdi_ = s.mpcdi;
         if (s.fell_back) runner_->path = "full";
         if (s.solution) last_solution_ = std::make_shared<ClusterSolution>(*s.solution);
         FinishRound(s.solution ? &*s.solution : nullptr, s.status, s.cpu_s, node);
       });
+}
+
+bool SelfCalibrationService::RoundAgainForReturners(const ClusterSolution* solution,
+                                                    NodeRuntime& node) {
+  Runner& r = *runner_;
+  if (solution && solution->calibrations.size() >= 2) return false;
+  std::vector<NodeId> back;
+  for (NodeId m : r.departed) {
+    if (node.peers().count(m)) back.push_back(m);
+  }
+  if (back.empty()) return false;
+  // The round was solved from one unit's view alone (or not at all) because units left it,
+  // and they are back: its result would be weak (docs/calibration.md, "A unit that comes
+  // back"); nothing is delivered and a new round with everyone starts.
+  ST_LOG(kWarning) << "self-calibration: " << back.size() << " unit(s) left round " << r.round
+                   << " and came back before its end; "
+                   << (solution ? "solved from one unit alone" : "not solved")
+                   << ", so not delivered: calibrating all again";
+  runner_.reset();
+  return true;
 }
 
 void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const Status& status,

@@ -45,6 +45,9 @@ struct SelfCalibrationService::Runner {
   bool join = false;
   std::map<NodeId, std::pair<int, int>> projector_size;  // from the Hello capabilities
   std::map<NodeId, std::string> left_out;                // unit -> why
+  // Of those, the units left out because they left the site or stopped answering: when one
+  // comes back it is calibrated again (docs/calibration.md, "A unit that comes back").
+  std::set<NodeId> departed;
   // Units awaited that are not in the member list, since when (a loaded unit whose heartbeats
   // stalled is dropped by the coordinator and registers again at once: not gone yet).
   std::map<NodeId, std::chrono::steady_clock::time_point> missing_since;

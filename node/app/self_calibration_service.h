@@ -171,6 +171,9 @@ class SelfCalibrationService : public NodeService {
   void StartJoinSolve(NodeRuntime& node);
   // The round's inputs as the solvers take them (units that sent none are left out).
   void CollectInputs(ClusterObservations* observations, std::map<NodeId, LocalGeometry>* local);
+  // True (the round dropped, a new one to start) when units left the round, are back, and
+  // the round's solution (null: failed) has fewer than two units.
+  bool RoundAgainForReturners(const ClusterSolution* solution, NodeRuntime& node);
   // `solution` is null when the solve failed with `status`.
   void FinishRound(const ClusterSolution* solution, const Status& status, double solve_cpu_s,
                    NodeRuntime& node);
