@@ -5,7 +5,8 @@
 //   sandtable-node --id N --coordinator REQUESTS,EVENTS [--world ENDPOINT] [--factory FILE]
 //                  [--true-pose FILE] [--export-dir DIR] [--projector SPEC] [--camera SPEC]
 //                  [--model FILE] [--saved-calibration FILE] [--grid-step-px N]
-//                  [--calibration-path auto|full]
+//                  [--calibration-path auto|full] [--phase-steps N] [--gray-cell-px X]
+//                  [--bundle-iterations N] [--bundle-free all|poses]
 //                  [--render auto|on|off] [--timeline TRACKS.csv] [--sun on|off]
 //                  [--sun-start-h H] [--sun-hours-per-s R] [--render-max-fps F]
 //                  [--render-log FILE] [--blend on|off] [--blend-step-px N]
@@ -86,6 +87,9 @@ static int Run(int argc, char** argv) {
   std::string projector_spec, camera_spec, model_path;
   int grid_step_px = 16;
   std::string calibration_path = "auto";
+  // The knobs `sandtable-lab sweep` turns (docs/lab.md, "Sweep"): run time against error.
+  node::SelfCalibrationOptions calibration_knobs;
+  std::string bundle_free = "all";
   int heartbeat_ms = 100;
   std::string render_mode = "auto", timeline_path, sun = "on", render_log;
   node::SunOptions sun_options;
@@ -139,6 +143,21 @@ static int Run(int argc, char** argv) {
   app.add_option("--grid-step-px", grid_step_px,
                  "self-calibration: projector grid spacing of the correspondences, px")
       ->check(cli::Integer(4, 256));
+  app.add_option("--phase-steps", calibration_knobs.plan.phase_steps,
+                 "self-calibration: phase-shift steps per direction (fewer: fewer frames, more "
+                 "projector-gamma ripple)")
+      ->check(cli::Integer(3, 64));
+  app.add_option("--gray-cell-px", calibration_knobs.plan.min_gray_cell_camera_px,
+                 "self-calibration: the finest Gray cell projected covers at least this many "
+                 "camera px (larger: fewer Gray frames)")
+      ->check(CLI::Range(0.5, 64.0));
+  app.add_option("--bundle-iterations", calibration_knobs.solve.bundle.max_iterations,
+                 "self-calibration: joint refinement iterations per round at most")
+      ->check(cli::Integer(1, 1000));
+  app.add_option("--bundle-free", bundle_free,
+                 "self-calibration: what the joint refinement frees: all (poses, mounts, "
+                 "intrinsics, distortion) or poses (the factory models held)")
+      ->check(CLI::IsMember({"all", "poses"}));
 
   app.add_option("--render", render_mode,
                  "the show: auto (when there is a projector), on (an error without GL), off")
@@ -357,6 +376,13 @@ static int Run(int argc, char** argv) {
   // calibration, a projector and a camera, and is not in the lab's true-pose test mode.
   if (calibration && true_pose_path.empty() && projector && !camera_spec.empty()) {
     node::SelfCalibrationOptions sc;
+    sc.plan = calibration_knobs.plan;
+    sc.solve.bundle.max_iterations = calibration_knobs.solve.bundle.max_iterations;
+    if (bundle_free == "poses") {
+      node::BundleOptions& b = sc.solve.bundle;
+      b.free_projector_intrinsics = b.free_projector_distortion = false;
+      b.free_camera_intrinsics = b.free_camera_distortion = b.free_mounts = false;
+    }
     sc.grid_step_px = grid_step_px;
     sc.path = calibration_path == "full" ? node::SelfCalibrationOptions::Path::kFull
                                          : node::SelfCalibrationOptions::Path::kAuto;

@@ -168,6 +168,7 @@ json LabReportJson(const LabResult& r) {
   if (sc.contains("mpcdi")) calibration["mpcdi"] = sc["mpcdi"];
   if (!r.join.is_null()) calibration["join"] = r.join;
   if (!r.kill.is_null()) calibration["kill"] = r.kill;
+  if (!r.stall.is_null()) calibration["stall"] = r.stall;
   if (sc.contains("verification")) calibration["verification"] = sc["verification"];
   if (sc.contains("round_ran")) calibration["round_ran"] = sc["round_ran"];
   if (sc.contains("compute_time_s")) {

@@ -73,8 +73,9 @@ struct LabResult {
   // Self-calibration (docs/calibration.md): the runner's report, per-unit compute, messages
   // and bytes; units that could not calibrate and why; the model's placement against the truth.
   nlohmann::json self_calibration = nlohmann::json::object();
-  nlohmann::json join;  // --join-late: the late unit's join (null when none)
-  nlohmann::json kill;  // --kill-unit: what the others did (null when none)
+  nlohmann::json join;   // --join-late: the late unit's join (null when none)
+  nlohmann::json kill;   // --kill-unit: what the others did (null when none)
+  nlohmann::json stall;  // --stall-unit: when the unit was stopped and resumed (null when none)
   // The show (docs/render.md): frame times, the floor, timeline skew, grid coincidence, and
   // per-unit summaries; empty when the nodes did not render.
   nlohmann::json render = nlohmann::json::object();

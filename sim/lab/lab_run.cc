@@ -406,6 +406,7 @@ class LabRun {
           }
         }
       }
+      argv.insert(argv.end(), options_.node_args.begin(), options_.node_args.end());
       ChildProcess* node = StartChild("node-" + id, "node", argv);
       if (!node) return false;
     }
@@ -441,6 +442,38 @@ class LabRun {
                                     " s into the calibration (--kill-unit)";
       }
       ST_LOG(kWarning) << "lab: killed node-" << unit << " (--kill-unit)";
+    }
+  }
+
+  // --stall-unit: SIGSTOP the unit stall_at_s after the calibration phase began, SIGCONT it
+  // stall_for_s later (and at the latest before the teardown).
+  void MaybeStall() {
+    if (options_.stall_unit < 0 || stall_state_ == StallState::kResumed) return;
+    const auto now = std::chrono::steady_clock::now();
+    const bool stopped = stall_state_ == StallState::kStopped;
+    if (!stopped && now - calibration_started_ < std::chrono::duration<double>(options_.stall_at_s))
+      return;
+    if (stopped && now - stalled_at_ < std::chrono::duration<double>(options_.stall_for_s)) return;
+    Stall(!stopped);
+  }
+  void Stall(bool stop) {
+    const NodeId unit = static_cast<NodeId>(options_.stall_unit);
+    for (const auto& child : supervisor_.children()) {
+      if (child->name() != "node-" + std::to_string(unit)) continue;
+      child->Signal(stop ? SIGSTOP : SIGCONT);
+    }
+    const auto now = std::chrono::steady_clock::now();
+    const double at_s = std::chrono::duration<double>(now - calibration_started_).count();
+    if (stop) {
+      stall_state_ = StallState::kStopped;
+      stalled_at_ = now;
+      result_.stall = {
+          {"unit", unit}, {"stopped_at_s", at_s}, {"during_calibration", !calibrated_.count(unit)}};
+      ST_LOG(kWarning) << "lab: stopped node-" << unit << " (--stall-unit)";
+    } else {
+      stall_state_ = StallState::kResumed;
+      result_.stall["resumed_at_s"] = at_s;
+      ST_LOG(kWarning) << "lab: resumed node-" << unit << " (--stall-unit)";
     }
   }
 
@@ -494,6 +527,7 @@ class LabRun {
     calibration_started_ = std::chrono::steady_clock::now();
     auto done = [&] {
       MaybeKill();
+      MaybeStall();
       if (static_cast<int>(calibrated_.size() + calibration_failed_.size()) < n) return false;
       bool round_needed = static_cast<int>(given_saved_.size()) < n;
       for (const auto& [id, line] : verification_) round_needed |= !line.value("holds", false);
@@ -503,7 +537,7 @@ class LabRun {
       }
       return true;
     };
-    return Wait(
+    const bool held = Wait(
         "calibration held", done, ToMs(options_.calibration_timeout_s),
         "not every sandtable-node reported a calibration "
         "{\"calibrated\":N,\"source\":..,\"json\":..,\"yaml\":..}",
@@ -513,6 +547,9 @@ class LabRun {
           for (const auto& [id, line] : calibrated_) have.insert(id);
           return Missing(have);
         });
+    // A stall that outlasts the calibration ends with it (the show needs every node).
+    if (stall_state_ == StallState::kStopped) Stall(false);
+    return held;
   }
 
   // ---- the show (docs/render.md) ----
@@ -990,6 +1027,7 @@ class LabRun {
     const WaitOutcome outcome = supervisor_.WaitUntil(
         [&] {
           MaybeKill();
+          MaybeStall();
           return false;
         },
         ToMs(options_.hold_s), stop_, Handler());
@@ -1262,6 +1300,7 @@ class LabRun {
 
   int Finish() {
     Phase("teardown", 0);
+    if (stall_state_ == StallState::kStopped) Stall(false);  // a stopped child cannot exit
     const std::vector<std::string> killed = supervisor_.TearDown(ToMs(options_.teardown_grace_s));
     CollectRender();
     progress_.End(killed.empty() ? "ok" : "killed " + std::to_string(killed.size()));
@@ -1494,6 +1533,9 @@ class LabRun {
   std::chrono::steady_clock::time_point calibration_started_{}, hold_started_{};
   bool killed_ = false, killed_while_calibrating_ = false;
   double kill_at_s_ = 0.0;
+  enum class StallState { kNone, kStopped, kResumed };
+  StallState stall_state_ = StallState::kNone;
+  std::chrono::steady_clock::time_point stalled_at_{};
   std::map<NodeId, json> calibrated_at_kill_;
   std::map<NodeId, json> calibrated_;
   std::map<NodeId, std::string> calibration_failed_;
@@ -1513,6 +1555,12 @@ Status LabRunOptions::Check() const {
   if (metric_samples < 1) return InvalidArgumentError("--samples must be >= 1");
   if (image_width_px < 16) return InvalidArgumentError("--image-width must be >= 16");
   if (kill_unit >= 0 && !(kill_at_s >= 0)) return InvalidArgumentError("--kill-at-s must be >= 0");
+  if (stall_unit >= 0 && (!(stall_at_s >= 0) || !(stall_for_s > 0))) {
+    return InvalidArgumentError("--stall-at-s must be >= 0 and --stall-for-s > 0");
+  }
+  if (stall_unit >= 0 && stall_unit == kill_unit) {
+    return InvalidArgumentError("--stall-unit and --kill-unit name the same unit");
+  }
   if (join_late >= 0 && (calibration == "true-pose" || !saved_calibration.empty())) {
     return InvalidArgumentError(
         "--join-late: only with structured-light calibration and no --saved-calibration");

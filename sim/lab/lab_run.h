@@ -31,6 +31,7 @@
 #include <cstdint>
 #include <ostream>
 #include <string>
+#include <vector>
 
 #include "common/base/status.h"
 
@@ -75,6 +76,14 @@ struct LabRunOptions {
   int kill_unit = -1;
   double kill_at_s = 0.0;
   bool kill_after_calibration = false;  // kill_at_s counted from the hold phase's start
+  // A unit the lab stalls (SIGSTOP, then SIGCONT stall_for_s later) stall_at_s seconds after
+  // the calibration phase began: a node frozen by its machine's load; the coordinator drops
+  // it and it registers again when it thaws. -1: none.
+  // Extra arguments for every sandtable-node, verbatim (the sweep's knobs: --phase-steps 4 ..).
+  std::vector<std::string> node_args;
+  int stall_unit = -1;
+  double stall_at_s = 0.0;
+  double stall_for_s = 4.0;
   // The show (docs/render.md): once calibrated, every node shows the table grid (the lab
   // measures how the projectors' lines coincide from above), then the show with the lab's
   // personnel tracks playing for show_s (frame times, timeline skew). render "off": none.

@@ -7,6 +7,8 @@
 //                     [--calibration structured-light|true-pose] [--model FILE.gltf]
 //                     [--saved-calibration DIR] [--calibration-path auto|full]
 //                     [--join-late ID] [--kill-unit ID --kill-at-s S]
+//                     [--stall-unit ID --stall-at-s S --stall-for-s D] [--node-arg=ARG ...]
+//   sandtable-lab sweep [--site ..] [--scene ..] --out DIR [--seed N]
 //
 // Exit codes: 0 ok, 1 the run failed (report written), 2 usage, 130 interrupted (SIGINT or
 // SIGTERM: the site is torn down and the report says so).
@@ -21,6 +23,7 @@
 #include "common/base/main_guard.h"
 #include "common/cli/command_line.h"
 #include "sim/lab/lab_run.h"
+#include "sim/lab/lab_sweep.h"
 
 namespace {
 
@@ -88,6 +91,18 @@ static int Run(int argc, char** argv) {
   run->add_flag("--kill-after-calibration", options.kill_after_calibration,
                 "count --kill-at-s from the hold phase (every unit calibrated): a node that "
                 "leaves a calibrated site");
+  run->add_option("--node-arg", options.node_args,
+                  "an argument for every sandtable-node, verbatim, written with '=': "
+                  "--node-arg=--phase-steps=4 (repeat it; the sweep's knobs, sandtable-node "
+                  "--help)");
+  run->add_option("--stall-unit", options.stall_unit,
+                  "SIGSTOP this unit --stall-at-s seconds after calibration began and SIGCONT it "
+                  "--stall-for-s later: a node frozen by load (dropped, then back)")
+      ->check(CLI::Range(0, 1 << 20));
+  run->add_option("--stall-at-s", options.stall_at_s, "when --stall-unit stops (s)")
+      ->check(CLI::Range(0.0, 3600.0));
+  run->add_option("--stall-for-s", options.stall_for_s, "how long --stall-unit stays stopped (s)")
+      ->check(CLI::Range(0.01, 3600.0));
   run->add_option("--join-late", options.join_late,
                   "start this unit only once the others hold their calibration: it joins the "
                   "calibrated site (a live join; the report says whether any other unit was "
@@ -116,7 +131,37 @@ static int Run(int argc, char** argv) {
                   "Terminal progress: bars, plain lines, or auto (bars "
                   "on a TTY)")
       ->check(CLI::IsMember({"auto", "bar", "plain"}));
+  CLI::App* sweep = app.add_subcommand(
+      "sweep", "Run time against error: one run per configuration, CSV and Pareto plots");
+  cli::Configure(*sweep);
+  sim::LabSweepOptions sweep_options;
+  sweep->add_option("--site", sweep_options.site,
+                    "Site: sandtable-3, grid-N (1..32), flat-4, or a site file");
+  sweep->add_option("--scene", sweep_options.scene, "Scene: sandtable, city, flat, or a glTF file");
+  sweep->add_option("--out", sweep_options.out_dir, "Output directory (sweep.md, sweep.csv, runs/)")
+      ->required();
+  sweep->add_option("--seed", sweep_options.seed, "Seed of every run")
+      ->check(cli::Integer<uint64_t>(0, UINT64_MAX));
+  sweep->add_option("--bin-dir", sweep_options.bin_dir,
+                    "Directory of sandtable-world/-coordinator/-node (as for run)");
+  sweep
+      ->add_option("--samples", sweep_options.metric_samples,
+                   "Surface points sampled by each run's registration metric")
+      ->check(cli::Integer<int>(1, 10000000));
+  sweep->add_option("--only", sweep_options.only,
+                    "run only these configurations (defaults, phase-steps=4, ...; repeat it)");
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
+  if (sweep->parsed()) {
+    for (int i = 0; i < argc; ++i) {
+      sweep_options.command_line += (i ? " " : "") + std::string(argv[i]);
+    }
+    struct sigaction action {};
+    action.sa_handler = OnSignal;
+    sigaction(SIGINT, &action, nullptr);
+    sigaction(SIGTERM, &action, nullptr);
+    signal(SIGPIPE, SIG_IGN);
+    return sim::RunSweep(sweep_options, g_stop, std::cout, std::cerr);
+  }
 
   options.progress_tty = progress == "bar" || (progress == "auto" && isatty(STDERR_FILENO));
   for (int i = 0; i < argc; ++i) options.command_line += (i ? " " : "") + std::string(argv[i]);

@@ -7,6 +7,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -43,7 +44,10 @@ class LabRunTest : public ::testing::Test {
             ::testing::UnitTest::GetInstance()->current_test_info()->name());
     std::filesystem::remove_all(dir_);
   }
-  void TearDown() override { std::filesystem::remove_all(dir_); }
+  // SANDTABLE_KEEP_LAB_DIR=1 keeps a test's run (logs, reports) for a look after a failure.
+  void TearDown() override {
+    if (std::getenv("SANDTABLE_KEEP_LAB_DIR") == nullptr) std::filesystem::remove_all(dir_);
+  }
 
   std::vector<std::string> LabArgs(std::vector<std::string> extra,
                                    const std::string& site = "sandtable-3",
@@ -373,6 +377,34 @@ TEST_F(LabRunTest, Sandtable3NamesAProjectorNoCameraSees) {
   EXPECT_TRUE(AllProcessesGone(ReadJson("run/processes.json")));
 }
 
+// A node frozen mid-calibration (SIGSTOP for 4 s, as a loaded machine can stall one) on a site
+// where it is one of only two units that can calibrate (unit 2's projector is dark): the
+// coordinator drops it, the runner leaves it out, and the round would be solved from unit 0's
+// view alone (25 mm rms measured on sandtable-3, one short baseline). When it comes back that
+// weak round is not delivered and all calibrate again: both end at the usual accuracy. (Seen
+// in CI before the fix: 23-28 mm.)
+TEST_F(LabRunTest, Sandtable3NodeStalledMidCalibrationIsCalibratedWithTheOthers) {
+  Expected<Site> site = MakeSitePreset("sandtable-3");
+  ASSERT_TRUE(site.ok());
+  site->units[2].projector.peak_luminance_at_1m_nits *= 1e-5;
+  std::filesystem::create_directories(dir_);
+  const std::filesystem::path site_path = dir_ / "site-dark-2.json";
+  ASSERT_TRUE(WriteSiteFile(*site, site_path.string()).ok());
+  json report;
+  ASSERT_TRUE(RunToEnd(LabArgs({"--stall-unit", "1", "--stall-at-s", "7", "--stall-for-s", "4",
+                                "--render", "off", "--blend", "off"},
+                               site_path.string(), dir_ / "run"),
+                       "run", &report));
+  const json& c = report["calibration"];
+  ASSERT_TRUE(c.contains("stall")) << c.dump();
+  EXPECT_TRUE(c["stall"].contains("resumed_at_s")) << c["stall"].dump();
+  for (const char* id : {"0", "1"}) {
+    EXPECT_EQ(c["per_unit"][id]["source"], "structured_light") << id;
+    EXPECT_LT(c["per_unit"][id]["rms_mm"].get<double>(), kAcceptanceMax_mm) << id;
+  }
+  EXPECT_TRUE(AllProcessesGone(ReadJson("run/processes.json")));
+}
+
 // A capture that decodes too few points: unit 2's camera turned 42 degrees on its mount sees
 // only a sliver of projector 0's footprint (measured: 14 grid points); the runner says so and
 // every unit calibrates (the sliver is not used).
@@ -575,11 +607,28 @@ TEST_F(LabRunTest, HelpListsEveryFlag) {
   std::string text;
   while (std::optional<std::string> line = lab.ReadLine(kRunDeadline)) text += *line + "\n";
   EXPECT_EQ(lab.Wait(), 0);
-  for (const char* flag :
-       {"--site", "--scene", "--out", "--seed", "--hold-s", "--bin-dir", "--samples",
-        "--start-timeout-s", "--calibration-timeout-s", "--image-width", "--progress",
-        "--calibration", "--model", "--saved-calibration", "--calibration-path", "--join-late",
-        "--blend", "--black-match"}) {
+  for (const char* flag : {"--site",
+                           "--scene",
+                           "--out",
+                           "--seed",
+                           "--hold-s",
+                           "--bin-dir",
+                           "--samples",
+                           "--start-timeout-s",
+                           "--calibration-timeout-s",
+                           "--image-width",
+                           "--progress",
+                           "--calibration",
+                           "--model",
+                           "--saved-calibration",
+                           "--calibration-path",
+                           "--join-late",
+                           "--blend",
+                           "--black-match",
+                           "--kill-unit",
+                           "--stall-unit",
+                           "--stall-at-s",
+                           "--stall-for-s"}) {
     EXPECT_NE(text.find(flag), std::string::npos) << flag;
   }
 }

@@ -1,0 +1,354 @@
+#include "sim/lab/lab_sweep.h"
+
+#include <signal.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <limits>
+#include <memory>
+#include <ostream>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+#include "sim/lab/child_process.h"
+#include "sim/lab/lab_html.h"
+
+namespace sandtable::sim {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+SweepConfig Knob(const std::string& knob, const std::string& value) {
+  return {knob + "=" + value, knob, value, {"--" + knob + "=" + value}};
+}
+
+std::string Fixed(double v, int digits) {
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(digits) << v;
+  return s.str();
+}
+
+std::string SelfExe() {
+  std::error_code ec;
+  const fs::path p = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? std::string() : p.string();
+}
+
+// An executable `name` on PATH, or empty.
+std::string OnPath(const std::string& name) {
+  const char* path = std::getenv("PATH");
+  std::istringstream dirs(path ? path : "/usr/bin:/bin");
+  std::string dir;
+  while (std::getline(dirs, dir, ':')) {
+    const fs::path candidate = fs::path(dir.empty() ? "." : dir) / name;
+    if (access(candidate.c_str(), X_OK) == 0) return candidate.string();
+  }
+  return {};
+}
+
+// Reads a finished run's report.json into `point`.
+void ReadRun(const fs::path& report_path, SweepPoint* point) {
+  std::ifstream in(report_path);
+  if (!in) {
+    point->error = "no report at " + report_path.string();
+    return;
+  }
+  const json report = json::parse(in, nullptr, false);
+  if (report.is_discarded() || !report.contains("calibration")) {
+    point->error = "unreadable report " + report_path.string();
+    return;
+  }
+  const json& c = report["calibration"];
+  auto number = [&c](const char* key) {
+    return c.contains(key) && c[key].is_number() ? c[key].get<double>()
+                                                 : std::numeric_limits<double>::quiet_NaN();
+  };
+  point->rms_mm = number("rms_mm");
+  point->p99_mm = number("p99_mm");
+  point->max_mm = number("max_mm");
+  point->device_time_s = number("device_time_s");
+  point->compute_s = number("compute_time_s");
+  if (c.contains("self_calibration_report") && c["self_calibration_report"].contains("wall_s")) {
+    point->round_wall_s = c["self_calibration_report"]["wall_s"].get<double>();
+  }
+  if (c.contains("frames_per_projector") && c["frames_per_projector"].is_object()) {
+    for (const auto& [id, frames] : c["frames_per_projector"].items()) {
+      if (frames.is_number())
+        point->frames_per_projector = std::max(point->frames_per_projector, frames.get<int>());
+    }
+  }
+  const bool failures = c.contains("failures") && !c["failures"].empty();
+  point->ok = std::isfinite(point->rms_mm) && std::isfinite(point->device_time_s) &&
+              std::isfinite(point->compute_s) && !failures;
+  if (!point->ok) {
+    point->error = failures ? "units failed: " + c["failures"].dump() : "no calibration figures";
+  }
+}
+
+// One plot: error against `x` (device or compute time); the front drawn as a step line.
+std::string PlotScript(const std::vector<SweepPoint>& points, bool device, const fs::path& dir,
+                       const std::string& png) {
+  const std::string data = (dir / (png + ".dat")).string();
+  const std::string front = (dir / (png + ".front.dat")).string();
+  const std::string defaults = (dir / (png + ".defaults.dat")).string();
+  std::ofstream all(data), on(front), def(defaults);
+  std::vector<const SweepPoint*> sorted;
+  for (const SweepPoint& p : points) {
+    if (!p.ok) continue;
+    const double x = device ? p.device_time_s : p.compute_s;
+    all << x << " " << p.rms_mm << " " << p.config.name << "\n";
+    if (p.config.knob.empty()) def << x << " " << p.rms_mm << "\n";
+    if (device ? p.front_device : p.front_compute) sorted.push_back(&p);
+  }
+  std::sort(sorted.begin(), sorted.end(), [device](const SweepPoint* a, const SweepPoint* b) {
+    return device ? a->device_time_s < b->device_time_s : a->compute_s < b->compute_s;
+  });
+  for (const SweepPoint* p : sorted) {
+    on << (device ? p->device_time_s : p->compute_s) << " " << p->rms_mm << "\n";
+  }
+  std::ostringstream s;
+  s << "set terminal png size 1000,640\n"
+    << "set output '" << (dir / (png + ".png")).string() << "'\n"
+    << "set title 'registration error against "
+    << (device ? "modeled projection time (whole site)" : "compute time (slowest node, one core)")
+    << "'\n"
+    << "set xlabel '" << (device ? "modeled projection time (s)" : "compute time (s)") << "'\n"
+    << "set ylabel 'registration rms (mm)'\n"
+    << "set logscale y\nset grid\nset key top right\n"
+    << "plot '" << data << "' using 1:2 with points pt 7 ps 1.2 lc rgb '#4477aa' title "
+    << "'configurations', '" << data
+    << "' using 1:2:3 with labels offset char 0.5,0.6 left font ',8' notitle, '" << front
+    << "' using 1:2 with steps lw 2 lc rgb '#cc3311' title 'Pareto front', '" << defaults
+    << "' using 1:2 with points pt 6 ps 3 lw 2 lc rgb '#228833' title 'shipped defaults'\n";
+  return s.str();
+}
+
+}  // namespace
+
+std::vector<SweepConfig> DefaultSweep() {
+  std::vector<SweepConfig> c;
+  c.push_back({"defaults", "", "", {}});
+  for (const char* v : {"4", "6", "12"}) c.push_back(Knob("phase-steps", v));
+  for (const char* v : {"2", "8"}) c.push_back(Knob("gray-cell-px", v));
+  for (const char* v : {"8", "32"}) c.push_back(Knob("grid-step-px", v));
+  for (const char* v : {"3", "10"}) c.push_back(Knob("bundle-iterations", v));
+  c.push_back(Knob("bundle-free", "poses"));
+  return c;
+}
+
+void MarkParetoFronts(std::vector<SweepPoint>& points) {
+  for (SweepPoint& p : points) {
+    p.front_device = p.front_compute = false;
+    if (!p.ok) continue;
+    bool beaten_device = false, beaten_compute = false;
+    for (const SweepPoint& q : points) {
+      if (&q == &p || !q.ok) continue;
+      const bool q_error = q.rms_mm <= p.rms_mm;
+      beaten_device |= q_error && q.device_time_s <= p.device_time_s &&
+                       (q.rms_mm < p.rms_mm || q.device_time_s < p.device_time_s);
+      beaten_compute |= q_error && q.compute_s <= p.compute_s &&
+                        (q.rms_mm < p.rms_mm || q.compute_s < p.compute_s);
+    }
+    p.front_device = !beaten_device;
+    p.front_compute = !beaten_compute;
+  }
+}
+
+std::string SweepCsv(const std::vector<SweepPoint>& points) {
+  std::ostringstream s;
+  s << "config,knob,value,ok,frames_per_projector,device_time_s,compute_s,round_wall_s,rms_mm,"
+       "p99_mm,max_mm,front_device,front_compute,error\n";
+  for (const SweepPoint& p : points) {
+    std::string error = p.error;
+    std::replace(error.begin(), error.end(), ',', ';');
+    std::replace(error.begin(), error.end(), '"', '\'');
+    s << p.config.name << "," << p.config.knob << "," << p.config.value << "," << (p.ok ? 1 : 0)
+      << "," << p.frames_per_projector << "," << Fixed(p.device_time_s, 4) << ","
+      << Fixed(p.compute_s, 3) << "," << Fixed(p.round_wall_s, 2) << "," << Fixed(p.rms_mm, 4)
+      << "," << Fixed(p.p99_mm, 4) << "," << Fixed(p.max_mm, 4) << "," << (p.front_device ? 1 : 0)
+      << "," << (p.front_compute ? 1 : 0) << ",\"" << error << "\"\n";
+  }
+  return s.str();
+}
+
+int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std::ostream& out,
+             std::ostream& err) {
+  if (options.out_dir.empty()) {
+    err << "sandtable-lab sweep: --out is required\n";
+    return 2;
+  }
+  std::vector<SweepConfig> configs;
+  for (const SweepConfig& c : DefaultSweep()) {
+    if (options.only.empty() ||
+        std::find(options.only.begin(), options.only.end(), c.name) != options.only.end()) {
+      configs.push_back(c);
+    }
+  }
+  if (configs.empty()) {
+    err << "sandtable-lab sweep: --only names no configuration (see docs/lab.md, \"Sweep\")\n";
+    return 2;
+  }
+  const std::string self = SelfExe();
+  if (self.empty()) {
+    err << "sandtable-lab sweep: cannot find this program (/proc/self/exe)\n";
+    return 1;
+  }
+  const fs::path dir = fs::absolute(options.out_dir);
+  std::error_code ec;
+  fs::create_directories(dir / "runs", ec);
+  if (ec) {
+    err << "sandtable-lab sweep: cannot create " << (dir / "runs").string() << ": " << ec.message()
+        << "\n";
+    return 1;
+  }
+  const auto started = std::chrono::steady_clock::now();
+  std::vector<SweepPoint> points;
+  for (size_t i = 0; i < configs.size(); ++i) {
+    if (stop) break;
+    SweepPoint point;
+    point.config = configs[i];
+    const fs::path run_dir = dir / "runs" / point.config.name;
+    fs::remove_all(run_dir, ec);
+    std::vector<std::string> argv = {self,
+                                     "run",
+                                     "--site",
+                                     options.site,
+                                     "--scene",
+                                     options.scene,
+                                     "--seed",
+                                     std::to_string(options.seed),
+                                     "--out",
+                                     run_dir.string(),
+                                     "--render",
+                                     "off",
+                                     "--samples",
+                                     std::to_string(options.metric_samples),
+                                     "--image-width",
+                                     "200",
+                                     "--progress",
+                                     "plain"};
+    if (!options.bin_dir.empty()) argv.insert(argv.end(), {"--bin-dir", options.bin_dir});
+    for (const std::string& a : point.config.node_args) argv.push_back("--node-arg=" + a);
+    err << "sweep: " << (i + 1) << "/" << configs.size() << " " << point.config.name << " ..."
+        << std::endl;
+    Expected<std::unique_ptr<ChildProcess>> child = ChildProcess::Spawn(
+        {point.config.name, "lab", argv, (dir / "runs" / (point.config.name + ".log")).string()});
+    if (!child.ok()) {
+      point.error = child.status().ToString();
+    } else {
+      ChildProcess& c = **child;
+      bool interrupted = false;
+      while (!c.Reap()) {
+        c.ReadLines();
+        if (stop && !interrupted) {
+          c.Signal(SIGTERM);  // the run tears its site down and writes its report
+          interrupted = true;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      }
+      c.ReadLines();
+      if (c.exit_code() != 0) point.error = "sandtable-lab run: " + c.DescribeExit();
+      ReadRun(run_dir / "report.json", &point);
+      if (c.exit_code() != 0) point.ok = false;
+    }
+    err << "sweep: " << point.config.name << ": "
+        << (point.ok ? "rms " + Fixed(point.rms_mm, 3) + " mm, projection " +
+                           Fixed(point.device_time_s, 3) + " s, compute " +
+                           Fixed(point.compute_s, 2) + " s"
+                     : "FAILED (" + point.error + ")")
+        << std::endl;
+    points.push_back(std::move(point));
+  }
+  MarkParetoFronts(points);
+
+  std::ofstream(dir / "sweep.csv") << SweepCsv(points);
+  // Plots (gnuplot: docs/lab.md); the CSV stands without them.
+  std::vector<std::string> plot_notes;
+  const std::string gnuplot = OnPath("gnuplot");
+  for (const bool device : {true, false}) {
+    const std::string png = device ? "sweep_projection" : "sweep_compute";
+    const fs::path script = dir / (png + ".gp");
+    std::ofstream(script) << PlotScript(points, device, dir, png);
+    if (gnuplot.empty()) {
+      plot_notes.push_back("gnuplot not found on PATH: " + png + ".png not drawn");
+      continue;
+    }
+    Expected<std::unique_ptr<ChildProcess>> plot = ChildProcess::Spawn(
+        {"gnuplot", "plot", {gnuplot, script.string()}, (dir / (png + ".log")).string()});
+    if (!plot.ok() || !(*plot)->WaitFor(std::chrono::milliseconds(30000)) ||
+        (*plot)->exit_code() != 0) {
+      plot_notes.push_back("gnuplot failed on " + script.string() + " (see " + png + ".log)");
+    }
+  }
+
+  // sweep.md and sweep.html.
+  std::ostringstream md;
+  md << "# Sweep: run time against registration error\n\n"
+     << "Site `" << options.site << "`, scene `" << options.scene << "`, seed " << options.seed
+     << "; one `sandtable-lab run` per configuration (`--render off`, metric on "
+     << options.metric_samples << " samples), the shipped defaults and one knob changed at a "
+     << "time. Command:\n\n    " << options.command_line << "\n\n"
+     << "Wall time of the sweep: "
+     << Fixed(std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count(), 0)
+     << " s. Projection: the site's modeled projection time (frames x (frame period + capture "
+        "latency)); compute: the slowest node's CPU time in the round (one core); wall: the "
+        "round on this machine. Front: on the Pareto front of error against projection (P) "
+        "or compute (C).\n\n"
+     << "| configuration | frames / projector | projection (s) | compute (s) | round wall (s) "
+        "| rms (mm) | p99 (mm) | max (mm) | front |\n"
+     << "| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n";
+  const SweepPoint* defaults = nullptr;
+  for (const SweepPoint& p : points) {
+    if (p.config.knob.empty()) defaults = &p;
+    if (!p.ok) {
+      md << "| " << p.config.name << " | failed: " << p.error << " | | | | | | | |\n";
+      continue;
+    }
+    std::string front = std::string(p.front_device ? "P" : "") + (p.front_compute ? "C" : "");
+    md << "| " << (p.config.knob.empty() ? "**defaults**" : "`" + p.config.name + "`") << " | "
+       << p.frames_per_projector << " | " << Fixed(p.device_time_s, 3) << " | "
+       << Fixed(p.compute_s, 2) << " | " << Fixed(p.round_wall_s, 1) << " | " << Fixed(p.rms_mm, 3)
+       << " | " << Fixed(p.p99_mm, 3) << " | " << Fixed(p.max_mm, 3) << " | "
+       << (front.empty() ? "-" : front) << " |\n";
+  }
+  md << "\n";
+  if (defaults && defaults->ok) {
+    md << "The shipped defaults are " << (defaults->front_device ? "on" : "**not** on")
+       << " the projection front and " << (defaults->front_compute ? "on" : "**not** on")
+       << " the compute front.";
+    for (const SweepPoint& p : points) {
+      if (&p == defaults || !p.ok || p.rms_mm > defaults->rms_mm) continue;
+      if (p.device_time_s <= defaults->device_time_s || p.compute_s <= defaults->compute_s) {
+        md << " `" << p.config.name << "` is as accurate or better (" << Fixed(p.rms_mm, 3)
+           << " mm) at " << Fixed(p.device_time_s, 3) << " s projection, " << Fixed(p.compute_s, 2)
+           << " s compute.";
+      }
+    }
+    md << " (docs/results.md says why the defaults stay where they are not on a front.)\n\n";
+  }
+  for (const std::string& note : plot_notes) md << "- " << note << "\n";
+  md << "\n![error against projection time](sweep_projection.png)\n\n"
+     << "![error against compute time](sweep_compute.png)\n\n"
+     << "Each run's report: `runs/<configuration>/report.md`; the figures: `sweep.csv`.\n";
+  std::ofstream(dir / "sweep.md") << md.str();
+  Expected<std::string> html = MarkdownToHtmlPage(md.str(), dir.string(), "Sandtable sweep");
+  if (html.ok()) std::ofstream(dir / "sweep.html") << *html;
+
+  int failed = 0;
+  for (const SweepPoint& p : points) failed += p.ok ? 0 : 1;
+  out << "sandtable-lab sweep: " << points.size() << " configurations, " << failed << " failed; "
+      << (dir / "sweep.md").string() << std::endl;
+  if (stop) return 130;
+  return failed == 0 ? 0 : 1;
+}
+
+}  // namespace sandtable::sim

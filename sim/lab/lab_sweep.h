@@ -1,0 +1,63 @@
+// sandtable-lab sweep: run time against error over the knobs that trade them (docs/lab.md,
+// "Sweep"). One `sandtable-lab run` per configuration (the shipped defaults, then one knob
+// changed at a time), each a child process with its own output folder; the calibration's
+// registration error against its modeled projection time and its compute time goes to
+// sweep.csv, sweep.md (+ sweep.html) and two Pareto plots drawn by gnuplot.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+#include "common/base/status.h"
+
+namespace sandtable::sim {
+
+struct SweepConfig {
+  std::string name;   // "phase-steps=4"; "defaults" for the shipped configuration
+  std::string knob;   // "phase-steps"; empty for the defaults
+  std::string value;  // "4"
+  std::vector<std::string> node_args;
+};
+
+// The configurations swept: the defaults first, then each knob's values one at a time.
+std::vector<SweepConfig> DefaultSweep();
+
+struct SweepPoint {
+  SweepConfig config;
+  bool ok = false;
+  std::string error;  // why the run gave no figure
+  double rms_mm = 0, p99_mm = 0, max_mm = 0;
+  double device_time_s = 0;      // modeled projection time of the whole site
+  double compute_s = 0;          // slowest node's compute (one core)
+  double round_wall_s = 0;       // the round's wall time on this machine
+  int frames_per_projector = 0;  // most
+  bool front_device = false, front_compute = false;
+};
+
+// Marks the points no other ok point beats on both error and time (front_device against the
+// modeled projection time, front_compute against compute).
+void MarkParetoFronts(std::vector<SweepPoint>& points);
+
+// The sweep's table as CSV (header + one line per point).
+std::string SweepCsv(const std::vector<SweepPoint>& points);
+
+struct LabSweepOptions {
+  std::string site = "sandtable-3";
+  std::string scene = "sandtable";
+  std::string out_dir;
+  std::string bin_dir;
+  uint64_t seed = 1;
+  int metric_samples = 6000;
+  std::vector<std::string> only;  // configuration names to run (empty: all)
+  std::string command_line;
+};
+
+// Exit codes: 0 every configuration measured, 1 one or more failed (the others are reported),
+// 2 usage, 130 interrupted.
+int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std::ostream& out,
+             std::ostream& err);
+
+}  // namespace sandtable::sim
