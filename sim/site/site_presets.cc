@@ -13,6 +13,18 @@ namespace {
 
 constexpr double kOverlap = 0.25;
 
+// The camera exposure an installer sets for a throw: the presets' 5 ms suits throws of 1.6 to
+// 2.6 m (sandtable-3 1.65 m, grid-8 2.54 m); the light on the table goes as 1 / throw^2, so a
+// longer throw (grid-1, grid-2: 5.1 m, a white near 20 DN at 5 ms) gets a longer exposure and a
+// shorter one (grid-16 and up: 1.3 m and less, white saturated at 5 ms) a shorter one, keeping
+// the white in the camera's range.
+double ExposureForThrow(double throw_m) {
+  constexpr double kExposure_s = 0.005, kShort_m = 1.6, kLong_m = 2.6;
+  if (throw_m < kShort_m) return kExposure_s * (throw_m / kShort_m) * (throw_m / kShort_m);
+  if (throw_m > kLong_m) return kExposure_s * (throw_m / kLong_m) * (throw_m / kLong_m);
+  return kExposure_s;
+}
+
 // The camera mount: 0.12 m right of the projector, rotated about the projector's y axis to look
 // at the projector's axis point at `aim_distance_m`.
 Rigid3d CameraMount(double aim_distance_m) {
@@ -85,6 +97,7 @@ Expected<Site> Grid(const std::string& name, int n, const Eigen::Vector2d& table
           TableFromDeviceLookAt(eye, centre, Eigen::Vector3d::UnitY());
       if (!table_from_projector.ok()) return table_from_projector.status();
       site.units.push_back(MakeUnit(id, *table_from_projector, distance_m));
+      site.units.back().camera->exposure_s = ExposureForThrow(distance_m);
     }
   }
   return site;
@@ -109,9 +122,45 @@ CameraSpec DefaultCamera() {
   return c;
 }
 
+namespace {
+
+Status ScaleModel(double factor, const std::string& what, CameraModel* model) {
+  const int width = static_cast<int>(std::lround(model->width_px * factor));
+  const int height = static_cast<int>(std::lround(model->height_px * factor));
+  if (width < 32 || height < 32) {
+    return InvalidArgumentError(what + ": " + std::to_string(model->width_px) + "x" +
+                                std::to_string(model->height_px) + " at " + std::to_string(factor) +
+                                " would be under 32 px");
+  }
+  const double sx = static_cast<double>(width) / model->width_px;
+  const double sy = static_cast<double>(height) / model->height_px;
+  model->fx_px *= sx;
+  model->fy_px *= sy;
+  model->cx_px = (model->cx_px + 0.5) * sx - 0.5;
+  model->cy_px = (model->cy_px + 0.5) * sy - 0.5;
+  model->width_px = width;
+  model->height_px = height;
+  return OkStatus();
+}
+
+}  // namespace
+
+Status ScaleSiteResolution(double factor, Site* site) {
+  if (!(factor > 0.0 && factor <= 1.0)) {
+    return InvalidArgumentError("resolution scale " + std::to_string(factor) + " is not in (0, 1]");
+  }
+  if (factor == 1.0) return OkStatus();
+  for (UnitSpec& unit : site->units) {
+    ST_RETURN_IF_ERROR(ScaleModel(factor, unit.name + ".projector", &unit.projector.model));
+    if (unit.camera)
+      ST_RETURN_IF_ERROR(ScaleModel(factor, unit.name + ".camera", &unit.camera->model));
+  }
+  return site->Check();
+}
+
 Expected<Site> MakeSitePreset(std::string_view name) {
   Expected<Site> site = InvalidArgumentError("unknown site preset '" + std::string(name) +
-                                             "' (use sandtable-3, grid-N with N in 1..32, flat-4)");
+                                             "' (use sandtable-3, grid-N with N in 1..64, flat-4)");
   if (name == "sandtable-3") {
     site = Sandtable3();
   } else if (name == "flat-4") {
@@ -126,8 +175,8 @@ Expected<Site> MakeSitePreset(std::string_view name) {
     } catch (const std::exception&) {
       n = 0;
     }
-    if (n < 1 || n > 32) {
-      return InvalidArgumentError("site preset '" + std::string(name) + "': N must be in 1..32");
+    if (n < 1 || n > 64) {
+      return InvalidArgumentError("site preset '" + std::string(name) + "': N must be in 1..64");
     }
     site = Grid(std::string(name), n, {3.0, 2.0}, 0.0);
   }

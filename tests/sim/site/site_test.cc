@@ -40,14 +40,65 @@ TEST(SitePresets, Sandtable3MatchesTr09017) {
 }
 
 TEST(SitePresets, GridAndFlat) {
-  for (const char* name : {"grid-1", "grid-7", "grid-32", "flat-4"}) {
+  for (const char* name : {"grid-1", "grid-7", "grid-32", "grid-64", "flat-4"}) {
     Expected<Site> site = MakeSitePreset(name);
     ASSERT_TRUE(site.ok()) << name << ": " << site.status().ToString();
   }
-  EXPECT_EQ(MakeSitePreset("grid-32")->units.size(), 32u);
-  EXPECT_FALSE(MakeSitePreset("grid-33").ok());
+  EXPECT_EQ(MakeSitePreset("grid-64")->units.size(), 64u);
+  EXPECT_FALSE(MakeSitePreset("grid-65").ok());
   EXPECT_FALSE(MakeSitePreset("grid-x").ok());
   EXPECT_FALSE(MakeSitePreset("moon").ok());
+}
+
+// The camera exposure follows the throw outside 1.6..2.6 m, so that the white stays in range.
+TEST(SitePresets, GridExposureFollowsTheThrow) {
+  auto exposure = [](const char* name) {
+    return MakeSitePreset(name)->units[0].camera->exposure_s;
+  };
+  auto throw_m = [](const char* name) {
+    return MakeSitePreset(name)->units[0].projector.table_from_projector.translation.z();
+  };
+  constexpr double kPresetExposure_s = 0.005;
+  EXPECT_DOUBLE_EQ(exposure("grid-8"), kPresetExposure_s);  // 2.54 m
+  EXPECT_DOUBLE_EQ(exposure("grid-4"), kPresetExposure_s);
+  // The light goes as 1 / throw^2, the exposure as throw^2: equal signal at both ends.
+  const double long_ratio = exposure("grid-2") / kPresetExposure_s;
+  EXPECT_NEAR(long_ratio, std::pow(throw_m("grid-2") / 2.6, 2), 1e-12);
+  EXPECT_GT(long_ratio, 3.0);
+  const double short_ratio = exposure("grid-64") / kPresetExposure_s;
+  EXPECT_NEAR(short_ratio, std::pow(throw_m("grid-64") / 1.6, 2), 1e-12);
+  EXPECT_LT(short_ratio, 0.2);
+}
+
+// A scaled site keeps every ray: a table point seen at u in the full-resolution image is seen
+// at (u + 0.5) * w' / w - 0.5 in the scaled one; the field of view and the poses are unchanged.
+TEST(SitePresets, ScaleSiteResolutionKeepsTheRays) {
+  Site site = *MakeSitePreset("sandtable-3");
+  const Site full = site;
+  ASSERT_TRUE(ScaleSiteResolution(0.5, &site).ok());
+  constexpr double kRayTolerance_px = 1e-9;
+  for (size_t i = 0; i < site.units.size(); ++i) {
+    for (const bool camera : {false, true}) {
+      const CameraModel& a = camera ? full.units[i].camera->model : full.units[i].projector.model;
+      const CameraModel& b = camera ? site.units[i].camera->model : site.units[i].projector.model;
+      EXPECT_EQ(b.width_px, a.width_px / 2);
+      EXPECT_EQ(b.height_px, a.height_px / 2);
+      for (const Eigen::Vector3d& x : {Eigen::Vector3d(0.05, -0.1, 1.0),
+                                       Eigen::Vector3d(-0.3, 0.2, 1.0), Eigen::Vector3d(0, 0, 1)}) {
+        const std::optional<Eigen::Vector2d> ua = a.Project(x), ub = b.Project(x);
+        ASSERT_TRUE(ua && ub);
+        EXPECT_NEAR(ub->x(), (ua->x() + 0.5) * b.width_px / a.width_px - 0.5, kRayTolerance_px);
+        EXPECT_NEAR(ub->y(), (ua->y() + 0.5) * b.height_px / a.height_px - 0.5, kRayTolerance_px);
+      }
+    }
+    EXPECT_TRUE(site.units[i].projector.table_from_projector.ToMatrix4().isApprox(
+        full.units[i].projector.table_from_projector.ToMatrix4()));
+  }
+  EXPECT_FALSE(ScaleSiteResolution(0.0, &site).ok());
+  EXPECT_FALSE(ScaleSiteResolution(1.5, &site).ok());
+  const Status tiny = ScaleSiteResolution(0.01, &site);
+  EXPECT_FALSE(tiny.ok());
+  EXPECT_NE(tiny.message().find("under 32 px"), std::string::npos) << tiny.ToString();
 }
 
 TEST(SiteCheck, ErrorsNameUnitAndField) {
