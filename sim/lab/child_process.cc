@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/prctl.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -131,9 +132,13 @@ std::vector<std::string> ChildProcess::ReadLines() {
 bool ChildProcess::Reap() {
   if (exited_ || pid_ <= 0) return exited_;
   int status = 0;
-  const pid_t r = waitpid(pid_, &status, WNOHANG);
+  struct rusage usage {};
+  const pid_t r = wait4(pid_, &status, WNOHANG, &usage);
   if (r != pid_) return false;
   exited_ = true;
+  cpu_s_ = static_cast<double>(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
+           1e-6 * static_cast<double>(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+  max_rss_mb_ = static_cast<double>(usage.ru_maxrss) / 1024.0;  // Linux: kilobytes
   if (WIFEXITED(status)) exit_code_ = WEXITSTATUS(status);
   if (WIFSIGNALED(status)) term_signal_ = WTERMSIG(status);
   return true;

@@ -53,6 +53,10 @@ class ChildProcess {
   // After exit: "exit status 1", "killed by signal 9 (SIGKILL)".
   std::string DescribeExit() const;
   std::optional<int> exit_code() const { return exit_code_; }
+  // After exit: the CPU time (user + system, s) the child used (wait4's rusage; its own
+  // children it did not reap are not counted).
+  double cpu_s() const { return cpu_s_; }
+  double max_rss_mb() const { return max_rss_mb_; }  // peak resident memory (MiB)
   std::optional<int> term_signal() const { return term_signal_; }
 
   // Sends `signal` to the child's process group (no-op once reaped).
@@ -74,6 +78,7 @@ class ChildProcess {
   std::string partial_;
   bool exited_ = false;
   std::optional<int> exit_code_, term_signal_;
+  double cpu_s_ = 0.0, max_rss_mb_ = 0.0;
 };
 
 // "SIGKILL" for 9 (the abbreviation sigabbrev_np gives), "signal N" when unknown.

@@ -36,7 +36,7 @@ bool IsFile(const std::string& text) {
 
 Expected<LabInputs> PrepareLabInputs(const std::string& site_arg, const std::string& scene_arg,
                                      uint64_t seed, const std::string& out_dir,
-                                     const std::string& model_arg) {
+                                     const std::string& model_arg, double resolution_scale) {
   const std::filesystem::path dir(out_dir);
   std::error_code error;
   for (const char* sub : {"", "factory", "truth", "calibration", "logs"}) {
@@ -51,6 +51,9 @@ Expected<LabInputs> PrepareLabInputs(const std::string& site_arg, const std::str
   if (!site.ok())
     return InvalidArgumentError("--site " + site_arg + ": " + site.status().message());
   inputs.site = std::move(*site);
+  if (Status scaled = ScaleSiteResolution(resolution_scale, &inputs.site); !scaled.ok()) {
+    return InvalidArgumentError("--resolution-scale: " + scaled.message());
+  }
   inputs.site_path = (dir / "site.json").string();
   ST_RETURN_IF_ERROR(WriteSiteFile(inputs.site, inputs.site_path));
 

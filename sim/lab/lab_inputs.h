@@ -49,8 +49,10 @@ struct LabInputs {
 // kMaxModelOffset_m in x and y and kMaxModelYaw_deg about z); a file is handed over as given.
 inline constexpr double kMaxModelOffset_m = 0.05;
 inline constexpr double kMaxModelYaw_deg = 10.0;
+// `resolution_scale` < 1: every projector and camera at that fraction of its resolution
+// (ScaleSiteResolution), before site.json and the factory files are written.
 Expected<LabInputs> PrepareLabInputs(const std::string& site, const std::string& scene,
                                      uint64_t seed, const std::string& out_dir,
-                                     const std::string& model = "");
+                                     const std::string& model = "", double resolution_scale = 1.0);
 
 }  // namespace sandtable::sim

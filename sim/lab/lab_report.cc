@@ -112,8 +112,12 @@ json LabReportJson(const LabResult& r) {
       {"label", r.scene_label}, {"file", r.scene_path}, {"triangles", r.scene_triangles}};
   json processes = json::array();
   for (const LabProcess& p : r.processes) {
-    processes.push_back(
-        {{"name", p.name}, {"pid", p.pid}, {"role", p.role}, {"exit", p.exit_text}});
+    processes.push_back({{"name", p.name},
+                         {"pid", p.pid},
+                         {"role", p.role},
+                         {"exit", p.exit_text},
+                         {"cpu_s", p.cpu_s},
+                         {"max_rss_mb", p.max_rss_mb}});
   }
   out["processes"] = processes;
   json calibration = {{"source", r.calibration_source}};
@@ -522,9 +526,11 @@ std::string LabReportMarkdown(const LabResult& r) {
        << ")\n\n*Worst projector per point, 0 (dark) to " << Fixed(r.heatmap_scale_mm, 2)
        << " mm (yellow, the site's p99); grey: lit by nobody.*\n\n";
   }
-  md << "## Processes\n\n| name | role | pid | exit |\n| --- | --- | --- | --- |\n";
+  md << "## Processes\n\n| name | role | pid | exit | CPU (s) | peak memory (MiB) |\n"
+        "| --- | --- | --- | --- | --- | --- |\n";
   for (const LabProcess& p : r.processes) {
-    md << "| " << p.name << " | " << p.role << " | " << p.pid << " | " << p.exit_text << " |\n";
+    md << "| " << p.name << " | " << p.role << " | " << p.pid << " | " << p.exit_text << " | "
+       << Fixed(p.cpu_s, 2) << " | " << Fixed(p.max_rss_mb, 0) << " |\n";
   }
   md << "\nLogs: `logs/<name>.log`.\n";
   if (!r.render.empty()) {

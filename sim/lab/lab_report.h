@@ -46,6 +46,8 @@ struct LabProcess {
   std::string name, role;
   int pid = -1;
   std::string exit_text;
+  double cpu_s = 0.0;       // user + system CPU time over its life (the coordinator's load)
+  double max_rss_mb = 0.0;  // peak resident memory
 };
 
 struct LabUnitResult {

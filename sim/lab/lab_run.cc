@@ -135,8 +135,9 @@ class LabRun {
 
   int Prepare() {
     Phase("prepare", 0);
-    Expected<LabInputs> inputs = PrepareLabInputs(options_.site, options_.scene, options_.seed,
-                                                  options_.out_dir, options_.model);
+    Expected<LabInputs> inputs =
+        PrepareLabInputs(options_.site, options_.scene, options_.seed, options_.out_dir,
+                         options_.model, options_.resolution_scale);
     if (!inputs.ok()) {
       progress_.End("failed");
       err_ << "sandtable-lab run: " << inputs.status().message() << "\n";
@@ -1305,8 +1306,8 @@ class LabRun {
     CollectRender();
     progress_.End(killed.empty() ? "ok" : "killed " + std::to_string(killed.size()));
     for (const auto& child : supervisor_.children()) {
-      result_.processes.push_back(
-          {child->name(), child->spec().role, child->pid(), child->DescribeExit()});
+      result_.processes.push_back({child->name(), child->spec().role, child->pid(),
+                                   child->DescribeExit(), child->cpu_s(), child->max_rss_mb()});
     }
     result_.phase_seconds = progress_.phase_seconds();
     result_.total_s =

@@ -51,6 +51,9 @@ struct LabRunOptions {
   double teardown_grace_s = 5.0;
   int metric_samples = 40000;
   int image_width_px = 640;
+  // Every projector and camera of the site at this fraction of its resolution (scale runs of
+  // many nodes on a small machine); 1 = as the site file or preset says.
+  double resolution_scale = 1.0;
   bool progress_tty = false;
   bool curve = false;  // generate OUT/site.key (0600); world, coordinator, nodes require CURVE
   // "structured-light" (the nodes calibrate themselves and find the model) or "true-pose"

@@ -134,6 +134,42 @@ std::string PlotScript(const std::vector<SweepPoint>& points, bool device, const
 
 }  // namespace
 
+std::string FixedDigits(double value, int digits) { return Fixed(value, digits); }
+
+std::string RunChildLab(const std::vector<std::string>& run_args, const std::string& log_path,
+                        const std::atomic<bool>& stop) {
+  const std::string self = SelfExe();
+  if (self.empty()) return "cannot find this program (/proc/self/exe)";
+  std::vector<std::string> argv = {self, "run"};
+  argv.insert(argv.end(), run_args.begin(), run_args.end());
+  Expected<std::unique_ptr<ChildProcess>> child =
+      ChildProcess::Spawn({"sandtable-lab run", "lab", argv, log_path});
+  if (!child.ok()) return child.status().ToString();
+  ChildProcess& c = **child;
+  bool interrupted = false;
+  while (!c.Reap()) {
+    c.ReadLines();
+    if (stop && !interrupted) {
+      c.Signal(SIGTERM);
+      interrupted = true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  c.ReadLines();
+  return c.exit_code() == 0 ? std::string() : "sandtable-lab run: " + c.DescribeExit();
+}
+
+std::string RunGnuplot(const std::string& script, const std::string& log_path) {
+  const std::string gnuplot = OnPath("gnuplot");
+  if (gnuplot.empty()) return "gnuplot not found on PATH";
+  Expected<std::unique_ptr<ChildProcess>> plot =
+      ChildProcess::Spawn({"gnuplot", "plot", {gnuplot, script}, log_path});
+  if (!plot.ok()) return plot.status().ToString();
+  if (!(*plot)->WaitFor(std::chrono::milliseconds(30000))) return "gnuplot ran past 30 s";
+  return (*plot)->exit_code() == 0 ? std::string()
+                                   : "gnuplot: " + (*plot)->DescribeExit() + " (" + log_path + ")";
+}
+
 std::vector<SweepConfig> DefaultSweep() {
   std::vector<SweepConfig> c;
   c.push_back({"defaults", "", "", {}});
@@ -197,11 +233,6 @@ int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std:
     err << "sandtable-lab sweep: --only names no configuration (see docs/lab.md, \"Sweep\")\n";
     return 2;
   }
-  const std::string self = SelfExe();
-  if (self.empty()) {
-    err << "sandtable-lab sweep: cannot find this program (/proc/self/exe)\n";
-    return 1;
-  }
   const fs::path dir = fs::absolute(options.out_dir);
   std::error_code ec;
   fs::create_directories(dir / "runs", ec);
@@ -218,47 +249,24 @@ int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std:
     point.config = configs[i];
     const fs::path run_dir = dir / "runs" / point.config.name;
     fs::remove_all(run_dir, ec);
-    std::vector<std::string> argv = {self,
-                                     "run",
-                                     "--site",
-                                     options.site,
-                                     "--scene",
-                                     options.scene,
-                                     "--seed",
-                                     std::to_string(options.seed),
-                                     "--out",
-                                     run_dir.string(),
-                                     "--render",
-                                     "off",
-                                     "--samples",
-                                     std::to_string(options.metric_samples),
-                                     "--image-width",
-                                     "200",
-                                     "--progress",
-                                     "plain"};
-    if (!options.bin_dir.empty()) argv.insert(argv.end(), {"--bin-dir", options.bin_dir});
-    for (const std::string& a : point.config.node_args) argv.push_back("--node-arg=" + a);
+    std::vector<std::string> args = {"--site",        options.site,
+                                     "--scene",       options.scene,
+                                     "--seed",        std::to_string(options.seed),
+                                     "--out",         run_dir.string(),
+                                     "--render",      "off",
+                                     "--samples",     std::to_string(options.metric_samples),
+                                     "--image-width", "200",
+                                     "--progress",    "plain"};
+    if (!options.bin_dir.empty()) args.insert(args.end(), {"--bin-dir", options.bin_dir});
+    for (const std::string& a : point.config.node_args) args.push_back("--node-arg=" + a);
     err << "sweep: " << (i + 1) << "/" << configs.size() << " " << point.config.name << " ..."
         << std::endl;
-    Expected<std::unique_ptr<ChildProcess>> child = ChildProcess::Spawn(
-        {point.config.name, "lab", argv, (dir / "runs" / (point.config.name + ".log")).string()});
-    if (!child.ok()) {
-      point.error = child.status().ToString();
-    } else {
-      ChildProcess& c = **child;
-      bool interrupted = false;
-      while (!c.Reap()) {
-        c.ReadLines();
-        if (stop && !interrupted) {
-          c.Signal(SIGTERM);  // the run tears its site down and writes its report
-          interrupted = true;
-        }
-        std::this_thread::sleep_for(std::chrono::milliseconds(100));
-      }
-      c.ReadLines();
-      if (c.exit_code() != 0) point.error = "sandtable-lab run: " + c.DescribeExit();
-      ReadRun(run_dir / "report.json", &point);
-      if (c.exit_code() != 0) point.ok = false;
+    point.error = RunChildLab(args, (dir / "runs" / (point.config.name + ".log")).string(), stop);
+    const std::string exit_error = point.error;
+    ReadRun(run_dir / "report.json", &point);
+    if (!exit_error.empty()) {
+      point.ok = false;
+      point.error = exit_error;
     }
     err << "sweep: " << point.config.name << ": "
         << (point.ok ? "rms " + Fixed(point.rms_mm, 3) + " mm, projection " +
@@ -273,21 +281,12 @@ int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std:
   std::ofstream(dir / "sweep.csv") << SweepCsv(points);
   // Plots (gnuplot: docs/lab.md); the CSV stands without them.
   std::vector<std::string> plot_notes;
-  const std::string gnuplot = OnPath("gnuplot");
   for (const bool device : {true, false}) {
     const std::string png = device ? "sweep_projection" : "sweep_compute";
     const fs::path script = dir / (png + ".gp");
     std::ofstream(script) << PlotScript(points, device, dir, png);
-    if (gnuplot.empty()) {
-      plot_notes.push_back("gnuplot not found on PATH: " + png + ".png not drawn");
-      continue;
-    }
-    Expected<std::unique_ptr<ChildProcess>> plot = ChildProcess::Spawn(
-        {"gnuplot", "plot", {gnuplot, script.string()}, (dir / (png + ".log")).string()});
-    if (!plot.ok() || !(*plot)->WaitFor(std::chrono::milliseconds(30000)) ||
-        (*plot)->exit_code() != 0) {
-      plot_notes.push_back("gnuplot failed on " + script.string() + " (see " + png + ".log)");
-    }
+    const std::string why = RunGnuplot(script.string(), (dir / (png + ".log")).string());
+    if (!why.empty()) plot_notes.push_back(png + ".png not drawn: " + why);
   }
 
   // sweep.md and sweep.html.

@@ -8,7 +8,8 @@
 //                     [--saved-calibration DIR] [--calibration-path auto|full]
 //                     [--join-late ID] [--kill-unit ID --kill-at-s S]
 //                     [--stall-unit ID --stall-at-s S --stall-for-s D] [--node-arg=ARG ...]
-//   sandtable-lab sweep [--site ..] [--scene ..] --out DIR [--seed N]
+//   sandtable-lab sweep [--site ..] [--scene ..] --out DIR [--seed N] [--only CONFIG ..]
+//   sandtable-lab scale --nodes 2,4,8 [--scene city] --out DIR [--seed N] [--reblend]
 //
 // Exit codes: 0 ok, 1 the run failed (report written), 2 usage, 130 interrupted (SIGINT or
 // SIGTERM: the site is torn down and the report says so).
@@ -23,6 +24,7 @@
 #include "common/base/main_guard.h"
 #include "common/cli/command_line.h"
 #include "sim/lab/lab_run.h"
+#include "sim/lab/lab_scale.h"
 #include "sim/lab/lab_sweep.h"
 
 namespace {
@@ -44,7 +46,7 @@ static int Run(int argc, char** argv) {
   sim::LabRunOptions options;
   std::string progress = "auto";
   run->add_option("--site", options.site,
-                  "Site: sandtable-3, grid-N (1..32), flat-4, or a site file");
+                  "Site: sandtable-3, grid-N (1..64), flat-4, or a site file");
   run->add_option("--scene", options.scene, "Scene: sandtable, city, flat, or a glTF file");
   run->add_option("--out", options.out_dir, "Output directory (report, logs, calibrations)")
       ->required();
@@ -124,6 +126,10 @@ static int Run(int argc, char** argv) {
       ->check(CLI::Range(0.1, 240.0));
   run->add_option("--image-width", options.image_width_px, "Width of the report's pictures (px)")
       ->check(cli::Integer<int>(16, 8192));
+  run->add_option("--resolution-scale", options.resolution_scale,
+                  "Every projector and camera at this fraction of its resolution (large sites on "
+                  "a small machine)")
+      ->check(CLI::Range(0.05, 1.0));
   run->add_flag("--curve", options.curve,
                 "Authenticate the whole run: a site key in OUT/site.key, CURVE on world, "
                 "coordinator and nodes");
@@ -136,7 +142,7 @@ static int Run(int argc, char** argv) {
   cli::Configure(*sweep);
   sim::LabSweepOptions sweep_options;
   sweep->add_option("--site", sweep_options.site,
-                    "Site: sandtable-3, grid-N (1..32), flat-4, or a site file");
+                    "Site: sandtable-3, grid-N (1..64), flat-4, or a site file");
   sweep->add_option("--scene", sweep_options.scene, "Scene: sandtable, city, flat, or a glTF file");
   sweep->add_option("--out", sweep_options.out_dir, "Output directory (sweep.md, sweep.csv, runs/)")
       ->required();
@@ -150,16 +156,49 @@ static int Run(int argc, char** argv) {
       ->check(cli::Integer<int>(1, 10000000));
   sweep->add_option("--only", sweep_options.only,
                     "run only these configurations (defaults, phase-steps=4, ...; repeat it)");
+  CLI::App* scale =
+      app.add_subcommand("scale", "The cost of a site as it grows: one grid-N run per N, plots");
+  cli::Configure(*scale);
+  sim::LabScaleOptions scale_options;
+  scale->add_option("--nodes", scale_options.nodes, "site sizes N of grid-N, e.g. 2,4,8,16")
+      ->delimiter(',')
+      ->check(cli::Integer<int>(1, 64));
+  scale->add_option("--scene", scale_options.scene, "Scene: city, sandtable, flat, or a glTF file");
+  scale->add_option("--out", scale_options.out_dir, "Output directory (scale.md, scale.csv, runs/)")
+      ->required();
+  scale->add_option("--seed", scale_options.seed, "Seed of every run")
+      ->check(cli::Integer<uint64_t>(0, UINT64_MAX));
+  scale->add_option("--bin-dir", scale_options.bin_dir,
+                    "Directory of sandtable-world/-coordinator/-node (as for run)");
+  scale
+      ->add_option("--samples", scale_options.metric_samples,
+                   "Surface points sampled by each run's registration metric")
+      ->check(cli::Integer<int>(1, 10000000));
+  scale
+      ->add_option("--resolution-scale", scale_options.resolution_scale,
+                   "Every projector and camera at this fraction of its resolution")
+      ->check(CLI::Range(0.05, 1.0));
+  scale->add_flag("--reblend", scale_options.reblend,
+                  "with the show and the blend, unit 0 killed after calibration: the re-blend "
+                  "time per N (much slower)");
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
-  if (sweep->parsed()) {
-    for (int i = 0; i < argc; ++i) {
-      sweep_options.command_line += (i ? " " : "") + std::string(argv[i]);
-    }
+  if (scale->parsed() || sweep->parsed()) {
     struct sigaction action {};
     action.sa_handler = OnSignal;
     sigaction(SIGINT, &action, nullptr);
     sigaction(SIGTERM, &action, nullptr);
     signal(SIGPIPE, SIG_IGN);
+  }
+  if (scale->parsed()) {
+    for (int i = 0; i < argc; ++i) {
+      scale_options.command_line += (i ? " " : "") + std::string(argv[i]);
+    }
+    return sim::RunScale(scale_options, g_stop, std::cout, std::cerr);
+  }
+  if (sweep->parsed()) {
+    for (int i = 0; i < argc; ++i) {
+      sweep_options.command_line += (i ? " " : "") + std::string(argv[i]);
+    }
     return sim::RunSweep(sweep_options, g_stop, std::cout, std::cerr);
   }
 

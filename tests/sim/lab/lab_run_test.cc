@@ -617,6 +617,7 @@ TEST_F(LabRunTest, HelpListsEveryFlag) {
                            "--start-timeout-s",
                            "--calibration-timeout-s",
                            "--image-width",
+                           "--resolution-scale",
                            "--progress",
                            "--calibration",
                            "--model",
