@@ -27,6 +27,22 @@ Status Channel::Send(wire::Envelope envelope, const std::string& routing_id) {
   Expected<std::string> bytes = proto::EncodeEnvelope(std::move(envelope), limits_);
   if (!bytes.ok()) return bytes.status();
   const size_t size = bytes->size();
+  if (faults_.active()) {
+    const double u = std::uniform_real_distribution<double>(0.0, 1.0)(fault_random_);
+    if (u < faults_.drop_share) {
+      ++fault_counts_.dropped;
+      return OkStatus();  // a lossy link: the sender cannot tell
+    }
+    if (u < faults_.drop_share + faults_.corrupt_share && !bytes->empty()) {
+      ++fault_counts_.corrupted;
+      const int flips = 1 + static_cast<int>(fault_random_() % 4);
+      for (int i = 0; i < flips; ++i) {
+        const size_t at = fault_random_() % bytes->size();
+        (*bytes)[at] =
+            static_cast<char>((*bytes)[at] ^ static_cast<char>(1 + fault_random_() % 255));
+      }
+    }
+  }
   Status sent = socket_->type() == SocketType::kRouter
                     ? socket_->Send({routing_id, std::move(*bytes)})
                     : socket_->Send({std::move(*bytes)});
@@ -35,6 +51,23 @@ Status Channel::Send(wire::Envelope envelope, const std::string& routing_id) {
     stats_.bytes_sent += size;
   }
   return sent;
+}
+
+Status ChannelFaults::Check() const {
+  if (!(drop_share >= 0.0 && drop_share <= 1.0) ||
+      !(corrupt_share >= 0.0 && corrupt_share <= 1.0) || drop_share + corrupt_share > 1.0) {
+    return InvalidArgumentError("channel faults: drop share " + std::to_string(drop_share) +
+                                " and corrupt share " + std::to_string(corrupt_share) +
+                                " must be in [0, 1] with a sum of at most 1");
+  }
+  return OkStatus();
+}
+
+Status Channel::SetFaults(const ChannelFaults& faults) {
+  ST_RETURN_IF_ERROR(faults.Check());
+  faults_ = faults;
+  fault_random_.seed(faults.seed);
+  return OkStatus();
 }
 
 Expected<std::optional<Incoming>> Channel::TryReceive() {

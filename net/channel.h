@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <random>
 #include <string>
 
 #include "common/base/status.h"
@@ -50,6 +51,25 @@ struct ChannelStats {
   uint64_t bytes_received = 0;     // of all messages, accepted or not
 };
 
+// Fault injection for the lab's chaos runs (docs/reliability.md, "Faults on a link"): of the
+// messages this channel sends, a share is dropped (Send() reports success, nothing leaves: a
+// lossy link) and a share corrupted (1 to 4 bytes of the encoded message flipped after
+// encoding, so the receiver's codec and checks meet it), drawn per message from a generator
+// seeded with `seed`. Off (both 0) by default; a product node turns it on only through its
+// --fault-* flags.
+struct ChannelFaults {
+  double drop_share = 0.0;
+  double corrupt_share = 0.0;
+  uint64_t seed = 1;
+  bool active() const { return drop_share > 0.0 || corrupt_share > 0.0; }
+  Status Check() const;  // shares in [0, 1], their sum at most 1
+};
+
+struct ChannelFaultCounts {
+  uint64_t dropped = 0;
+  uint64_t corrupted = 0;
+};
+
 class Channel {
  public:
   // `counters` may be shared between channels of one process; it must outlive the channel.
@@ -77,6 +97,10 @@ class Channel {
   // closes it: Send() is then UNAVAILABLE, and socket() must not be called until replaced.
   void ReplaceSocket(std::unique_ptr<Socket> socket);
 
+  // Turns fault injection on (or off with both shares 0). INVALID_ARGUMENT from Check().
+  Status SetFaults(const ChannelFaults& faults);
+  const ChannelFaultCounts& fault_counts() const { return fault_counts_; }
+
   Socket& socket() { return *socket_; }
   const ChannelStats& stats() const { return stats_; }
   proto::MessageCounters& counters() { return *counters_; }
@@ -88,6 +112,9 @@ class Channel {
   proto::MessageCounters* counters_;
   proto::CodecLimits limits_;
   ChannelStats stats_;
+  ChannelFaults faults_;
+  std::mt19937_64 fault_random_;
+  ChannelFaultCounts fault_counts_;
 };
 
 }  // namespace sandtable::net

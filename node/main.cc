@@ -12,6 +12,7 @@
 //                  [--render-log FILE] [--blend on|off] [--blend-step-px N]
 //                  [--black-match on|off]
 //                  [--bind ENDPOINT] [--curve-keys FILE] [--heartbeat-ms N] [--workers N]
+//                  [--fault-drop-share P] [--fault-corrupt-share P] [--fault-seed N] (lab chaos)
 //   (--world E is short for --projector world:E --camera world:E; node/devices/device_factory.h)
 //   sandtable-node calibrate-unit --poses DIR -o unit.json ...   (the unit's factory calibration)
 //   sandtable-node render-frame --calibration unit.json -o frame.png ...  (one frame of the show)
@@ -22,6 +23,7 @@
 //   {"calibrated":3,"source":"factory+true_pose","json":"DIR/unit-3.json","yaml":"DIR/unit-3.yaml"}
 // (self-calibration adds report, mpcdi, round, verified and its compute and traffic figures);
 // with --saved-calibration, the check's figures first: {"verification":3,"holds":true,...}.
+// On exit: {"messages":ID,"accepted":N,"rejected":N,"faults_dropped":N,"faults_corrupted":N}.
 // The show (node/render, docs/render.md): once the unit holds a calibration it renders the
 // --model where it stands, the annotations, the wand's cursor and the --timeline's personnel
 // tracks at the coordinator's media time, under a virtual sun, into its projector; it prints
@@ -113,6 +115,13 @@ static int Run(int argc, char** argv) {
       ->check(cli::Integer(1, 60000));
   app.add_option("--workers", options.worker_threads, "worker threads for long work")
       ->check(cli::Integer(1, 64));
+  app.add_option("--fault-drop-share", options.faults.drop_share,
+                 "LAB CHAOS ONLY: drop this share of the messages the node sends")
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--fault-corrupt-share", options.faults.corrupt_share,
+                 "LAB CHAOS ONLY: corrupt this share of the messages the node sends")
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--fault-seed", options.faults.seed, "seed of the injected faults");
   app.add_option("--world", world,
                  "the simulated world's endpoint: projector and camera are "
                  "world-backed")
@@ -492,6 +501,14 @@ static int Run(int argc, char** argv) {
   }
   Status ran = runtime.Run(g_stop);
   if (render_service) WriteJsonLine(std::cout, render_service->SummaryJson(options.id));
+  {
+    const net::ChannelFaultCounts faults = runtime.fault_counts();
+    WriteJsonLine(std::cout, {{"messages", options.id},
+                              {"accepted", runtime.counters().accepted()},
+                              {"rejected", runtime.counters().total_rejected()},
+                              {"faults_dropped", faults.dropped},
+                              {"faults_corrupted", faults.corrupted}});
+  }
   if (auto offset = runtime.clock_offset()) {
     ST_LOG(kInfo) << "clock offset to coordinator " << offset->offset_s * 1e3
                   << " ms, error <= " << offset->error_bound_s * 1e3 << " ms over "

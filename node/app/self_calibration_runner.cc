@@ -390,8 +390,21 @@ void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
       if (to != r.self && !node.peers().count(to)) {
         auto since = r.missing_since.emplace(to, now).first;
         gone = now - since->second >= options_.member_grace;
+        r.unsent.insert(it->first);
       } else {
         r.missing_since.erase(to);
+        if (to != r.self && now - it->second.sent_at >= options_.step_retry) {
+          r.unsent.insert(it->first);  // unanswered for step_retry: its answer may be lost
+        }
+        if (r.unsent.count(it->first)) {  // linked again, or unanswered: the step goes again
+          wire::Envelope e;
+          *e.mutable_calibration_step() = it->second.step;
+          it->second.sent_at = now;
+          if (Send(to, std::move(e), node)) {
+            r.unsent.erase(it->first);
+            ST_LOG(kInfo) << "self-calibration: step " << it->first << " sent again to unit " << to;
+          }
+        }
       }
       const bool late = now - r.stage_started > options_.step_timeout;
       if (gone || late) {
@@ -405,6 +418,7 @@ void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
           if (gone) r.departed.insert(to);
           ST_LOG(kWarning) << "self-calibration: " << why;
         }
+        r.unsent.erase(it->first);
         it = r.awaiting.erase(it);
       } else {
         ++it;
@@ -430,13 +444,14 @@ void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
         c.step.set_frames(expected);
       }
       c.step.set_step(r.next_step++);
+      c.sent_at = now;
       r.awaiting[c.step.step()] = c;
       to_send.push_back(c);
     }
     for (const Runner::Command& c : to_send) {
       wire::Envelope e;
       *e.mutable_calibration_step() = c.step;
-      Send(c.to, std::move(e), node);
+      if (!Send(c.to, std::move(e), node)) r.unsent.insert(c.step.step());
     }
     if (r.awaiting.empty() && !EndStage(node)) return;  // nothing to wait for
   }

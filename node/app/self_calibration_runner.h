@@ -29,6 +29,7 @@ struct SelfCalibrationService::Runner {
     NodeId to = kInvalidNodeId;
     wire::CalibrationStep step;
     NodeId about = kInvalidNodeId;  // CAPTURE in the pre-pass: the projector that is white
+    std::chrono::steady_clock::time_point sent_at{};  // last sent (step_retry)
   };
   struct Stage {
     std::vector<Command> commands;
@@ -51,6 +52,10 @@ struct SelfCalibrationService::Runner {
   // Units awaited that are not in the member list, since when (a loaded unit whose heartbeats
   // stalled is dropped by the coordinator and registers again at once: not gone yet).
   std::map<NodeId, std::chrono::steady_clock::time_point> missing_since;
+  // Awaited steps that may not have reached their unit (the send failed, or the unit dropped
+  // out of the member list while it was awaited, taking its link's queue with it): sent again
+  // once the unit is linked again.
+  std::set<uint32_t> unsent;
   std::deque<Stage> stages;
   std::map<uint32_t, Command> awaiting;  // by step number
   std::function<void(NodeRuntime&)> current_after;

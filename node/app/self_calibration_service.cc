@@ -260,16 +260,18 @@ bool SelfCalibrationService::ServesPeer(wire::Envelope::BodyCase body) const {
   }
 }
 
-void SelfCalibrationService::Send(NodeId to, wire::Envelope envelope, NodeRuntime& node) {
+bool SelfCalibrationService::Send(NodeId to, wire::Envelope envelope, NodeRuntime& node) {
   if (to == node.id()) {  // the runner talking to itself: no socket
     Deliver(to, envelope, node);
-    return;
+    return true;
   }
   ++messages_sent_;
   bytes_sent_ += envelope.ByteSizeLong();
   if (Status sent = node.SendToPeer(to, std::move(envelope)); !sent.ok()) {
     ST_LOG(kWarning) << "self-calibration: to node " << to << ": " << sent.ToString();
+    return false;
   }
+  return true;
 }
 
 void SelfCalibrationService::OnPeerMessage(net::Incoming request, NodeRuntime& node) {
@@ -303,6 +305,10 @@ void SelfCalibrationService::Deliver(NodeId from, const wire::Envelope& e, NodeR
 void SelfCalibrationService::Answer(NodeId to, wire::CalibrationStepDone done, NodeRuntime& node) {
   wire::Envelope e;
   *e.mutable_calibration_step_done() = std::move(done);
+  if (e.calibration_step_done().round() == round_) {
+    replies_[e.calibration_step_done().step()].push_back(e);
+    working_.erase(e.calibration_step_done().step());
+  }
   Send(to, std::move(e), node);
 }
 
@@ -324,7 +330,17 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
     lit_masks_.clear();
     received_.clear();
     pending_local_.reset();
+    replies_.clear();
+    working_.clear();
   }
+  // A step sent again (its answer was lost, or the runner lost patience): the same answer
+  // again, or nothing while it is still being worked on.
+  if (auto answered = replies_.find(step.step()); answered != replies_.end()) {
+    ST_LOG(kInfo) << "self-calibration: step " << step.step() << " again; answering again";
+    for (const wire::Envelope& e : answered->second) Send(from, e, node);
+    return;
+  }
+  if (!working_.insert(step.step()).second) return;
   wire::CalibrationStepDone done;
   done.set_round(step.round());
   done.set_step(step.step());
@@ -425,6 +441,7 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
     case wire::CALIBRATION_ACTION_CAPTURE: {
       if (!camera_) {
         deferred_.emplace_back(step, from);  // the camera is still opening
+        working_.erase(step.step());         // handled afresh when it has
         return;
       }
       CameraInput* camera = camera_.get();
@@ -721,6 +738,7 @@ void SelfCalibrationService::RunLocal(const wire::CalibrationStep& step, NodeId 
             ST_LOG(kInfo) << "self-calibration: " << note;
           }
         }
+        if (step.round() == round_) replies_[step.step()].push_back(e);
         Send(from, std::move(e), node);
         wire::CalibrationStepDone done;
         done.set_round(step.round());

@@ -18,6 +18,9 @@
 // projecting nodes' inputs, solves the cluster on a worker (cluster_solver.h) and sends each
 // node its CalibrationResult. A node that does not answer a step within step_timeout is left
 // out of the rest of the round (its log line and the report name it); the others finish.
+// Lost messages (a lossy link): the runner sends a step again every step_retry while it is
+// unanswered; a node answers a step it has already answered with the same messages again (its
+// done, and for LOCAL its CalibrationInput) and ignores one it is still working on.
 #pragma once
 
 #include <chrono>
@@ -53,6 +56,7 @@ struct SelfCalibrationOptions {
   std::chrono::milliseconds step_timeout{60000};
   // A unit awaited by the runner that is out of the member list this long has left the round.
   std::chrono::milliseconds member_grace{3000};
+  std::chrono::milliseconds step_retry{1500};
   // Modeled device time: frames x (frame period + capture latency). The latency is that of a
   // hardware-triggered camera whose exposure fits inside the frame period: trigger and readout
   // overlap beyond the frame, stated as 2 ms.
@@ -148,7 +152,8 @@ class SelfCalibrationService : public NodeService {
   void HandleStep(const wire::CalibrationStep& step, NodeId from, NodeRuntime& node);
   void RunDeferred(NodeRuntime& node);
   void Answer(NodeId to, wire::CalibrationStepDone done, NodeRuntime& node);
-  void Send(NodeId to, wire::Envelope envelope, NodeRuntime& node);
+  // False when the message could not be queued (the peer is not linked).
+  bool Send(NodeId to, wire::Envelope envelope, NodeRuntime& node);
   void Deliver(NodeId from, const wire::Envelope& envelope, NodeRuntime& node);
   void HandleCorrespondences(const wire::CorrespondenceSet& set);
   void RunLocal(const wire::CalibrationStep& step, NodeId from, NodeRuntime& node);
@@ -195,6 +200,10 @@ class SelfCalibrationService : public NodeService {
   std::optional<ProjectorResponseRecord> response_;  // the own projector's, last measured
   std::map<std::string, std::vector<cv::Mat>> pattern_cache_;
   std::map<NodeId, wire::CorrespondenceSet> received_;  // by camera, for own projector
+  // This round's answers to the runner by step (sent again when the step comes again) and the
+  // steps still being worked on (a repeated one is ignored).
+  std::map<uint32_t, std::vector<wire::Envelope>> replies_;
+  std::set<uint32_t> working_;
   std::deque<std::pair<wire::CalibrationStep, NodeId>> deferred_;
   std::optional<std::pair<wire::CalibrationStep, NodeId>> pending_local_;
   std::chrono::steady_clock::time_point pending_local_since_{};

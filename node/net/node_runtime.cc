@@ -37,6 +37,7 @@ Status NodeOptions::Check() const {
   if (worker_threads < 1 || worker_threads > 64) {
     return InvalidArgumentError("node: worker_threads must be in [1, 64]");
   }
+  if (Status f = faults.Check(); !f.ok()) return InvalidArgumentError("node: " + f.message());
   if (coordinator_requests.empty() || coordinator_events.empty()) {
     return InvalidArgumentError(
         "node: coordinator endpoints are required (--coordinator REQUESTS,EVENTS)");
@@ -98,6 +99,7 @@ Status NodeRuntime::Start() {
   peer_endpoint_ = *bound;
   peer_router_ = std::make_unique<net::Channel>(std::move(*router), options_.id, incarnation_,
                                                 &counters_, options_.limits);
+  ST_RETURN_IF_ERROR(peer_router_->SetFaults(options_.faults));
 
   net::SocketOptions to_coordinator = ClientSocketOptions();
   // Let the Goodbye leave on shutdown.
@@ -109,6 +111,9 @@ Status NodeRuntime::Start() {
   ST_RETURN_IF_ERROR((*dealer)->Connect(options_.coordinator_requests));
   coordinator_ = std::make_unique<net::Channel>(std::move(*dealer), options_.id, incarnation_,
                                                 &counters_, options_.limits);
+  net::ChannelFaults coordinator_faults = options_.faults;
+  coordinator_faults.seed ^= 0x9e3779b97f4a7c15ull;  // its own draws
+  ST_RETURN_IF_ERROR(coordinator_->SetFaults(coordinator_faults));
 
   auto sub = net::Socket::Create(&context_, net::SocketType::kSub, ClientSocketOptions());
   if (!sub.ok()) return sub.status();
@@ -332,7 +337,20 @@ void NodeRuntime::ApplyMemberList(const wire::MemberList& list) {
   const auto distance = [this](const wire::Member* m) {
     return std::abs(static_cast<int64_t>(m->node_id()) - static_cast<int64_t>(options_.id));
   };
-  const size_t links = std::min(candidates.size(), static_cast<size_t>(options_.max_peer_links));
+  // The lowest id runs the site's calibration rounds and must reach every unit: it links up to
+  // kMaxRunnerPeerLinks, and every node links it (beyond the cap: max_peer_links + 1 at most).
+  NodeId lowest = options_.id;
+  const wire::Member* lowest_member = nullptr;
+  for (const wire::Member& m : members.members()) {
+    if (IsValidNodeId(m.node_id()) && m.node_id() < lowest &&
+        LinkableEndpoint(m.endpoints().peer_router())) {
+      lowest = m.node_id();
+      lowest_member = &m;
+    }
+  }
+  const size_t cap = lowest == options_.id ? static_cast<size_t>(kMaxRunnerPeerLinks)
+                                           : static_cast<size_t>(options_.max_peer_links);
+  const size_t links = std::min(candidates.size(), cap);
   std::partial_sort(candidates.begin(), candidates.begin() + static_cast<std::ptrdiff_t>(links),
                     candidates.end(), [&](const wire::Member* a, const wire::Member* b) {
                       return std::make_pair(distance(a), a->node_id()) <
@@ -345,11 +363,16 @@ void NodeRuntime::ApplyMemberList(const wire::MemberList& list) {
   peer_links_capped_ = candidates.size() > links;
   std::map<NodeId, const wire::Member*> listed;
   for (size_t i = 0; i < links; ++i) listed[candidates[i]->node_id()] = candidates[i];
+  if (lowest_member) listed[lowest_member->node_id()] = lowest_member;
   for (auto it = peers_.begin(); it != peers_.end();) {
     auto found = listed.find(it->first);
     const bool gone = found == listed.end() ||
                       found->second->incarnation() != it->second.incarnation ||
                       found->second->endpoints().peer_router() != it->second.endpoint;
+    if (gone && it->second.to_peer) {
+      closed_link_faults_.dropped += it->second.to_peer->fault_counts().dropped;
+      closed_link_faults_.corrupted += it->second.to_peer->fault_counts().corrupted;
+    }
     it = gone ? peers_.erase(it) : std::next(it);
   }
   for (const auto& [id, member] : listed) {
@@ -380,8 +403,24 @@ void NodeRuntime::ApplyMemberList(const wire::MemberList& list) {
     peer.incarnation = member->incarnation();
     peer.to_peer = std::make_unique<net::Channel>(std::move(*dealer), options_.id, incarnation_,
                                                   &counters_, options_.limits);
+    net::ChannelFaults link_faults = options_.faults;
+    link_faults.seed = options_.faults.seed * 1000003ull + id;  // one stream per link
+    (void)peer.to_peer->SetFaults(link_faults);                 // checked in NodeOptions::Check
     peer.monitor = std::move(monitor);
   }
+}
+
+net::ChannelFaultCounts NodeRuntime::fault_counts() const {
+  net::ChannelFaultCounts total = closed_link_faults_;
+  auto add = [&](const net::Channel* c) {
+    if (!c) return;
+    total.dropped += c->fault_counts().dropped;
+    total.corrupted += c->fault_counts().corrupted;
+  };
+  add(peer_router_.get());
+  add(coordinator_.get());
+  for (const auto& [id, peer] : peers_) add(peer.to_peer.get());
+  return total;
 }
 
 void NodeRuntime::DrainPeerMonitors() {

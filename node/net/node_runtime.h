@@ -8,7 +8,12 @@
 // traffic grows with neighbours, not with the site. Bounded: at most max_peer_links peers are
 // linked (one socket each; ZeroMQ's default limit is 1023 sockets per context): when more
 // members qualify, the ones with the nearest ids (|id - own id|, ties to the lower id) are
-// linked, so a member list flooded with fake members cannot crowd out the node's sockets. A
+// linked, so a member list flooded with fake members cannot crowd out the node's sockets. The
+// member with the lowest id runs the calibration rounds and must reach every unit: it links up
+// to kMaxRunnerPeerLinks (128: a link costs ~3 ZeroMQ sockets, its DEALER and its connection
+// monitor's pair, and a flood of 1 100 fake members ran into the 1 023-socket limit at ~340
+// links) members, and every node links it beyond its own cap (grid-64: with 32 nearest ids
+// only, units 33 and up were out of the runner's reach and no round began). A
 // member whose endpoint is not tcp:// or ipc:// (or is over 256 bytes) is not linked. The peer mesh
 // does not depend on the coordinator: when it is down, peers keep heartbeating each other from the
 // last member list; when it returns the node says Hello again and membership resumes.
@@ -52,6 +57,8 @@ struct NodeCapabilities {
   std::string camera_input;      // "world", "video", "replay", "none"
 };
 
+inline constexpr int kMaxRunnerPeerLinks = 128;
+
 struct NodeOptions {
   NodeId id = kInvalidNodeId;                   // below kFirstReservedSenderId
   std::string coordinator_requests;             // coordinator ROUTER endpoint
@@ -66,6 +73,9 @@ struct NodeOptions {
   NodeCapabilities capabilities;
   std::optional<net::CurveKeyPair> curve;
   proto::CodecLimits limits;
+  // Lab chaos only (--fault-*): faults on every link this node sends on (its peer router, its
+  // links to peers, its requests to the coordinator); net/channel.h.
+  net::ChannelFaults faults;
 
   Status Check() const;
 };
@@ -130,6 +140,8 @@ class NodeRuntime {
   }
   const proto::MessageCounters& counters() const { return counters_; }
   uint64_t registrations() const { return registrations_; }
+  // The faults injected so far on this node's links (options.faults), closed links included.
+  net::ChannelFaultCounts fault_counts() const;
 
  private:
   void HandleCoordinatorReply(const wire::Envelope& in);
@@ -150,6 +162,7 @@ class NodeRuntime {
   std::unique_ptr<net::ZapHandler> zap_;
   std::unique_ptr<net::HandshakeMonitor> peer_monitor_;
   proto::MessageCounters counters_;
+  net::ChannelFaultCounts closed_link_faults_;  // of peer links since closed
   std::unique_ptr<net::Channel> coordinator_;
   std::unique_ptr<net::Channel> events_;
   std::unique_ptr<net::Channel> peer_router_;

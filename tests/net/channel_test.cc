@@ -121,5 +121,49 @@ TEST(ChannelTest, LargePayloadTravelsCompressed) {
   EXPECT_EQ(p->client->stats().bytes_sent, in->wire_bytes);
 }
 
+// Fault injection (lab chaos): of 200 messages a seeded share is dropped and a share
+// corrupted; everything not dropped reaches the receiver, which accepts or refuses it (a flipped
+// byte inside a value can still decode); the same seed draws the same faults.
+TEST(ChannelTest, InjectedFaultsDropAndCorruptASeededShare) {
+  constexpr int kMessages = 200;
+  auto run = [](uint64_t seed) {
+    auto p = MakePair();
+    EXPECT_TRUE(p->client->SetFaults({0.3, 0.2, seed}).ok());
+    for (int i = 0; i < kMessages; ++i) {
+      wire::Envelope e;
+      e.mutable_heartbeat()->set_incarnation(static_cast<uint64_t>(i));
+      EXPECT_TRUE(p->client->Send(std::move(e)).ok());
+    }
+    const ChannelFaultCounts counts = p->client->fault_counts();
+    const uint64_t delivered = kMessages - counts.dropped;
+    EXPECT_TRUE(testing::WaitFor(
+        [&] {
+          (void)p->server->TryReceive();
+          return p->server_counters.accepted() + p->server_counters.total_rejected() == delivered;
+        },
+        kDeadline))
+        << p->server_counters.ToString() << " dropped " << counts.dropped;
+    EXPECT_GT(p->server_counters.total_rejected(), 0u);  // some corruption is caught
+    EXPECT_LE(p->server_counters.total_rejected(), counts.corrupted + 0u);
+    return counts;
+  };
+  const ChannelFaultCounts a = run(7), b = run(7);
+  EXPECT_EQ(a.dropped, b.dropped);
+  EXPECT_EQ(a.corrupted, b.corrupted);
+  // 30 % and 20 % of 200: well inside 4 standard deviations.
+  EXPECT_NEAR(static_cast<double>(a.dropped), 60.0, 26.0);
+  EXPECT_NEAR(static_cast<double>(a.corrupted), 40.0, 23.0);
+
+  auto p = MakePair();
+  EXPECT_FALSE(p->client->SetFaults({0.8, 0.3, 1}).ok());
+  EXPECT_FALSE(p->client->SetFaults({-0.1, 0.0, 1}).ok());
+  ASSERT_TRUE(p->client->SetFaults({1.0, 0.0, 1}).ok());
+  wire::Envelope e;
+  e.mutable_heartbeat();
+  EXPECT_TRUE(p->client->Send(std::move(e)).ok());  // a lossy link: the sender cannot tell
+  EXPECT_EQ(p->client->fault_counts().dropped, 1u);
+  EXPECT_FALSE(ReceiveWithin(p->server.get(), milliseconds(300)).has_value());
+}
+
 }  // namespace
 }  // namespace sandtable::net

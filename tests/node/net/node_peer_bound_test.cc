@@ -1,8 +1,10 @@
-// A node links to at most max_peer_links peers, the nearest ids first: a member list flooded
+// A node links to at most max_peer_links peers, the nearest ids first, plus the lowest id (the
+// calibration runner, which itself links up to kMaxRunnerPeerLinks): a member list flooded
 // with 1 100 fake members (the report: each node pushed to ZeroMQ's 1 023-socket limit, real
-// peers never connected) costs it max_peer_links sockets, and its real neighbour is linked and
-// heard. The member list comes from a publisher of the test (a stand-in for the coordinator's
-// PUB, real sockets), the nodes are real NodeRuntimes stepped on this thread.
+// peers never connected) costs a node max_peer_links sockets and the runner
+// kMaxRunnerPeerLinks, and the real neighbours are linked and heard both ways. The member list
+// comes from a publisher of the test (a stand-in for the coordinator's PUB, real sockets), the
+// nodes are real NodeRuntimes stepped on this thread.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -76,17 +78,24 @@ TEST(NodePeerBoundTest, FakeMembersCannotCrowdOutARealNeighbour) {
         }
         EXPECT_TRUE(a.Step(milliseconds(1)).ok());
         EXPECT_TRUE(b.Step(milliseconds(1)).ok());
-        EXPECT_LE(a.peers().size(), static_cast<size_t>(defaults.max_peer_links));
-        const auto it = a.peers().find(2);
-        return it != a.peers().end() && it->second.heartbeats_received > 0;
+        EXPECT_LE(a.peers().size(), static_cast<size_t>(kMaxRunnerPeerLinks));
+        EXPECT_LE(b.peers().size(), static_cast<size_t>(defaults.max_peer_links) + 1);
+        const auto ab = a.peers().find(2), ba = b.peers().find(1);
+        return ab != a.peers().end() && ab->second.heartbeats_received > 0 &&
+               ba != b.peers().end() && ba->second.heartbeats_received > 0;
       },
       kDeadline);
-  EXPECT_TRUE(heard) << "node 1 never heard its real neighbour 2";
-  EXPECT_EQ(a.peers().size(), static_cast<size_t>(defaults.max_peer_links));
+  EXPECT_TRUE(heard) << "nodes 1 and 2 never heard each other";
+  // Node 1 has the lowest id: it runs the rounds and links up to kMaxRunnerPeerLinks.
+  EXPECT_EQ(a.peers().size(), static_cast<size_t>(kMaxRunnerPeerLinks));
+  // Node 2: its max_peer_links nearest ids, node 1 among them.
+  EXPECT_EQ(b.peers().size(), static_cast<size_t>(defaults.max_peer_links));
   EXPECT_EQ(a.peers().count(5000) + a.peers().count(5001), 0u);
   // The nearest ids: 2 and the lowest fake ids.
   EXPECT_EQ(a.peers().count(kFirstFakeId), 1u);
   EXPECT_EQ(a.peers().count(kFirstFakeId + kFakeMembers - 1), 0u);
+  EXPECT_EQ(b.peers().count(kFirstFakeId), 1u);
+  EXPECT_EQ(b.peers().count(kFirstFakeId + defaults.max_peer_links), 0u);
 }
 
 }  // namespace
