@@ -194,6 +194,7 @@ json LabReportJson(const LabResult& r) {
   if (!r.render.empty()) out["render"] = r.render;
   if (!r.photometric.empty()) out["photometric"] = r.photometric;
   if (!r.live.empty()) out["live"] = r.live;
+  if (!r.chaos.is_null()) out["chaos"] = r.chaos;
   if (r.model_offset_measured || sc.contains("runner_report")) {
     json registration = json::object();
     if (r.model_offset_measured) {
@@ -525,6 +526,33 @@ std::string LabReportMarkdown(const LabResult& r) {
     md << "## Registration error seen from above\n\n![registration error](" << r.heatmap_png
        << ")\n\n*Worst projector per point, 0 (dark) to " << Fixed(r.heatmap_scale_mm, 2)
        << " mm (yellow, the site's p99); grey: lit by nobody.*\n\n";
+  }
+  if (!r.chaos.is_null()) {
+    const json& c = r.chaos;
+    md << "## Chaos (docs/lab.md)\n\nFaults injected during the hold, seed "
+       << r.metric_options.seed << ". Processes crashed: **" << c.value("processes_crashed", 0)
+       << "**";
+    if (c.contains("annotations")) {
+      const json& a = c["annotations"];
+      md << "; annotations acknowledged " << a.value("points_acknowledged", 0) << ", present "
+         << a.value("points_present", 0) << ", lost **" << a.value("points_lost", 0) << "**";
+      if (!a.value("verify_error", std::string()).empty()) {
+        md << " (not verified: " << a.value("verify_error", std::string()) << ")";
+      }
+    }
+    md << ".\n\n| fault | at (s into the hold) | detected (ms) | recovered (ms) | frames lost "
+          "on the others (max per node) | note |\n| --- | --- | --- | --- | --- | --- |\n";
+    const json faults = c.value("faults", json::array());
+    for (const json& f : faults) {
+      auto ms = [&](const char* key) {
+        return f.contains(key) && f[key].is_number() ? Fixed(f[key].get<double>(), 0) : "-";
+      };
+      md << "| " << f.value("fault", std::string()) << " | " << Fixed(f.value("at_s", 0.0), 1)
+         << " | " << ms("detected_ms") << " | " << ms("recovered_ms") << " | "
+         << (f.contains("frames_lost_max") ? std::to_string(f["frames_lost_max"].get<int>()) : "-")
+         << " | " << f.value("note", std::string()) << " |\n";
+    }
+    md << "\n";
   }
   md << "## Processes\n\n| name | role | pid | exit | CPU (s) | peak memory (MiB) |\n"
         "| --- | --- | --- | --- | --- | --- |\n";

@@ -78,6 +78,9 @@ struct LabResult {
   nlohmann::json join;   // --join-late: the late unit's join (null when none)
   nlohmann::json kill;   // --kill-unit: what the others did (null when none)
   nlohmann::json stall;  // --stall-unit: when the unit was stopped and resumed (null when none)
+  // Faults during the hold (docs/lab.md, "Chaos"): the annotations painted and found, the
+  // coordinator's restart, faults on a node's links, frames lost, crashes (null when none).
+  nlohmann::json chaos;
   // The show (docs/render.md): frame times, the floor, timeline skew, grid coincidence, and
   // per-unit summaries; empty when the nodes did not render.
   nlohmann::json render = nlohmann::json::object();

@@ -29,7 +29,9 @@
 #include "net/curve.h"
 #include "sim/lab/lab_images.h"
 #include "sim/lab/lab_inputs.h"
+#include "sim/lab/lab_painter.h"
 #include "sim/lab/lab_report.h"
+#include "sim/lab/lab_sweep.h"
 #include "sim/lab/photometric_metric.h"
 #include "sim/lab/progress.h"
 #include "sim/lab/registration_metric.h"
@@ -220,12 +222,22 @@ class LabRun {
         world);
   }
 
+  std::vector<std::string> CoordinatorArgs(const std::string& requests,
+                                           const std::string& events) const {
+    std::vector<std::string> argv = {coordinator_bin_, "--requests", requests,    "--events",
+                                     events,           "--timeline", tracks_path_};
+    if (Chaos()) {
+      argv.insert(argv.end(),
+                  {"--annotations", fs::absolute(fs::path(options_.out_dir) / "annotations.db")});
+    }
+    return argv;
+  }
+  bool Chaos() const { return options_.annotate || options_.kill_coordinator_at_s >= 0; }
+
   bool StartCoordinator() {
     Phase("start coordinator", 1);
-    ChildProcess* coordinator =
-        StartChild("coordinator", "coordinator",
-                   {coordinator_bin_, "--requests", "tcp://127.0.0.1:*", "--events",
-                    "tcp://127.0.0.1:*", "--timeline", tracks_path_});
+    ChildProcess* coordinator = StartChild(
+        "coordinator", "coordinator", CoordinatorArgs("tcp://127.0.0.1:*", "tcp://127.0.0.1:*"));
     if (!coordinator) return false;
     return Wait(
         "start coordinator", [&] { return !coordinator_events_.empty(); },
@@ -408,6 +420,12 @@ class LabRun {
         }
       }
       argv.insert(argv.end(), options_.node_args.begin(), options_.node_args.end());
+      if (options_.fault_unit >= 0 && unit.id == static_cast<NodeId>(options_.fault_unit)) {
+        argv.insert(argv.end(),
+                    {"--fault-drop-share", std::to_string(options_.fault_drop_share),
+                     "--fault-corrupt-share", std::to_string(options_.fault_corrupt_share),
+                     "--fault-seed", std::to_string(options_.seed)});
+      }
       ChildProcess* node = StartChild("node-" + id, "node", argv);
       if (!node) return false;
     }
@@ -429,6 +447,7 @@ class LabRun {
     for (const auto& child : supervisor_.children()) {
       if (child->name() != "node-" + std::to_string(unit)) continue;
       supervisor_.ExpectExit(child.get());
+      intended_kills_.insert(child->name());
       kill_ns_ = std::chrono::duration_cast<std::chrono::nanoseconds>(
                      std::chrono::steady_clock::now().time_since_epoch())
                      .count();
@@ -452,8 +471,10 @@ class LabRun {
     if (options_.stall_unit < 0 || stall_state_ == StallState::kResumed) return;
     const auto now = std::chrono::steady_clock::now();
     const bool stopped = stall_state_ == StallState::kStopped;
-    if (!stopped && now - calibration_started_ < std::chrono::duration<double>(options_.stall_at_s))
-      return;
+    const bool holding = hold_started_ != std::chrono::steady_clock::time_point{};
+    if (options_.stall_after_calibration && !holding) return;
+    const auto from = options_.stall_after_calibration ? hold_started_ : calibration_started_;
+    if (!stopped && now - from < std::chrono::duration<double>(options_.stall_at_s)) return;
     if (stopped && now - stalled_at_ < std::chrono::duration<double>(options_.stall_for_s)) return;
     Stall(!stopped);
   }
@@ -464,7 +485,8 @@ class LabRun {
       child->Signal(stop ? SIGSTOP : SIGCONT);
     }
     const auto now = std::chrono::steady_clock::now();
-    const double at_s = std::chrono::duration<double>(now - calibration_started_).count();
+    const auto from = options_.stall_after_calibration ? hold_started_ : calibration_started_;
+    const double at_s = std::chrono::duration<double>(now - from).count();
     if (stop) {
       stall_state_ = StallState::kStopped;
       stalled_at_ = now;
@@ -517,6 +539,183 @@ class LabRun {
                     {"during_calibration", killed_while_calibrating_},
                     {"others_calibrated", finished},
                     {"others_recalibrated_after_the_kill", recalibrated}};
+  }
+
+  // --kill-coordinator-at-s: SIGKILL the coordinator that long into the hold and start a new
+  // one at once on the same database and endpoints (the nodes reconnect by themselves).
+  void MaybeKillCoordinator() {
+    if (options_.kill_coordinator_at_s < 0 || coordinator_killed_) return;
+    const auto now = std::chrono::steady_clock::now();
+    if (now - hold_started_ < std::chrono::duration<double>(options_.kill_coordinator_at_s)) return;
+    coordinator_killed_ = true;
+    for (const auto& child : supervisor_.children()) {
+      if (child->spec().role != "coordinator" || child->exited()) continue;
+      supervisor_.ExpectExit(child.get());
+      intended_kills_.insert(child->name());
+      child->Signal(SIGKILL);
+      child->WaitFor(milliseconds(5000));
+    }
+    coordinator_kill_ms_ = SystemMs();
+    ST_LOG(kWarning) << "lab: killed the coordinator (--kill-coordinator-at-s); restarting it";
+    const std::string requests = coordinator_requests_, events = coordinator_events_;
+    coordinator_events_.clear();
+    ChildProcess* restarted =
+        StartChild("coordinator-2", "coordinator", CoordinatorArgs(requests, events));
+    if (!restarted) return;
+    const WaitOutcome ready =
+        supervisor_.WaitUntil([&] { return !coordinator_events_.empty(); },
+                              ToMs(options_.start_timeout_s), stop_, Handler());
+    coordinator_restart_ms_ = ready == WaitOutcome::kDone ? SystemMs() - coordinator_kill_ms_ : -1;
+    if (coordinator_events_.empty()) coordinator_events_ = events;
+  }
+
+  // Frames each other node showed in [from_ms, from_ms + window_ms) against what its median
+  // frame interval before from_ms gives: the frames a fault cost the others (largest per node).
+  int FramesLost(int64_t from_ms, int64_t window_ms, const std::set<NodeId>& skip) {
+    if (options_.render == "off") return -1;
+    if (frame_times_.empty()) {
+      Expected<std::string> log = ReadInputFile(FrameLogPath(), size_t{256} << 20, "256 MiB");
+      if (!log.ok()) return -1;
+      std::istringstream lines(*log);
+      std::string line;
+      while (std::getline(lines, line)) {
+        const json j = json::parse(line, nullptr, false);
+        if (!j.is_object() || !j.contains("projector") || !j.contains("time_ms")) continue;
+        frame_times_[j["projector"].get<NodeId>()].push_back(j["time_ms"].get<int64_t>());
+      }
+    }
+    int worst = 0;
+    for (auto& [id, times] : frame_times_) {
+      if (skip.count(id)) continue;
+      std::sort(times.begin(), times.end());
+      std::vector<int64_t> gaps;
+      int in_window = 0;
+      for (size_t i = 0; i < times.size(); ++i) {
+        if (i > 0 && times[i] < from_ms && times[i - 1] >= from_ms - 5000) {
+          gaps.push_back(times[i] - times[i - 1]);
+        }
+        if (times[i] >= from_ms && times[i] < from_ms + window_ms) ++in_window;
+      }
+      if (gaps.empty()) continue;
+      std::nth_element(gaps.begin(), gaps.begin() + gaps.size() / 2, gaps.end());
+      const double period_ms = std::max<int64_t>(gaps[gaps.size() / 2], 1);
+      const int expected = static_cast<int>(std::floor(window_ms / period_ms));
+      worst = std::max(worst, expected - in_window);
+    }
+    return worst;
+  }
+
+  // The chaos section: every fault of the hold, the annotations, the nodes' link faults.
+  void RecordChaos() {
+    const bool any = Chaos() || options_.fault_unit >= 0 ||
+                     (options_.kill_unit >= 0 && options_.kill_after_calibration) ||
+                     options_.stall_unit >= 0;
+    if (!any) return;
+    json chaos = {{"faults", json::array()}};
+    constexpr int64_t kWindowMs = 3000;
+    const double hold_ms = static_cast<double>(hold_started_ms_);
+    if (killed_ && options_.kill_after_calibration) {
+      const NodeId unit = static_cast<NodeId>(options_.kill_unit);
+      json f = {{"fault", "SIGKILL node-" + std::to_string(unit)}, {"at_s", kill_at_s_}};
+      double detected = -1;
+      const json reblends = result_.live.value("reblend", json::object());
+      for (const auto& [id, r] : reblends.items()) {
+        const double d = r.value("detected_ms", -1.0);
+        if (d >= 0 && (detected < 0 || d < detected)) detected = d;
+      }
+      if (detected >= 0) f["detected_ms"] = detected;
+      if (result_.live.contains("reblend_ms_max")) {
+        f["recovered_ms"] = result_.live["reblend_ms_max"];
+        f["note"] = "recovered: the last neighbour's first re-blended frame";
+      }
+      const int64_t kill_ms = static_cast<int64_t>(hold_ms + kill_at_s_ * 1e3);
+      if (int lost = FramesLost(kill_ms, kWindowMs, {unit}); lost >= 0) f["frames_lost_max"] = lost;
+      chaos["faults"].push_back(f);
+    }
+    if (!result_.stall.is_null()) {
+      const NodeId unit = static_cast<NodeId>(options_.stall_unit);
+      json f = {{"fault", "SIGSTOP node-" + std::to_string(unit) + " for " +
+                              FixedDigits(options_.stall_for_s, 1) + " s"},
+                {"at_s", result_.stall.value("stopped_at_s", 0.0)},
+                {"note", options_.stall_after_calibration
+                             ? "stopped while the site showed"
+                             : "at: counted from the calibration phase's start"}};
+      if (options_.stall_after_calibration) {
+        const int64_t at_ms =
+            hold_started_ms_ + static_cast<int64_t>(result_.stall.value("stopped_at_s", 0.0) * 1e3);
+        if (int lost = FramesLost(at_ms, kWindowMs, {unit}); lost >= 0) f["frames_lost_max"] = lost;
+      }
+      chaos["faults"].push_back(f);
+    }
+    if (coordinator_killed_) {
+      json f = {{"fault", "SIGKILL coordinator, restart on the same database"},
+                {"at_s", (coordinator_kill_ms_ - hold_started_ms_) * 1e-3}};
+      if (coordinator_restart_ms_ >= 0) f["detected_ms"] = coordinator_restart_ms_;
+      std::string note = "detected: the new coordinator ready";
+      if (painter_) {
+        // The painter's clock starts with the hold (within a millisecond).
+        const double kill_s = (coordinator_kill_ms_ - hold_started_ms_) * 1e-3;
+        const double back_s = painter_->FirstAckAfter(kill_s);
+        if (back_s >= 0) {
+          f["recovered_ms"] = (back_s - kill_s) * 1e3;
+          note += "; recovered: the first annotation acknowledged after it";
+        }
+      }
+      f["note"] = note;
+      if (int lost = FramesLost(coordinator_kill_ms_, kWindowMs, {}); lost >= 0) {
+        f["frames_lost_max"] = lost;
+      }
+      chaos["faults"].push_back(f);
+    }
+    if (options_.fault_unit >= 0) {
+      chaos["faults"].push_back(
+          {{"fault", "node-" + std::to_string(options_.fault_unit) + " drops " +
+                         FixedDigits(options_.fault_drop_share * 100, 1) + " % and corrupts " +
+                         FixedDigits(options_.fault_corrupt_share * 100, 1) +
+                         " % of what it sends (whole run)"},
+           {"at_s", 0.0},
+           {"note", "counts: chaos.links"}});
+    }
+    if (painter_) {
+      LabPainterResult painted = painter_->Verify(ToMs(10));
+      chaos["annotations"] = painted.ToJson();
+    }
+    result_.chaos = chaos;
+  }
+
+  // After the teardown: the nodes' exit lines (link faults, rejected messages) and crashes.
+  void FinishChaos(const std::vector<std::string>& killed_at_teardown) {
+    if (result_.chaos.is_null()) return;
+    json links = json::object();
+    for (const auto& child : supervisor_.children()) {
+      if (child->spec().role != "node") continue;
+      const fs::path log = fs::path(options_.out_dir) / "logs" / (child->name() + ".log");
+      Expected<std::string> text = ReadInputFile(log.string(), size_t{64} << 20, "64 MiB");
+      if (!text.ok()) continue;
+      std::istringstream lines(*text);
+      std::string line;
+      while (std::getline(lines, line)) {
+        if (line.empty() || line[0] != '{' || line.find("\"faults_dropped\"") == std::string::npos)
+          continue;
+        const json j = json::parse(line, nullptr, false);
+        if (j.is_object()) links[child->name()] = j;
+      }
+    }
+    result_.chaos["links"] = links;
+    int crashed = 0;
+    json crashes = json::array();
+    for (const auto& child : supervisor_.children()) {
+      if (intended_kills_.count(child->name())) continue;
+      const std::string exit = child->DescribeExit();
+      const bool hung = std::find(killed_at_teardown.begin(), killed_at_teardown.end(),
+                                  child->name()) != killed_at_teardown.end();
+      if (exit != "exit status 0" || hung) {
+        ++crashed;
+        crashes.push_back({{"name", child->name()}, {"exit", exit}, {"hung", hung}});
+      }
+    }
+    result_.chaos["processes_crashed"] = crashed;
+    result_.chaos["crashes"] = crashes;
   }
 
   bool Calibrate() {
@@ -1025,13 +1224,23 @@ class LabRun {
     if (options_.hold_s <= 0) return true;
     Phase("hold", 0);
     hold_started_ = std::chrono::steady_clock::now();
+    hold_started_ms_ = SystemMs();
+    if (options_.annotate) {
+      LabPainterOptions painter;
+      painter.requests_endpoint = coordinator_requests_;
+      painter.site_keys = site_keys_;
+      painter_ = std::make_unique<LabPainter>(painter);
+      painter_->Start();
+    }
     const WaitOutcome outcome = supervisor_.WaitUntil(
         [&] {
           MaybeKill();
           MaybeStall();
+          MaybeKillCoordinator();
           return false;
         },
         ToMs(options_.hold_s), stop_, Handler());
+    if (painter_) painter_->Stop();
     if (outcome == WaitOutcome::kDeadline) {
       progress_.End();
       return true;
@@ -1041,6 +1250,7 @@ class LabRun {
 
   bool Measure() {
     RecordKill();
+    RecordChaos();
     Phase("metrics", result_.num_units);
     std::vector<EstimatedRegistration> estimates;
     std::set<std::string> sources;
@@ -1304,6 +1514,7 @@ class LabRun {
     if (stall_state_ == StallState::kStopped) Stall(false);  // a stopped child cannot exit
     const std::vector<std::string> killed = supervisor_.TearDown(ToMs(options_.teardown_grace_s));
     CollectRender();
+    FinishChaos(killed);
     progress_.End(killed.empty() ? "ok" : "killed " + std::to_string(killed.size()));
     for (const auto& child : supervisor_.children()) {
       result_.processes.push_back({child->name(), child->spec().role, child->pid(),
@@ -1518,8 +1729,13 @@ class LabRun {
   std::string tracks_path_;
   std::map<NodeId, std::string> render_pattern_;  // the last pattern each node showed
   std::map<NodeId, json> blend_;                  // the last blended line of each node
-  std::vector<json> reblends_;                    // {"blend":..,"reblend":..} lines
-  std::vector<json> blended_lines_;               // every {"blend":..,"blended":..} line
+  std::vector<json> reblends_;
+  std::unique_ptr<LabPainter> painter_;
+  std::set<std::string> intended_kills_;
+  bool coordinator_killed_ = false;
+  int64_t coordinator_kill_ms_ = 0, coordinator_restart_ms_ = -1, hold_started_ms_ = 0;
+  std::map<NodeId, std::vector<int64_t>> frame_times_;  // {"blend":..,"reblend":..} lines
+  std::vector<json> blended_lines_;                     // every {"blend":..,"blended":..} line
   int64_t join_calibrated_ns_ = 0;  // when the late unit's calibrated line came (--join-late)
   std::chrono::steady_clock::time_point last_blend_line_{};
   int64_t kill_ns_ = 0;                               // steady time of the kill
@@ -1559,6 +1775,17 @@ Status LabRunOptions::Check() const {
   if (stall_unit >= 0 && (!(stall_at_s >= 0) || !(stall_for_s > 0))) {
     return InvalidArgumentError("--stall-at-s must be >= 0 and --stall-for-s > 0");
   }
+  if (kill_coordinator_at_s >= 0 && !(kill_coordinator_at_s < hold_s)) {
+    return InvalidArgumentError("--kill-coordinator-at-s must be inside the hold (--hold-s)");
+  }
+  if (fault_unit >= 0 && !(fault_drop_share > 0 || fault_corrupt_share > 0)) {
+    return InvalidArgumentError("--fault-unit needs --fault-drop-share or --fault-corrupt-share");
+  }
+  if (!(fault_drop_share >= 0 && fault_corrupt_share >= 0 &&
+        fault_drop_share + fault_corrupt_share <= 1)) {
+    return InvalidArgumentError("--fault-drop-share + --fault-corrupt-share must be in [0, 1]");
+  }
+  if (annotate && !(hold_s > 0)) return InvalidArgumentError("--annotate needs a hold (--hold-s)");
   if (stall_unit >= 0 && stall_unit == kill_unit) {
     return InvalidArgumentError("--stall-unit and --kill-unit name the same unit");
   }

@@ -87,6 +87,17 @@ struct LabRunOptions {
   int stall_unit = -1;
   double stall_at_s = 0.0;
   double stall_for_s = 4.0;
+  bool stall_after_calibration = false;  // stall_at_s counted from the hold's start
+  // Chaos (docs/lab.md): `annotate` paints strokes through the coordinator's annotation
+  // protocol during the hold (LabPainter; the coordinator keeps them in OUT/annotations.db) and
+  // checks afterwards that every acknowledged point is there. kill_coordinator_at_s >= 0:
+  // SIGKILL the coordinator that long into the hold and start it again on the same database and
+  // endpoints. fault_unit >= 0: that node drops / corrupts those shares of what it sends.
+  bool annotate = false;
+  double kill_coordinator_at_s = -1.0;
+  int fault_unit = -1;
+  double fault_drop_share = 0.0;
+  double fault_corrupt_share = 0.0;
   // The show (docs/render.md): once calibrated, every node shows the table grid (the lab
   // measures how the projectors' lines coincide from above), then the show with the lab's
   // personnel tracks playing for show_s (frame times, timeline skew). render "off": none.

@@ -132,22 +132,13 @@ int RunScale(const LabScaleOptions& options, const std::atomic<bool>& stop, std:
     const std::string name = "grid-" + std::to_string(point.nodes);
     const fs::path run_dir = dir / "runs" / name;
     fs::remove_all(run_dir, ec);
-    std::vector<std::string> args = {"--site",
-                                     name,
-                                     "--scene",
-                                     options.scene,
-                                     "--seed",
-                                     std::to_string(options.seed),
-                                     "--out",
-                                     run_dir.string(),
-                                     "--samples",
-                                     std::to_string(options.metric_samples),
-                                     "--image-width",
-                                     "200",
-                                     "--resolution-scale",
-                                     F(options.resolution_scale, 3),
-                                     "--progress",
-                                     "plain"};
+    std::vector<std::string> args = {
+        "--site", name, "--scene", options.scene, "--seed", std::to_string(options.seed), "--out",
+        run_dir.string(), "--samples", std::to_string(options.metric_samples), "--image-width",
+        "200", "--resolution-scale", F(options.resolution_scale, 3), "--progress", "plain",
+        // grid-64 on two cores: the world renders many minutes of
+        // captures
+        "--calibration-timeout-s", "3600"};
     if (options.reblend) {
       // A node killed 1 s into the hold after the show and the blend: its neighbours re-blend.
       args.insert(args.end(), {"--kill-unit", "0", "--kill-after-calibration", "--kill-at-s", "1",

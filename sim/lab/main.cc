@@ -8,8 +8,11 @@
 //                     [--saved-calibration DIR] [--calibration-path auto|full]
 //                     [--join-late ID] [--kill-unit ID --kill-at-s S]
 //                     [--stall-unit ID --stall-at-s S --stall-for-s D] [--node-arg=ARG ...]
+//                     [--stall-after-calibration] [--annotate] [--kill-coordinator-at-s S]
+//                     [--fault-unit ID --fault-drop-share P --fault-corrupt-share P]
 //   sandtable-lab sweep [--site ..] [--scene ..] --out DIR [--seed N] [--only CONFIG ..]
 //   sandtable-lab scale --nodes 2,4,8 [--scene city] --out DIR [--seed N] [--reblend]
+//   sandtable-lab chaos [--site sandtable-3] [--scene ..] --out DIR [--seed N] [--runs 5]
 //
 // Exit codes: 0 ok, 1 the run failed (report written), 2 usage, 130 interrupted (SIGINT or
 // SIGTERM: the site is torn down and the report says so).
@@ -23,6 +26,7 @@
 #include "common/base/log.h"
 #include "common/base/main_guard.h"
 #include "common/cli/command_line.h"
+#include "sim/lab/lab_chaos.h"
 #include "sim/lab/lab_run.h"
 #include "sim/lab/lab_scale.h"
 #include "sim/lab/lab_sweep.h"
@@ -105,6 +109,24 @@ static int Run(int argc, char** argv) {
       ->check(CLI::Range(0.0, 3600.0));
   run->add_option("--stall-for-s", options.stall_for_s, "how long --stall-unit stays stopped (s)")
       ->check(CLI::Range(0.01, 3600.0));
+  run->add_flag("--stall-after-calibration", options.stall_after_calibration,
+                "count --stall-at-s from the hold's start (after calibration) instead");
+  run->add_flag("--annotate", options.annotate,
+                "paint strokes through the coordinator during the hold (its database in "
+                "OUT/annotations.db) and check every acknowledged point afterwards");
+  run->add_option("--kill-coordinator-at-s", options.kill_coordinator_at_s,
+                  "SIGKILL the coordinator this long into the hold and restart it on the same "
+                  "database and endpoints")
+      ->check(CLI::Range(0.0, 3600.0));
+  run->add_option("--fault-unit", options.fault_unit,
+                  "this node drops / corrupts a share of the messages it sends (whole run)")
+      ->check(CLI::Range(0, 1 << 20));
+  run->add_option("--fault-drop-share", options.fault_drop_share,
+                  "share of --fault-unit's messages dropped")
+      ->check(CLI::Range(0.0, 1.0));
+  run->add_option("--fault-corrupt-share", options.fault_corrupt_share,
+                  "share of --fault-unit's messages corrupted (bytes flipped)")
+      ->check(CLI::Range(0.0, 1.0));
   run->add_option("--join-late", options.join_late,
                   "start this unit only once the others hold their calibration: it joins the "
                   "calibrated site (a live join; the report says whether any other unit was "
@@ -181,8 +203,29 @@ static int Run(int argc, char** argv) {
   scale->add_flag("--reblend", scale_options.reblend,
                   "with the show and the blend, unit 0 killed after calibration: the re-blend "
                   "time per N (much slower)");
+  CLI::App* chaos =
+      app.add_subcommand("chaos",
+                         "Faults while a site runs, over seeded runs: kills, a join, a stall, the "
+                         "coordinator killed and restarted, faulty links; annotations checked");
+  cli::Configure(*chaos);
+  sim::LabChaosOptions chaos_options;
+  chaos->add_option("--site", chaos_options.site,
+                    "Site: sandtable-3, grid-N (3..64), flat-4 (at least 3 units)");
+  chaos->add_option("--scene", chaos_options.scene, "Scene: sandtable, city, flat, or a glTF file");
+  chaos->add_option("--out", chaos_options.out_dir, "Output directory (chaos.md, chaos.csv, runs/)")
+      ->required();
+  chaos->add_option("--seed", chaos_options.first_seed, "Seed of the first run (then +1 each)")
+      ->check(cli::Integer<uint64_t>(0, UINT64_MAX));
+  chaos->add_option("--runs", chaos_options.runs, "Runs (seeds)")
+      ->check(cli::Integer<int>(1, 1000));
+  chaos->add_option("--bin-dir", chaos_options.bin_dir,
+                    "Directory of sandtable-world/-coordinator/-node (as for run)");
+  chaos
+      ->add_option("--samples", chaos_options.metric_samples,
+                   "Surface points sampled by each run's registration metric")
+      ->check(cli::Integer<int>(1, 10000000));
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
-  if (scale->parsed() || sweep->parsed()) {
+  if (scale->parsed() || sweep->parsed() || chaos->parsed()) {
     struct sigaction action {};
     action.sa_handler = OnSignal;
     sigaction(SIGINT, &action, nullptr);
@@ -194,6 +237,12 @@ static int Run(int argc, char** argv) {
       scale_options.command_line += (i ? " " : "") + std::string(argv[i]);
     }
     return sim::RunScale(scale_options, g_stop, std::cout, std::cerr);
+  }
+  if (chaos->parsed()) {
+    for (int i = 0; i < argc; ++i) {
+      chaos_options.command_line += (i ? " " : "") + std::string(argv[i]);
+    }
+    return sim::RunChaos(chaos_options, g_stop, std::cout, std::cerr);
   }
   if (sweep->parsed()) {
     for (int i = 0; i < argc; ++i) {

@@ -628,6 +628,12 @@ TEST_F(LabRunTest, HelpListsEveryFlag) {
                            "--black-match",
                            "--kill-unit",
                            "--stall-unit",
+                           "--stall-after-calibration",
+                           "--annotate",
+                           "--kill-coordinator-at-s",
+                           "--fault-unit",
+                           "--fault-drop-share",
+                           "--fault-corrupt-share",
                            "--stall-at-s",
                            "--stall-for-s"}) {
     EXPECT_NE(text.find(flag), std::string::npos) << flag;
