@@ -393,13 +393,17 @@ void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
         r.unsent.insert(it->first);
       } else {
         r.missing_since.erase(to);
-        if (to != r.self && now - it->second.sent_at >= options_.step_retry) {
+        // Unanswered: sent again after step_retry, then 2x, 4x, 8x that (a loaded site's slow
+        // steps are not flooded with copies).
+        if (to != r.self && now - it->second.sent_at >=
+                                options_.step_retry * (1 << std::min(it->second.resends, 3))) {
           r.unsent.insert(it->first);  // unanswered for step_retry: its answer may be lost
         }
         if (r.unsent.count(it->first)) {  // linked again, or unanswered: the step goes again
           wire::Envelope e;
           *e.mutable_calibration_step() = it->second.step;
           it->second.sent_at = now;
+          ++it->second.resends;
           if (Send(to, std::move(e), node)) {
             r.unsent.erase(it->first);
             ST_LOG(kInfo) << "self-calibration: step " << it->first << " sent again to unit " << to;

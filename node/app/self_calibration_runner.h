@@ -30,6 +30,7 @@ struct SelfCalibrationService::Runner {
     wire::CalibrationStep step;
     NodeId about = kInvalidNodeId;  // CAPTURE in the pre-pass: the projector that is white
     std::chrono::steady_clock::time_point sent_at{};  // last sent (step_retry)
+    int resends = 0;                                  // the wait doubles with each
   };
   struct Stage {
     std::vector<Command> commands;
