@@ -96,11 +96,15 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
     }
     if (joining.empty()) return;
     // A site solved from one unit's view alone is weak (its depth rests on one short factory
-    // baseline: 25 mm rms measured on sandtable-3); units that join it calibrate all again.
-    const bool weak_site = site_runner && last_solution_->calibrations.size() < 2;
+    // baseline: 25 mm rms measured on sandtable-3); units that join it calibrate all again. So
+    // do units that outnumber the site they join: a join round places them against the held
+    // units, and far from those it cannot (grid-32 on a loaded machine: the first round began
+    // with 2 of 32 registered, and the join of the other 30 left 24 'not reached').
+    const size_t held = last_solution_->calibrations.size();
+    const bool weak_site = site_runner && (held < 2 || joining.size() > held);
     if (weak_site) {
       ST_LOG(kInfo) << "self-calibration: " << joining.size()
-                    << " unit(s) joined a site solved from one unit alone; calibrating all again";
+                    << " unit(s) joined a site solved from " << held << "; calibrating all again";
       joining.clear();
     } else if (site_runner) {
       ST_LOG(kInfo) << "self-calibration: " << joining.size()
