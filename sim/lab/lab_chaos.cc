@@ -10,6 +10,8 @@
 
 #include "sim/lab/lab_html.h"
 #include "sim/lab/lab_sweep.h"
+#include "sim/site/site_json.h"
+#include "sim/site/site_presets.h"
 
 namespace sandtable::sim {
 namespace {
@@ -154,18 +156,15 @@ int RunChaos(const LabChaosOptions& options, const std::atomic<bool>& stop, std:
         << "\n";
     return 1;
   }
-  // The site's unit count: from its preset name or file through a dry `run`? The presets the
-  // chaos runs on have at least 3 units; the run refuses unit ids the site lacks.
-  int units = 3;
-  if (options.site.rfind("grid-", 0) == 0) {
-    try {
-      units = std::stoi(options.site.substr(5));
-    } catch (const std::exception&) {
-      units = 3;
-    }
-  } else if (options.site == "flat-4") {
-    units = 4;
+  // The site's unit count, from the preset or file the runs will use.
+  Expected<Site> site =
+      fs::is_regular_file(options.site) ? LoadSiteFile(options.site) : MakeSitePreset(options.site);
+  if (!site.ok()) {
+    err << "sandtable-lab chaos: --site " << options.site << ": " << site.status().message()
+        << "\n";
+    return 2;
   }
+  const int units = static_cast<int>(site->units.size());
   if (units < 3) {
     err << "sandtable-lab chaos: the site needs at least 3 units (a newcomer, a unit killed, one "
            "stalled)\n";
