@@ -33,6 +33,33 @@ Status ServerLoop::RunOnce(std::chrono::milliseconds max_wait) {
   return OkStatus();
 }
 
+Status ServerLoop::RunOnce(std::chrono::milliseconds max_wait,
+                           std::vector<zmq::pollitem_t>* extra) {
+  if (extra == nullptr || extra->empty()) return RunOnce(max_wait);
+  std::vector<zmq::pollitem_t> items;
+  items.reserve(entries_.size() + extra->size());
+  for (Entry& e : entries_) {
+    items.push_back({static_cast<void*>(e.channel->socket().raw()), 0, ZMQ_POLLIN, 0});
+  }
+  for (zmq::pollitem_t& item : *extra) {
+    item.revents = 0;
+    items.push_back(item);
+  }
+  try {
+    zmq::poll(items.data(), items.size(), max_wait);
+  } catch (const zmq::error_t& e) {
+    if (e.num() == EINTR) return OkStatus();
+    return UnavailableError(std::string("server loop: poll: ") + e.what());
+  }
+  for (size_t i = 0; i < extra->size(); ++i) {
+    (*extra)[i].revents = items[entries_.size() + i].revents;
+  }
+  for (size_t i = 0; i < entries_.size(); ++i) {
+    if (items[i].revents & ZMQ_POLLIN) Drain(entries_[i]);
+  }
+  return OkStatus();
+}
+
 void ServerLoop::Drain(Entry& entry) {
   for (int drained = 0; drained < max_drain_; ++drained) {
     Expected<Received> received = entry.channel->Receive();

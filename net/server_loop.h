@@ -37,6 +37,9 @@ class ServerLoop {
   // one. OK also on timeout and on EINTR (the caller checks its stop flag); an error only
   // when a socket itself fails.
   Status RunOnce(std::chrono::milliseconds max_wait);
+  // The same, also waking when one of `extra` (sockets or file descriptors the caller drains
+  // itself) is ready; their revents are set on return.
+  Status RunOnce(std::chrono::milliseconds max_wait, std::vector<zmq::pollitem_t>* extra);
 
   // Messages handed to handlers and refusals answered, since construction.
   uint64_t messages_handled() const { return handled_; }

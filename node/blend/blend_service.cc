@@ -357,7 +357,8 @@ Status BlendService::OnStep(NodeRuntime& node) {
     const bool gone = info == node.peers().end() ||
                       info->second.disconnected_at != Clock::time_point{} ||
                       (info->second.last_heard != Clock::time_point{} &&
-                       now - info->second.last_heard > options_.peer_silence);
+                       now - info->second.last_heard >
+                           NodeRuntime::PeerSilence(info->second, options_.peer_silence));
     if (!gone) {
       ++it;
       continue;

@@ -1,5 +1,6 @@
 #include "node/net/node_runtime.h"
 
+#include <cmath>
 #include <cstring>
 
 #include <algorithm>
@@ -184,6 +185,23 @@ void NodeRuntime::SetNeighbours(std::optional<std::set<NodeId>> neighbours) {
   if (last_member_list_) ApplyMemberList(*last_member_list_);
 }
 
+std::chrono::milliseconds NodeRuntime::peer_heartbeat_period() const {
+  const double scale =
+      std::max(1.0, static_cast<double>(peers_.size()) / kPeersAtFullHeartbeatRate);
+  return std::chrono::milliseconds(
+      static_cast<int64_t>(std::ceil(static_cast<double>(options_.heartbeat_period.count()) * scale)));
+}
+
+std::chrono::milliseconds NodeRuntime::PeerSilence(const PeerInfo& peer,
+                                                   std::chrono::milliseconds at_least) {
+  return std::max(at_least, kPeerSilencePeriods * peer.heartbeat_period);
+}
+
+void NodeRuntime::set_calibration_state(wire::CalibrationState state) {
+  if (state != calibration_state_) next_peer_heartbeat_ = Clock::time_point{};  // say it now
+  calibration_state_ = state;
+}
+
 void NodeRuntime::SetRegistered(bool registered) {
   if (registered == registered_) return;
   registered_ = registered;
@@ -211,17 +229,22 @@ void NodeRuntime::SendTimers(Clock::time_point now) {
       hb.mutable_heartbeat()->set_incarnation(incarnation_);
       (void)SendToCoordinator(std::move(hb));
     }
-    for (auto& [id, peer] : peers_) {
-      wire::Envelope hb;
-      hb.mutable_heartbeat()->set_incarnation(incarnation_);
-      hb.mutable_heartbeat()->set_calibration_state(calibration_state_);
-      (void)peer.to_peer->Send(std::move(hb));  // a full queue means the peer is down
-    }
     // A coordinator that went silent may have restarted: register again.
     if (registered_ && !coordinator_alive()) {
       SetRegistered(false);
       ST_LOG(kWarning) << "coordinator silent for more than "
                        << options_.coordinator_timeout.count() << " ms; peers keep running";
+    }
+  }
+  if (now >= next_peer_heartbeat_) {
+    const std::chrono::milliseconds period = peer_heartbeat_period();
+    next_peer_heartbeat_ = now + period;
+    for (auto& [id, peer] : peers_) {
+      wire::Envelope hb;
+      hb.mutable_heartbeat()->set_incarnation(incarnation_);
+      hb.mutable_heartbeat()->set_calibration_state(calibration_state_);
+      hb.mutable_heartbeat()->set_period_ms(static_cast<uint32_t>(period.count()));
+      (void)peer.to_peer->Send(std::move(hb));  // a full queue means the peer is down
     }
   }
   if (now >= next_time_sync_) {
@@ -234,13 +257,61 @@ void NodeRuntime::SendTimers(Clock::time_point now) {
 
 Status NodeRuntime::Step(std::chrono::milliseconds max_wait) {
   ST_CHECK(coordinator_ != nullptr) << "NodeRuntime::Step before a successful Start()";
-  SendTimers(Clock::now());
-  // Every heartbeat_period / 10 at least: the peers' connection monitors are read here (a
-  // neighbour that died is noticed within a step; the blend reacts within a frame).
-  const auto wait = std::min(max_wait, options_.heartbeat_period / 10);
-  ST_RETURN_IF_ERROR(loop_.RunOnce(wait));
-  DrainPeerDealers();
-  DrainPeerMonitors();
+  const Clock::time_point now = Clock::now();
+  SendTimers(now);
+  // Sleep until a socket, a peer's connection monitor or a finished job wakes us, or until
+  // the next timer; services whose checks are time-based (resends, silences) get a turn at
+  // least every kServiceTick. An idle node wakes ~30 times a second instead of polling: with
+  // 64 nodes on two cores the idle polling alone was more than the machine (docs/lab.md).
+  Clock::time_point next =
+      std::min({next_heartbeat_, next_time_sync_, next_peer_drain_, next_peer_heartbeat_});
+  if (!registered_) next = std::min(next, next_hello_);
+  if (drain_all_peers_) next = now;
+  auto wait = std::min({max_wait, kServiceTick,
+                        std::chrono::duration_cast<std::chrono::milliseconds>(next - now) +
+                            std::chrono::milliseconds(1)});
+  wait = std::max(wait, std::chrono::milliseconds(0));
+  // Poll set beyond the loop's three channels, all plain file descriptors (one poll() for
+  // them all; a ZeroMQ socket in zmq_poll costs two system calls of its own each time): the
+  // worker pool's wake fd, then per peer the ZMQ_FD of its DEALER and of its monitor, which
+  // turn readable when the socket has something to process. ZMQ_FD can miss a message that a
+  // send on the same socket processed first: every DEALER and monitor is drained on each
+  // heartbeat anyway (drain_all).
+  std::vector<zmq::pollitem_t> extra;
+  std::vector<std::pair<NodeId, bool>> extra_owner;  // (peer, is monitor)
+  extra.reserve(1 + 2 * peers_.size());
+  if (workers_.wake_fd() >= 0) extra.push_back({nullptr, workers_.wake_fd(), ZMQ_POLLIN, 0});
+  const size_t first_peer_item = extra.size();
+  for (const auto& [id, peer] : peers_) {
+    if (peer.dealer_fd >= 0) {
+      extra.push_back({nullptr, peer.dealer_fd, ZMQ_POLLIN, 0});
+      extra_owner.push_back({id, false});
+    }
+    if (peer.monitor_fd >= 0) {
+      extra.push_back({nullptr, peer.monitor_fd, ZMQ_POLLIN, 0});
+      extra_owner.push_back({id, true});
+    }
+  }
+  ST_RETURN_IF_ERROR(loop_.RunOnce(wait, &extra));
+  // Handlers may relink peers (a member list): look each one up again by id.
+  std::vector<NodeId> dealers, monitors;
+  const bool drain_all = drain_all_peers_ || Clock::now() >= next_peer_drain_;
+  if (drain_all) {
+    drain_all_peers_ = false;
+    next_peer_drain_ = Clock::now() + peer_heartbeat_period();
+    for (const auto& [id, peer] : peers_) {
+      dealers.push_back(id);
+      monitors.push_back(id);
+    }
+  } else {
+    for (size_t i = first_peer_item; i < extra.size(); ++i) {
+      if (!(extra[i].revents & ZMQ_POLLIN)) continue;
+      const auto& [id, is_monitor] = extra_owner[i - first_peer_item];
+      (is_monitor ? monitors : dealers).push_back(id);
+    }
+  }
+  DrainPeerMonitors(monitors);
+  DrainPeerDealers(dealers);
   workers_.RunCompletions();
   for (NodeService* service : services_) {
     if (Status stepped = service->OnStep(*this); !stepped.ok()) {
@@ -250,13 +321,19 @@ Status NodeRuntime::Step(std::chrono::milliseconds max_wait) {
   return OkStatus();
 }
 
-void NodeRuntime::DrainPeerDealers() {
+void NodeRuntime::DrainPeerDealers(const std::vector<NodeId>& ids) {
   // Peers answer on their own DEALER to our ROUTER; what arrives on our DEALERs is a Rejected
   // (or a reply to a routing id) from a peer's ROUTER: hand it to the services like any peer
   // message, so queues never fill.
-  for (auto& [id, peer] : peers_) {
-    for (int i = 0; i < kMaxPeerDrain; ++i) {
-      Expected<std::optional<net::Incoming>> in = peer.to_peer->TryReceive();
+  for (NodeId id : ids) {
+    for (int i = 0;; ++i) {
+      if (i == kMaxPeerDrain) {  // more waiting; its fd will not signal again for them
+        drain_all_peers_ = true;
+        break;
+      }
+      auto it = peers_.find(id);
+      if (it == peers_.end()) break;
+      Expected<std::optional<net::Incoming>> in = it->second.to_peer->TryReceive();
       if (!in.ok()) continue;
       if (!in->has_value()) break;
       if ((*in)->envelope.has_rejected()) {
@@ -407,6 +484,14 @@ void NodeRuntime::ApplyMemberList(const wire::MemberList& list) {
     link_faults.seed = options_.faults.seed * 1000003ull + id;  // one stream per link
     (void)peer.to_peer->SetFaults(link_faults);                 // checked in NodeOptions::Check
     peer.monitor = std::move(monitor);
+    try {
+      peer.dealer_fd = peer.to_peer->socket().raw().get(zmq::sockopt::fd);
+      if (peer.monitor) peer.monitor_fd = peer.monitor->get(zmq::sockopt::fd);
+    } catch (const zmq::error_t& e) {
+      ST_LOG(kWarning) << "peer " << id << ": no ZMQ_FD (drained on heartbeats only): "
+                       << e.what();
+    }
+    drain_all_peers_ = true;
   }
 }
 
@@ -423,11 +508,17 @@ net::ChannelFaultCounts NodeRuntime::fault_counts() const {
   return total;
 }
 
-void NodeRuntime::DrainPeerMonitors() {
-  for (auto& [id, peer] : peers_) {
-    if (!peer.monitor) continue;
+void NodeRuntime::DrainPeerMonitors(const std::vector<NodeId>& ids) {
+  for (NodeId id : ids) {
+    auto found = peers_.find(id);
+    if (found == peers_.end() || !found->second.monitor) continue;
+    PeerInfo& peer = found->second;
     // Each event is two frames: 6 bytes (uint16 event, uint32 value) and the endpoint.
-    for (int i = 0; i < kMaxPeerDrain; ++i) {
+    for (int i = 0;; ++i) {
+      if (i == kMaxPeerDrain) {
+        drain_all_peers_ = true;
+        break;
+      }
       zmq::message_t event, address;
       zmq::recv_result_t got;
       try {
@@ -457,6 +548,7 @@ void NodeRuntime::HandlePeerMessage(net::Incoming in) {
       it->second.last_heard = Clock::now();
       ++it->second.heartbeats_received;
       it->second.calibration_state = e.heartbeat().calibration_state();
+      it->second.heartbeat_period = std::chrono::milliseconds(e.heartbeat().period_ms());
     }
     return;
   }
@@ -478,7 +570,7 @@ void NodeRuntime::HandlePeerMessage(net::Incoming in) {
       auto* p = status->add_peers();
       p->set_node_id(id);
       const bool heard = peer.last_heard != Clock::time_point{};
-      p->set_alive(heard && now - peer.last_heard < options_.peer_timeout);
+      p->set_alive(heard && now - peer.last_heard < PeerSilence(peer, options_.peer_timeout));
       p->set_last_heard_age_s(heard ? Seconds(now - peer.last_heard) : -1.0);
       p->set_heartbeats_received(peer.heartbeats_received);
     }

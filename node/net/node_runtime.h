@@ -3,9 +3,13 @@
 // Sockets: a DEALER to the coordinator's ROUTER (Hello, Heartbeat, TimeRequest, Goodbye, and
 // the services' requests); a SUB to the coordinator's PUB (MemberList and events); a bound
 // ROUTER for peers; one DEALER per peer it links to. Membership comes from the coordinator's
-// member list; the node links only to its neighbours (SetNeighbours: the nodes whose
-// footprints overlap its own, known once calibrated; until then every member), so peer
-// traffic grows with neighbours, not with the site. Bounded: at most max_peer_links peers are
+// member list; the node links every member, or only the ones given to SetNeighbours (no
+// service narrows the links today: the blend picks its overlapping units among the linked
+// peers). Peer heartbeats: every heartbeat_period up to kPeersAtFullHeartbeatRate peers, the
+// period growing in proportion beyond, so the heartbeats a node sends and receives stay flat
+// as a site grows; each says its period and a peer counts as silent after kPeerSilencePeriods
+// of them. An idle node sleeps in one poll over its sockets, its peers' ZMQ_FDs and its
+// worker pool's wake fd. Bounded: at most max_peer_links peers are
 // linked (one socket each; ZeroMQ's default limit is 1023 sockets per context): when more
 // members qualify, the ones with the nearest ids (|id - own id|, ties to the lower id) are
 // linked, so a member list flooded with fake members cannot crowd out the node's sockets. The
@@ -58,6 +62,16 @@ struct NodeCapabilities {
 };
 
 inline constexpr int kMaxRunnerPeerLinks = 128;
+// Services get an OnStep at least this often when nothing wakes the node (time-based checks:
+// resends, silences, quiet periods).
+inline constexpr std::chrono::milliseconds kServiceTick{30};
+// Up to this many peers a node heartbeats each one every heartbeat_period; beyond, the period
+// grows in proportion, so the heartbeats a node sends and receives stay flat as a site grows
+// (64 nodes linking 32 peers each at 10 Hz were 20 000 messages a second on one machine).
+inline constexpr double kPeersAtFullHeartbeatRate = 8.0;
+// A peer is silent when not heard for this many of its own heartbeat periods (or the
+// configured peer timeout, whichever is longer).
+inline constexpr int kPeerSilencePeriods = 5;
 
 struct NodeOptions {
   NodeId id = kInvalidNodeId;                   // below kFirstReservedSenderId
@@ -86,6 +100,7 @@ struct PeerInfo {
   std::unique_ptr<net::Channel> to_peer;  // our DEALER to its ROUTER
   Clock::time_point last_heard{};         // last heartbeat it sent us
   uint64_t heartbeats_received = 0;
+  std::chrono::milliseconds heartbeat_period{0};  // what its last heartbeat said (0: unsaid)
   wire::CalibrationState calibration_state = wire::CALIBRATION_STATE_UNSPECIFIED;  // its last
   // The DEALER's connection events (zmq_socket_monitor): a peer whose process died closes its
   // socket at once, long before its heartbeats are missed. Set when the connection dropped and
@@ -93,6 +108,7 @@ struct PeerInfo {
   // (the blend) read it. Destroyed before to_peer (declared after it).
   Clock::time_point disconnected_at{};
   std::unique_ptr<zmq::socket_t> monitor;
+  int dealer_fd = -1, monitor_fd = -1;  // ZMQ_FD of to_peer and of monitor (-1: none)
 };
 
 class NodeRuntime {
@@ -128,8 +144,16 @@ class NodeRuntime {
   // The coordinator's steady clock now, as this node estimates it (offset 0 until known).
   int64_t CoordinatorNowNs() const;
   const std::map<NodeId, PeerInfo>& peers() const { return peers_; }
+  // This node's heartbeat period to its peers: heartbeat_period up to
+  // kPeersAtFullHeartbeatRate peers, in proportion beyond.
+  std::chrono::milliseconds peer_heartbeat_period() const;
+  // How long `peer` may be silent before it counts as down: `at_least`, or
+  // kPeerSilencePeriods of the peer's own heartbeat period when that is longer.
+  static std::chrono::milliseconds PeerSilence(const PeerInfo& peer,
+                                               std::chrono::milliseconds at_least);
   // What this node tells its peers in every heartbeat (proto CalibrationState).
-  void set_calibration_state(wire::CalibrationState state) { calibration_state_ = state; }
+  // (A change is announced to the peers at once.)
+  void set_calibration_state(wire::CalibrationState state);
   wire::CalibrationState calibration_state() const { return calibration_state_; }
   // The coordinator's last member list (nullopt before the first), and how long ago its
   // version last changed.
@@ -150,8 +174,8 @@ class NodeRuntime {
   void ApplyMemberList(const wire::MemberList& list);
   void SendTimers(Clock::time_point now);
   void SetRegistered(bool registered);
-  void DrainPeerDealers();
-  void DrainPeerMonitors();
+  void DrainPeerDealers(const std::vector<NodeId>& ids);
+  void DrainPeerMonitors(const std::vector<NodeId>& ids);
   NodeService* CoordinatorServiceFor(wire::Envelope::BodyCase body) const;
   wire::Envelope MakeHello() const;
   net::SocketOptions ClientSocketOptions() const;
@@ -183,6 +207,8 @@ class NodeRuntime {
   Clock::time_point member_list_changed_{};
   Clock::time_point last_coordinator_message_{};
   Clock::time_point next_heartbeat_{}, next_time_sync_{}, next_hello_{};
+  Clock::time_point next_peer_drain_{}, next_peer_heartbeat_{};
+  bool drain_all_peers_ = false;  // a drain stopped at its cap, or a peer was linked
 };
 
 }  // namespace sandtable::node

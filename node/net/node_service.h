@@ -5,7 +5,7 @@
 // and events on the SUB) and the requests it answers on the node's peer ROUTER; the runtime
 // routes each message to the first service that declares it (in AddService order) and rejects
 // (counted, answered with Rejected) peer requests nobody serves. OnStep runs after every
-// drain, at least every heartbeat_period / 10. Everything is called on the network thread;
+// drain, at least every kServiceTick (30 ms). Everything is called on the network thread;
 // long work goes to NodeRuntime::workers() and comes back as a completion on this thread.
 #pragma once
 

@@ -1,5 +1,9 @@
 #include "node/net/worker_pool.h"
 
+#include <sys/eventfd.h>
+#include <unistd.h>
+
+#include <cstdint>
 #include <exception>
 
 #include "common/base/check.h"
@@ -9,6 +13,8 @@ namespace sandtable::node {
 
 WorkerPool::WorkerPool(int num_threads) {
   ST_CHECK(num_threads >= 1) << "WorkerPool needs at least one thread";
+  wake_fd_ = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+  if (wake_fd_ < 0) ST_LOG(kWarning) << "worker pool: no eventfd; completions wait for a timer";
   for (int i = 0; i < num_threads; ++i) threads_.emplace_back([this] { WorkerMain(); });
 }
 
@@ -20,6 +26,13 @@ WorkerPool::~WorkerPool() {
   }
   wake_.notify_all();
   for (std::thread& t : threads_) t.join();
+  if (wake_fd_ >= 0) close(wake_fd_);
+}
+
+void WorkerPool::SignalCompletion() {
+  if (wake_fd_ < 0 || signalled_) return;
+  const uint64_t one = 1;
+  signalled_ = write(wake_fd_, &one, sizeof(one)) == sizeof(one);
 }
 
 void WorkerPool::Submit(Job job) {
@@ -34,6 +47,7 @@ void WorkerPool::Submit(Job job) {
 void WorkerPool::Post(Completion completion) {
   std::lock_guard<std::mutex> lock(mutex_);
   completions_.push_back(std::move(completion));
+  SignalCompletion();
 }
 
 size_t WorkerPool::RunCompletions() {
@@ -41,6 +55,11 @@ size_t WorkerPool::RunCompletions() {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     ready.swap(completions_);
+    if (signalled_) {
+      uint64_t count = 0;
+      (void)!read(wake_fd_, &count, sizeof(count));
+      signalled_ = false;
+    }
   }
   for (Completion& c : ready) {
     if (c) c();
@@ -74,7 +93,10 @@ void WorkerPool::WorkerMain() {
     }
     std::lock_guard<std::mutex> lock(mutex_);
     --running_;
-    if (completion) completions_.push_back(std::move(completion));
+    if (completion) {
+      completions_.push_back(std::move(completion));
+      SignalCompletion();
+    }
   }
 }
 

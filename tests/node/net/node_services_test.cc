@@ -4,8 +4,10 @@
 // NodeRuntimes over loopback TCP, stepped on this thread (no fixed sleeps: loops end on
 // events or deadlines).
 #include <gtest/gtest.h>
+#include <poll.h>
 
 #include <chrono>
+#include <cmath>
 #include <functional>
 #include <memory>
 #include <thread>
@@ -81,6 +83,24 @@ TEST(WorkerPoolTest, CompletionRunsOnTheCallingThreadAfterTheJob) {
   EXPECT_EQ(done_thread, std::this_thread::get_id());
   EXPECT_NE(job_thread, std::this_thread::get_id());
   EXPECT_EQ(pool.busy(), 0u);
+}
+
+// The pool's wake fd turns readable when a job's completion waits and is cleared by
+// RunCompletions, so a network thread asleep in poll wakes for it at once.
+TEST(WorkerPoolTest, WakeFdIsReadableWhileACompletionWaits) {
+  WorkerPool pool(1);
+  ASSERT_GE(pool.wake_fd(), 0);
+  auto readable = [&](int timeout_ms) {
+    pollfd p{pool.wake_fd(), POLLIN, 0};
+    return poll(&p, 1, timeout_ms) == 1 && (p.revents & POLLIN);
+  };
+  EXPECT_FALSE(readable(0));
+  bool done = false;
+  pool.Run<int>([] { return 7; }, [&](int) { done = true; });
+  EXPECT_TRUE(readable(5000));  // woken by the job, not by the timeout
+  EXPECT_EQ(pool.RunCompletions(), 1u);
+  EXPECT_TRUE(done);
+  EXPECT_FALSE(readable(0));
 }
 
 // A service that starts one long job on a worker when the node registers.
@@ -247,6 +267,39 @@ TEST(NodeServicesTest, LinksOnlyToItsNeighbours) {
   nodes[0]->SetNeighbours(std::nullopt);
   ASSERT_TRUE(StepUntil(
       coordinator, all, [&] { return nodes[0]->peers().size() == 3; }, kJoinDeadline));
+}
+
+// With more than kPeersAtFullHeartbeatRate peers a node heartbeats each one less often, in
+// proportion, and says so: its peers judge its silence against its own period.
+TEST(NodeServicesTest, HeartbeatPeriodGrowsPastEightPeersAndIsTold) {
+  coordinator::CoordinatorServer coordinator(CoordinatorFor());
+  ASSERT_TRUE(coordinator.Start().ok());
+  constexpr int kNodes = 11;  // 10 peers each: 10 / 8 of the period
+  std::vector<std::unique_ptr<NodeRuntime>> nodes;
+  std::vector<NodeRuntime*> all;
+  for (int i = 0; i < kNodes; ++i) {
+    nodes.push_back(std::make_unique<NodeRuntime>(NodeFor(static_cast<NodeId>(i), coordinator)));
+    all.push_back(nodes.back().get());
+  }
+  for (auto& n : nodes) ASSERT_TRUE(n->Start().ok());
+  const milliseconds expected(
+      static_cast<int64_t>(std::ceil(kHeartbeat.count() * (kNodes - 1) / kPeersAtFullHeartbeatRate)));
+  ASSERT_TRUE(StepUntil(
+      coordinator, all,
+      [&] {
+        for (NodeRuntime* n : all) {
+          if (n->peers().size() != kNodes - 1) return false;
+          for (const auto& [id, peer] : n->peers()) {
+            if (peer.heartbeat_period != expected) return false;
+          }
+        }
+        return true;
+      },
+      milliseconds(10000)));
+  EXPECT_EQ(nodes[0]->peer_heartbeat_period(), expected);
+  const PeerInfo& peer = nodes[0]->peers().at(1);
+  EXPECT_EQ(NodeRuntime::PeerSilence(peer, milliseconds(100)), kPeerSilencePeriods * expected);
+  EXPECT_EQ(NodeRuntime::PeerSilence(peer, milliseconds(5000)), milliseconds(5000));
 }
 
 }  // namespace
