@@ -188,8 +188,8 @@ void NodeRuntime::SetNeighbours(std::optional<std::set<NodeId>> neighbours) {
 std::chrono::milliseconds NodeRuntime::peer_heartbeat_period() const {
   const double scale =
       std::max(1.0, static_cast<double>(peers_.size()) / kPeersAtFullHeartbeatRate);
-  return std::chrono::milliseconds(
-      static_cast<int64_t>(std::ceil(static_cast<double>(options_.heartbeat_period.count()) * scale)));
+  return std::chrono::milliseconds(static_cast<int64_t>(
+      std::ceil(static_cast<double>(options_.heartbeat_period.count()) * scale)));
 }
 
 std::chrono::milliseconds NodeRuntime::PeerSilence(const PeerInfo& peer,
@@ -488,8 +488,7 @@ void NodeRuntime::ApplyMemberList(const wire::MemberList& list) {
       peer.dealer_fd = peer.to_peer->socket().raw().get(zmq::sockopt::fd);
       if (peer.monitor) peer.monitor_fd = peer.monitor->get(zmq::sockopt::fd);
     } catch (const zmq::error_t& e) {
-      ST_LOG(kWarning) << "peer " << id << ": no ZMQ_FD (drained on heartbeats only): "
-                       << e.what();
+      ST_LOG(kWarning) << "peer " << id << ": no ZMQ_FD (drained on heartbeats only): " << e.what();
     }
     drain_all_peers_ = true;
   }

@@ -282,8 +282,8 @@ TEST(NodeServicesTest, HeartbeatPeriodGrowsPastEightPeersAndIsTold) {
     all.push_back(nodes.back().get());
   }
   for (auto& n : nodes) ASSERT_TRUE(n->Start().ok());
-  const milliseconds expected(
-      static_cast<int64_t>(std::ceil(kHeartbeat.count() * (kNodes - 1) / kPeersAtFullHeartbeatRate)));
+  const milliseconds expected(static_cast<int64_t>(
+      std::ceil(kHeartbeat.count() * (kNodes - 1) / kPeersAtFullHeartbeatRate)));
   ASSERT_TRUE(StepUntil(
       coordinator, all,
       [&] {
