@@ -63,6 +63,7 @@ namespace {
 
 std::atomic<bool> g_stop{false};
 void OnSignal(int) { g_stop = true; }
+constexpr int kCameraOpenAttempts = 5;
 
 }  // namespace
 
@@ -145,6 +146,10 @@ static int Run(int argc, char** argv) {
                  "a calibration this unit saved in an earlier run (unit-<id>.json, source "
                  "structured_light): checked with two frames and kept when it holds")
       ->check(CLI::ExistingFile);
+  app.add_option("--expect-units", calibration_knobs.expected_units,
+                 "self-calibration: the site's number of units; the first round waits (at most "
+                 "3 min) until that many are members")
+      ->check(cli::Integer(0, 4096));
   app.add_option("--calibration-path", calibration_path,
                  "self-calibration: auto (the planar path when every footprint is planar) or "
                  "full")
@@ -393,6 +398,7 @@ static int Run(int argc, char** argv) {
       b.free_camera_intrinsics = b.free_camera_distortion = b.free_mounts = false;
     }
     sc.grid_step_px = grid_step_px;
+    sc.expected_units = calibration_knobs.expected_units;
     sc.path = calibration_path == "full" ? node::SelfCalibrationOptions::Path::kFull
                                          : node::SelfCalibrationOptions::Path::kAuto;
     self_calibration = std::make_unique<node::SelfCalibrationService>(
@@ -445,8 +451,21 @@ static int Run(int argc, char** argv) {
   std::unique_ptr<node::CameraInput> camera;
   if (!camera_spec.empty()) {
     runtime.workers().Run<Expected<std::unique_ptr<node::CameraInput>>>(
-        [camera_spec, device_options] {
-          return node::MakeCameraInput(camera_spec, device_options);
+        [camera_spec, device_options, id = options.id] {
+          // A world busy with a large site's captures (grid-64) may not answer the size probe
+          // in time: UNAVAILABLE is tried again (kCameraOpenAttempts in all); anything else
+          // (a bad spec, a refused request) fails at once.
+          Expected<std::unique_ptr<node::CameraInput>> opened =
+              node::MakeCameraInput(camera_spec, device_options);
+          for (int attempt = 2; attempt <= kCameraOpenAttempts && !opened.ok() &&
+                                opened.status().code() == StatusCode::kUnavailable && !g_stop;
+               ++attempt) {
+            ST_LOG(kWarning) << "unit " << id << ": camera " << camera_spec << ": "
+                             << opened.status().message() << "; trying again (attempt " << attempt
+                             << " of " << kCameraOpenAttempts << ")";
+            opened = node::MakeCameraInput(camera_spec, device_options);
+          }
+          return opened;
         },
         [&camera, &self_calibration, camera_spec,
          id = options.id](Expected<std::unique_ptr<node::CameraInput>> opened) {

@@ -131,6 +131,17 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
     auto peer = node.peers().find(m);
     if (peer == node.peers().end() || peer->second.heartbeats_received == 0) return;
   }
+  if (!runner_ && !calibrated_ && options_.expected_units > 0 &&
+      static_cast<int>(members.size()) < options_.expected_units) {
+    const bool waited = std::chrono::steady_clock::now() - created_ >= options_.expect_wait;
+    if (!logged_expecting_) {
+      ST_LOG(kInfo) << "self-calibration: " << members.size() << " of " << options_.expected_units
+                    << " expected units are members; "
+                    << (waited ? "waited long enough, starting" : "waiting for the others");
+      logged_expecting_ = true;
+    }
+    if (!waited) return;
+  }
   runner_ = std::make_unique<Runner>();
   Runner& r = *runner_;
   r.round = static_cast<uint64_t>(proto::SteadyNowNs());
@@ -414,13 +425,13 @@ void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
           }
         }
       }
-      const bool late = now - r.stage_started > options_.step_timeout;
+      const bool late = now - std::max(r.stage_started, r.stage_progress) > options_.step_timeout;
       if (gone || late) {
-        const std::string why =
-            "unit " + std::to_string(to) +
-            (gone ? ": left the site during calibration"
-                  : ": no answer to a calibration step in " +
-                        std::to_string(options_.step_timeout.count() / 1000) + " s");
+        const std::string why = "unit " + std::to_string(to) +
+                                (gone ? ": left the site during calibration"
+                                      : ": no answer to a calibration step in " +
+                                            std::to_string(options_.step_timeout.count() / 1000) +
+                                            " s (nor from any other unit)");
         if (!r.left_out.count(to)) {
           r.left_out[to] = why;
           if (gone) r.departed.insert(to);
@@ -474,6 +485,7 @@ void SelfCalibrationService::RunnerDone(NodeId from, const wire::CalibrationStep
   if (it == r.awaiting.end() || it->second.to != from) return;
   const Runner::Command command = it->second;
   r.awaiting.erase(it);
+  r.stage_progress = std::chrono::steady_clock::now();
   r.compute_s[from] += done.compute_s();
   if (!done.ok()) {
     ST_LOG(kWarning) << "self-calibration: " << done.message();

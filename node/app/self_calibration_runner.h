@@ -61,6 +61,9 @@ struct SelfCalibrationService::Runner {
   std::map<uint32_t, Command> awaiting;  // by step number
   std::function<void(NodeRuntime&)> current_after;
   std::chrono::steady_clock::time_point stage_started{};
+  // The stage's last answer (or its start): units are late only when the whole stage has
+  // made no progress for step_timeout (a 64-unit stage queues at one world; docs/lab.md).
+  std::chrono::steady_clock::time_point stage_progress{};
   std::chrono::steady_clock::time_point round_started{};
   uint32_t next_step = 1;
   bool stage_active = false;

@@ -16,8 +16,9 @@
 // the conflict graph (schedule.h), plans each projector's patterns from what its cameras
 // resolve (structured_light_plan.h), runs the colour classes' sequences, collects the
 // projecting nodes' inputs, solves the cluster on a worker (cluster_solver.h) and sends each
-// node its CalibrationResult. A node that does not answer a step within step_timeout is left
-// out of the rest of the round (its log line and the report name it); the others finish.
+// node its CalibrationResult. A node that has not answered a step when the stage has made no
+// progress (no answer from any unit) for step_timeout is left out of the rest of the round
+// (its log line and the report name it); the others finish.
 // Lost messages (a lossy link): the runner sends a step again every step_retry while it is
 // unanswered; a node answers a step it has already answered with the same messages again (its
 // done, and for LOCAL its CalibrationInput) and ignores one it is still working on.
@@ -53,6 +54,12 @@ namespace sandtable::node {
 
 struct SelfCalibrationOptions {
   std::chrono::milliseconds settle{1500};
+  // The site's size when known (--expect-units; 0: not known): the first round waits until
+  // that many units are members, at most expect_wait from the runner's start (64 processes
+  // starting on two cores register over more than `settle`; a round begun with 56 of 64 left
+  // 8 to a join round).
+  int expected_units = 0;
+  std::chrono::milliseconds expect_wait{180000};
   std::chrono::milliseconds step_timeout{60000};
   // A unit awaited by the runner that is out of the member list this long has left the round.
   std::chrono::milliseconds member_grace{3000};
@@ -230,6 +237,8 @@ class SelfCalibrationService : public NodeService {
   // A unit that is the lowest id of a site whose other units are calibrated waits this long for
   // their runner's join round before it runs a round itself (that runner may have left).
   static constexpr std::chrono::seconds kJoinWait{15};
+  const std::chrono::steady_clock::time_point created_ = std::chrono::steady_clock::now();
+  bool logged_expecting_ = false;
   std::chrono::steady_clock::time_point first_seen_calibrated_peer_ =
       std::chrono::steady_clock::time_point::max();
 };

@@ -409,7 +409,8 @@ class LabRun {
       if (TruePoseMode()) {
         argv.insert(argv.end(), {"--true-pose", inputs_.true_pose_paths.at(unit.id)});
       } else {
-        argv.insert(argv.end(), {"--calibration-path", options_.calibration_path});
+        argv.insert(argv.end(), {"--calibration-path", options_.calibration_path, "--expect-units",
+                                 std::to_string(ExpectedUnits())});
         if (!options_.saved_calibration.empty()) {
           const std::filesystem::path saved =
               std::filesystem::path(options_.saved_calibration) / ("unit-" + id + ".json");

@@ -150,9 +150,9 @@ TEST_F(NodeProgramTest, HelpListsEveryFlag) {
   ChildProcess node({SANDTABLE_NODE_BIN, "--help"});
   std::string output;
   ASSERT_EQ(testing::RunToEnd(node, milliseconds(10000), &output), 0);
-  for (const char* flag :
-       {"--id", "--coordinator", "--bind", "--curve-keys", "--heartbeat-ms", "--workers", "--world",
-        "--projector", "--camera", "--factory", "--true-pose", "--export-dir", "calibrate-unit"}) {
+  for (const char* flag : {"--id", "--coordinator", "--bind", "--curve-keys", "--heartbeat-ms",
+                           "--workers", "--world", "--projector", "--camera", "--factory",
+                           "--true-pose", "--export-dir", "--expect-units", "calibrate-unit"}) {
     EXPECT_NE(output.find(flag), std::string::npos) << flag << " missing from:\n" << output;
   }
 }
