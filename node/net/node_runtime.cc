@@ -63,7 +63,26 @@ void NodeRuntime::AddService(NodeService* service) {
   services_.push_back(service);
 }
 
+namespace {
+
+// Stops a peer link's connection monitor before its sockets close. libzmq's I/O thread sends
+// monitor events with a blocking send: an event for a DEALER whose monitor PAIR is already
+// gone (or full) blocks that thread for ever, and with it every socket of the context: the
+// node stopped hearing the coordinator, was declared dead and never registered again (grid-64:
+// 16 nodes declared dead while 64 started, the member list shrank, the peers they dropped
+// froze their survivors). Unregistering the monitor (endpoint null) is synchronous.
+void StopPeerMonitor(PeerInfo& peer) {
+  if (peer.monitor && peer.to_peer) {
+    (void)zmq_socket_monitor(peer.to_peer->socket().raw().handle(), nullptr, 0);
+  }
+  peer.monitor.reset();
+  peer.monitor_fd = -1;
+}
+
+}  // namespace
+
 NodeRuntime::~NodeRuntime() {
+  for (auto& [id, peer] : peers_) StopPeerMonitor(peer);
   peers_.clear();
   coordinator_.reset();
   events_.reset();
@@ -450,6 +469,7 @@ void NodeRuntime::ApplyMemberList(const wire::MemberList& list) {
       closed_link_faults_.dropped += it->second.to_peer->fault_counts().dropped;
       closed_link_faults_.corrupted += it->second.to_peer->fault_counts().corrupted;
     }
+    if (gone) StopPeerMonitor(it->second);
     it = gone ? peers_.erase(it) : std::next(it);
   }
   for (const auto& [id, member] : listed) {
