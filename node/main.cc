@@ -214,6 +214,7 @@ static int Run(int argc, char** argv) {
   options.coordinator_events = coordinator.substr(comma + 1);
   options.heartbeat_period = std::chrono::milliseconds(heartbeat_ms);
   options.coordinator_timeout = std::max(options.coordinator_timeout, 5 * options.heartbeat_period);
+  options.time_sync_period = std::max(options.time_sync_period, options.heartbeat_period);
   options.peer_timeout = std::max(options.peer_timeout, 5 * options.heartbeat_period);
   if (!curve_keys.empty()) {
     Expected<net::CurveKeyPair> keys = net::ReadCurveKeyFile(curve_keys);

@@ -224,8 +224,10 @@ class LabRun {
 
   std::vector<std::string> CoordinatorArgs(const std::string& requests,
                                            const std::string& events) const {
-    std::vector<std::string> argv = {coordinator_bin_, "--requests", requests,    "--events",
-                                     events,           "--timeline", tracks_path_};
+    std::vector<std::string> argv = {
+        coordinator_bin_, "--requests",     requests,
+        "--events",       events,           "--timeline",
+        tracks_path_,     "--heartbeat-ms", std::to_string(HeartbeatMs())};
     if (Chaos()) {
       argv.insert(argv.end(),
                   {"--annotations", fs::absolute(fs::path(options_.out_dir) / "annotations.db")});
@@ -249,6 +251,11 @@ class LabRun {
 
   bool Late(NodeId id) const {
     return options_.join_late >= 0 && static_cast<NodeId>(options_.join_late) == id;
+  }
+  int HeartbeatMs() const {
+    if (options_.heartbeat_ms > 0) return options_.heartbeat_ms;
+    const int units = static_cast<int>(inputs_.site.units.size());
+    return units <= 16 ? 100 : 100 * units / 16;
   }
   int ExpectedUnits() const {
     int n = 0;
@@ -392,7 +399,9 @@ class LabRun {
                                        "--factory",
                                        inputs_.factory_paths.at(unit.id),
                                        "--export-dir",
-                                       export_dir};
+                                       export_dir,
+                                       "--heartbeat-ms",
+                                       std::to_string(HeartbeatMs())};
       // The model: self-calibration finds where it stands; the renderer draws it there.
       argv.insert(argv.end(), {"--model", inputs_.model_path});
       if (options_.render == "off") {

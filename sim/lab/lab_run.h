@@ -54,6 +54,10 @@ struct LabRunOptions {
   // Every projector and camera of the site at this fraction of its resolution (scale runs of
   // many nodes on a small machine); 1 = as the site file or preset says.
   double resolution_scale = 1.0;
+  // Membership heartbeat of the coordinator and the nodes, ms (a member is dead after 5 missed):
+  // 0 = 100 ms up to 16 units, 100 ms x units / 16 beyond (64 processes on two cores: a
+  // starved coordinator declared 56 of 64 nodes dead at once after a stall).
+  int heartbeat_ms = 0;
   bool progress_tty = false;
   bool curve = false;  // generate OUT/site.key (0600); world, coordinator, nodes require CURVE
   // "structured-light" (the nodes calibrate themselves and find the model) or "true-pose"

@@ -152,6 +152,10 @@ static int Run(int argc, char** argv) {
                   "Every projector and camera at this fraction of its resolution (large sites on "
                   "a small machine)")
       ->check(CLI::Range(0.05, 1.0));
+  run->add_option("--heartbeat-ms", options.heartbeat_ms,
+                  "Membership heartbeat of coordinator and nodes, ms (0: 100, or 100 x units / 16 "
+                  "past 16 units)")
+      ->check(cli::Integer<int>(0, 10000));
   run->add_flag("--curve", options.curve,
                 "Authenticate the whole run: a site key in OUT/site.key, CURVE on world, "
                 "coordinator and nodes");

@@ -618,6 +618,7 @@ TEST_F(LabRunTest, HelpListsEveryFlag) {
                            "--calibration-timeout-s",
                            "--image-width",
                            "--resolution-scale",
+                           "--heartbeat-ms",
                            "--progress",
                            "--calibration",
                            "--model",
