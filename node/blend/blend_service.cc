@@ -140,17 +140,20 @@ void BlendService::SetCalibration(const UnitCalibration& calibration, uint64_t r
   ready_ = false;
   pending_alpha_.reset();
   sent_to_.clear();
+  asked_.clear();
+  own_share_.reset();
   holding_.clear();
   neighbours_ = std::move(neighbours);
   struct Cast {
     Status status = OkStatus();
     double bound = 0.0, compute_ms = 0.0;
+    std::shared_ptr<const wire::BlendShare> share;  // the own field, as sent
   };
   // Fields already received (a neighbour that calibrated first) are applied with the cast.
   auto fields = std::make_shared<std::map<NodeId, DistanceField>>(fields_);
   node.workers().Run<Cast>(
       [core = core_, model = model_, calibration, options = options_.blend, generation, fields,
-       id = id_] {
+       id = id_, round] {
         Cast out;
         const Clock::time_point start = Clock::now();
         auto scene = std::make_shared<const Scene>(RenderLoop::SceneFor(model.get(), calibration));
@@ -169,6 +172,7 @@ void BlendService::SetCalibration(const UnitCalibration& calibration, uint64_t r
           if (unit != id) blender->SetNeighbour(field);
         }
         out.bound = blender->LevelBound();
+        out.share = std::make_shared<const wire::BlendShare>(ShareFromField(own, round));
         std::lock_guard<std::mutex> lock(core->mutex);
         core->scene = std::move(scene);
         core->caster = std::move(*caster);
@@ -186,6 +190,7 @@ void BlendService::SetCalibration(const UnitCalibration& calibration, uint64_t r
         }
         ready_ = true;
         cast_ms_ = cast.compute_ms;
+        own_share_ = std::move(cast.share);
         for (const auto& [unit, field] : *fields) {
           if (unit != id_) holding_.insert(unit);
         }
@@ -218,10 +223,16 @@ void BlendService::SetCalibration(const UnitCalibration& calibration, uint64_t r
 void BlendService::SendShare(NodeId to, bool with_field, bool answer, NodeRuntime& node) {
   wire::Envelope envelope;
   wire::BlendShare* share = envelope.mutable_blend_share();
-  if (with_field) {
-    std::lock_guard<std::mutex> lock(core_->mutex);
-    *share = ShareFromField(core_->own, round_);
+  if (with_field && own_share_) {
+    *share = *own_share_;
     sent_to_.insert(to);
+    if (answer) {
+      Asked& asked = asked_[to];
+      asked.at = Clock::now();
+      asked.interval = asked.interval.count() == 0
+                           ? options_.ask_again
+                           : std::min(options_.ask_again_max, 2 * asked.interval);
+    }
   } else {
     share->set_projector_id(id_);
     share->set_calibration_round(round_);
@@ -347,6 +358,20 @@ Status BlendService::OnStep(NodeRuntime& node) {
       it = dropped_.erase(it);
     } else {
       ++it;
+    }
+  }
+  // Overlapping units whose field has not come although it was asked for: the share or the
+  // answer may have been lost while a link was down (a unit declared dead for a moment).
+  if (neighbours_) {
+    for (NodeId n : *neighbours_) {
+      if (n == id_ || holding_.count(n) || dropped_.count(n) || fields_.count(n)) continue;
+      auto asked = asked_.find(n);
+      if (asked != asked_.end() && now - asked->second.at < asked->second.interval) continue;
+      if (!node.peers().count(n)) continue;  // not linked (yet): asked once it is
+      if (asked != asked_.end()) {
+        ST_LOG(kInfo) << "blend: no field from node " << n << " yet; asking again";
+      }
+      SendShare(n, /*with_field=*/true, /*answer=*/true, node);
     }
   }
   // Neighbours that left: their connection dropped (a process that dies closes its socket),

@@ -14,7 +14,8 @@
 // its heartbeats stop for `peer_silence`; or the member list drops it) is forgotten: the mask is
 // recomposed from what the node holds (no cast, no recalibration) and shown at once. If it is heard
 // again (a connection that came back), its field is asked for anew. A newcomer's share asks for an
-// answer; the node sends its own field back. Bad shares (a field that does not fit its grid, a
+// answer; the node sends its own field back. An overlapping unit whose field has not come is
+// asked again (options.ask_again, doubling). Bad shares (a field that does not fit its grid, a
 // model that does not check) are logged, counted and dropped.
 //
 // JSON lines (common/base/ready_line.h), for the lab:
@@ -56,6 +57,11 @@ struct BlendServiceOptions {
   // when its socket closes; this catches a stalled one. 10 heartbeats: 8 nodes on 2 loaded
   // cores miss 300 ms now and then.
   std::chrono::milliseconds peer_silence{1000};
+  // A neighbour whose field has not come this long after it was asked for is asked again (a
+  // share lost while a link was down: the coordinator dropped one of the two for a moment),
+  // then after twice as long, up to ask_again_max.
+  std::chrono::milliseconds ask_again{2000};
+  std::chrono::milliseconds ask_again_max{16000};
   std::string export_dir;  // blend-<id>.png (the alpha mask) is written here (empty: not)
   // The mask goes to the round's runner (the MPCDI export) once no new one was composed for this
   // long: a site settling sends one map per node, not one per share heard.
@@ -119,7 +125,15 @@ class BlendService : public NodeService {
   uint64_t generation_ = 0;  // bumped by each calibration
   bool ready_ = false;       // the own field is cast
   std::optional<std::set<NodeId>> neighbours_;
-  std::set<NodeId> sent_to_;                // own field sent to, this calibration
+  std::set<NodeId> sent_to_;  // own field sent to, this calibration
+  // The own field as sent (built by the cast's worker): sending never waits for the workers'
+  // lock, which a neighbour's lookup holds for up to seconds on a loaded machine.
+  std::shared_ptr<const wire::BlendShare> own_share_;
+  struct Asked {
+    std::chrono::steady_clock::time_point at;
+    std::chrono::milliseconds interval{0};
+  };
+  std::map<NodeId, Asked> asked_;           // neighbours asked for their field, this calibration
   std::map<NodeId, double> bounds_;         // level bounds heard (and own)
   double level_told_ = 0.0;                 // the lowest level told to the neighbours
   double own_black_ = -1.0;                 // this projector's black level (< 0: unknown)
