@@ -22,36 +22,30 @@ void ServerLoop::Add(Channel* channel, Handler handler, bool answer_refusals,
 }
 
 Status ServerLoop::RunOnce(std::chrono::milliseconds max_wait) {
-  std::vector<Socket*> sockets;
-  sockets.reserve(entries_.size());
-  for (Entry& e : entries_) sockets.push_back(&e.channel->socket());
-  std::vector<bool> readable;
-  ST_RETURN_IF_ERROR(Socket::Poll(sockets, max_wait, &readable));
-  for (size_t i = 0; i < entries_.size(); ++i) {
-    if (readable[i]) Drain(entries_[i]);
-  }
-  return OkStatus();
+  return RunOnce(max_wait, nullptr);
 }
 
 Status ServerLoop::RunOnce(std::chrono::milliseconds max_wait,
                            std::vector<zmq::pollitem_t>* extra) {
-  if (extra == nullptr || extra->empty()) return RunOnce(max_wait);
+  const size_t extras = extra ? extra->size() : 0;
   std::vector<zmq::pollitem_t> items;
-  items.reserve(entries_.size() + extra->size());
+  items.reserve(entries_.size() + extras);
   for (Entry& e : entries_) {
     items.push_back({static_cast<void*>(e.channel->socket().raw()), 0, ZMQ_POLLIN, 0});
   }
-  for (zmq::pollitem_t& item : *extra) {
-    item.revents = 0;
-    items.push_back(item);
+  for (size_t i = 0; i < extras; ++i) {
+    (*extra)[i].revents = 0;
+    items.push_back((*extra)[i]);
   }
   try {
     zmq::poll(items.data(), items.size(), max_wait);
   } catch (const zmq::error_t& e) {
+    last_woke_ = std::chrono::steady_clock::now();
     if (e.num() == EINTR) return OkStatus();
     return UnavailableError(std::string("server loop: poll: ") + e.what());
   }
-  for (size_t i = 0; i < extra->size(); ++i) {
+  last_woke_ = std::chrono::steady_clock::now();
+  for (size_t i = 0; i < extras; ++i) {
     (*extra)[i].revents = items[entries_.size() + i].revents;
   }
   for (size_t i = 0; i < entries_.size(); ++i) {

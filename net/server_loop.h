@@ -39,7 +39,11 @@ class ServerLoop {
   Status RunOnce(std::chrono::milliseconds max_wait);
   // The same, also waking when one of `extra` (sockets or file descriptors the caller drains
   // itself) is ready; their revents are set on return.
+  // (`extra` may be null.) One poll path for every server.
   Status RunOnce(std::chrono::milliseconds max_wait, std::vector<zmq::pollitem_t>* extra);
+  // When the last RunOnce's poll returned (its handlers ran after): a caller measures how long
+  // its thread was busy since.
+  std::chrono::steady_clock::time_point last_woke() const { return last_woke_; }
 
   // Messages handed to handlers and refusals answered, since construction.
   uint64_t messages_handled() const { return handled_; }
@@ -58,6 +62,7 @@ class ServerLoop {
   std::vector<Entry> entries_;
   uint64_t handled_ = 0;
   uint64_t refusals_answered_ = 0;
+  std::chrono::steady_clock::time_point last_woke_{};
 };
 
 }  // namespace sandtable::net

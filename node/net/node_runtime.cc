@@ -13,6 +13,8 @@ namespace sandtable::node {
 namespace {
 
 constexpr int kMaxPeerDrain = 100;
+// A turn of the loop (handlers, completions, services) longer than this is logged.
+constexpr std::chrono::milliseconds kBusyTurn{250};
 constexpr size_t kMaxPeerEndpointBytes = 256;
 
 bool LinkableEndpoint(const std::string& endpoint) {
@@ -329,13 +331,29 @@ Status NodeRuntime::Step(std::chrono::milliseconds max_wait) {
       (is_monitor ? monitors : dealers).push_back(id);
     }
   }
+  const Clock::time_point drained_channels = Clock::now();
   DrainPeerMonitors(monitors);
   DrainPeerDealers(dealers);
+  const Clock::time_point drained_peers = Clock::now();
   workers_.RunCompletions();
+  const Clock::time_point completed = Clock::now();
   for (NodeService* service : services_) {
     if (Status stepped = service->OnStep(*this); !stepped.ok()) {
       ST_LOG(kWarning) << service->name() << ": " << stepped.ToString();
     }
+  }
+  // Everything after the poll runs on this one thread; a turn that long keeps the node from
+  // heartbeating (the coordinator declares it dead after 5 periods): say where it went.
+  const Clock::time_point done = Clock::now();
+  if (done - loop_.last_woke() > kBusyTurn) {
+    const auto ms = [](Clock::duration d) {
+      return std::chrono::duration_cast<std::chrono::milliseconds>(d).count();
+    };
+    ST_LOG(kWarning) << "network thread busy " << ms(done - loop_.last_woke())
+                     << " ms in one turn (channels " << ms(drained_channels - loop_.last_woke())
+                     << " ms, peers " << ms(drained_peers - drained_channels) << " ms, completions "
+                     << ms(completed - drained_peers) << " ms, services " << ms(done - completed)
+                     << " ms)";
   }
   return OkStatus();
 }
