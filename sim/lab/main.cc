@@ -13,6 +13,7 @@
 //   sandtable-lab sweep [--site ..] [--scene ..] --out DIR [--seed N] [--only CONFIG ..]
 //   sandtable-lab scale --nodes 2,4,8 [--scene city] --out DIR [--seed N] [--reblend]
 //   sandtable-lab chaos [--site sandtable-3] [--scene ..] --out DIR [--seed N] [--runs 5]
+//   sandtable-lab html REPORT.md [-o REPORT.html] [--title T]   (any report, pictures inlined)
 //
 // Exit codes: 0 ok, 1 the run failed (report written), 2 usage, 130 interrupted (SIGINT or
 // SIGTERM: the site is torn down and the report says so).
@@ -20,13 +21,16 @@
 
 #include <atomic>
 #include <csignal>
+#include <filesystem>
 #include <iostream>
 #include <string>
 
+#include "common/base/file_io.h"
 #include "common/base/log.h"
 #include "common/base/main_guard.h"
 #include "common/cli/command_line.h"
 #include "sim/lab/lab_chaos.h"
+#include "sim/lab/lab_html.h"
 #include "sim/lab/lab_run.h"
 #include "sim/lab/lab_scale.h"
 #include "sim/lab/lab_sweep.h"
@@ -228,7 +232,34 @@ static int Run(int argc, char** argv) {
       ->add_option("--samples", chaos_options.metric_samples,
                    "Surface points sampled by each run's registration metric")
       ->check(cli::Integer<int>(1, 10000000));
+  CLI::App* html = app.add_subcommand(
+      "html", "A markdown report as one HTML page, the PNGs it links from its folder inlined");
+  cli::Configure(*html);
+  std::string html_in, html_out, html_title = "Sandtable report";
+  html->add_option("markdown", html_in, "the report (.md)")->required();
+  html->add_option("-o,--out", html_out, "the page (default: the report's name with .html)");
+  html->add_option("--title", html_title, "the page's title");
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
+  if (html->parsed()) {
+    const std::filesystem::path in(html_in);
+    const std::filesystem::path out = html_out.empty()
+                                          ? std::filesystem::path(in).replace_extension(".html")
+                                          : std::filesystem::path(html_out);
+    Expected<std::string> markdown = ReadInputFile(in, kMaxTextInputBytes);
+    if (!markdown.ok()) {
+      std::cerr << "sandtable-lab html: " << markdown.status().ToString() << "\n";
+      return 2;
+    }
+    const std::string dir = in.has_parent_path() ? in.parent_path().string() : ".";
+    Expected<std::string> page = sim::MarkdownToHtmlPage(*markdown, dir, html_title);
+    Status written = page.ok() ? WriteFileAtomically(out, *page) : page.status();
+    if (!written.ok()) {
+      std::cerr << "sandtable-lab html: " << out.string() << ": " << written.ToString() << "\n";
+      return 1;
+    }
+    std::cout << "sandtable-lab html: " << out.string() << "\n";
+    return 0;
+  }
   if (scale->parsed() || sweep->parsed() || chaos->parsed()) {
     struct sigaction action {};
     action.sa_handler = OnSignal;

@@ -602,6 +602,30 @@ TEST_F(LabRunTest, UsageErrorsExitTwo) {
   }
 }
 
+// `sandtable-lab html`: any report (the main job's) as one page, its pictures inlined, its
+// tables rendered; a report that is not there is a usage error naming it.
+TEST_F(LabRunTest, HtmlInlinesAReportsPicturesAndRefusesAMissingOne) {
+  std::filesystem::create_directories(dir_ / "sub");
+  std::ofstream(dir_ / "sub" / "pic.png", std::ios::binary) << "abc";  // inlined as it is
+  std::ofstream(dir_ / "r.md") << "# Report\n\n| a | b |\n| --- | --- |\n| 1 | 2 |\n\n"
+                               << "![a picture](sub/pic.png)\n";
+  {
+    ChildProcess lab({SANDTABLE_LAB_BIN, "html", (dir_ / "r.md").string(), "--title", "T"});
+    while (lab.ReadLine(kRunDeadline)) {
+    }
+    ASSERT_EQ(lab.Wait(), 0);
+  }
+  std::ifstream in(dir_ / "r.html");
+  const std::string page((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(page.find("<table"), std::string::npos) << page;
+  EXPECT_NE(page.find("data:image/png;base64,YWJj"), std::string::npos) << page;  // "abc"
+  EXPECT_NE(page.find("<title>T</title>"), std::string::npos) << page;
+  ChildProcess missing({SANDTABLE_LAB_BIN, "html", (dir_ / "none.md").string()});
+  std::string text;
+  while (std::optional<std::string> line = missing.ReadLine(kRunDeadline)) text += *line;
+  EXPECT_EQ(missing.Wait(), 2);
+}
+
 TEST_F(LabRunTest, HelpListsEveryFlag) {
   ChildProcess lab({SANDTABLE_LAB_BIN, "run", "--help"});
   std::string text;
