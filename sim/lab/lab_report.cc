@@ -589,6 +589,15 @@ std::string LabReportMarkdown(const LabResult& r) {
     if (rd.contains("grid_top_png")) {
       md << "![table grid from above](" << rd["grid_top_png"].get<std::string>() << ")\n\n";
     }
+    if (rd.contains("unit_grid_top_png") && rd["unit_grid_top_png"].is_object()) {
+      md << "Each projector's output alone, seen from above (its table grid):\n\n";
+      for (const auto& [id, png] : rd["unit_grid_top_png"].items()) {
+        if (png.is_string()) {
+          md << "![unit " << id << " alone](" << png.get<std::string>() << ")\n*unit " << id
+             << "*\n\n";
+        }
+      }
+    }
     if (rd.contains("show_top_png")) {
       md << "![the show from above](" << rd["show_top_png"].get<std::string>() << ")\n\n";
     }

@@ -924,6 +924,13 @@ class LabRun {
     Expected<GridCoincidence> grid = MeasureGridCoincidence(views.each, TableMask(views.each));
     result_.render["grid"] =
         grid.ok() ? grid->ToJson() : nlohmann::json{{"error", grid.status().message()}};
+    // Each projector's output alone, as it lands on the table (the report's per-projector view).
+    for (const auto& [id, view] : views.each) {
+      const std::string png = "show_grid_top_unit-" + std::to_string(id) + ".png";
+      if (io::WritePngFile((dir / png).string(), LuminancePicture(view.luminance)).ok()) {
+        result_.render["unit_grid_top_png"][std::to_string(id)] = png;
+      }
+    }
     if (views.all) {
       if (io::WritePngFile((dir / "show_grid_top.png").string(),
                            LuminancePicture(views.all->luminance))

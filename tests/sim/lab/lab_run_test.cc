@@ -220,6 +220,10 @@ TEST_F(LabRunTest, Sandtable3SelfCalibratesAndFindsTheModel) {
   EXPECT_GT(render["timeline_skew"]["instants"].get<int>(), 50);
   EXPECT_TRUE(std::filesystem::exists(dir_ / "show_grid_top.png"));
   EXPECT_TRUE(std::filesystem::exists(dir_ / "show_top.png"));
+  for (const char* id : {"0", "1", "2"}) {  // each projector's output alone
+    ASSERT_TRUE(render["unit_grid_top_png"].contains(id)) << render.dump();
+    EXPECT_TRUE(std::filesystem::exists(dir_ / render["unit_grid_top_png"][id].get<std::string>()));
+  }
 
   // The blend (docs/blend.md): raw white has the footprint and shadow steps, the blended white
   // none above the eye's threshold on the table (99th percentile: the largest steps are
