@@ -50,7 +50,7 @@ def lab_section(out):
                     f"| {fmt(b.get('rms_mm'))} | {fmt(r['total_s'])} | [{folder}/report.md]"
                     f"({folder}/report.md) |")
     if rows:
-        lines += ["| site / scene | calibration | rms (mm) | p99 (mm) | max (mm) | rms (px) "
+        lines += ["", "| site / scene | calibration | rms (mm) | p99 (mm) | max (mm) | rms (px) "
                   "| table rms (mm) | buildings rms (mm) | run time (s) | report |",
                   "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"] + rows
         lines += ["",
@@ -86,6 +86,134 @@ def lab_section(out):
     return lines
 
 
+def load(path):
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def verdict(value, target, lower_is_better=True):
+    if target is None:
+        return "-"
+    if value is None:
+        return "not measured"
+    ok = value <= target if lower_is_better else value >= target
+    return "pass" if ok else "**FAIL**"
+
+
+def summary_section(out):
+    """One screen: every headline figure of this demo beside its target (issue text), pass/fail."""
+    rows = []
+
+    def row(figure, value, target_text, target, lower=True, unit="", digits=3):
+        shown = "-" if value is None else f"{float(value):.{digits}f}{unit}"
+        rows.append(f"| {figure} | {shown} | {target_text} | {verdict(value, target, lower)} |")
+
+    lab = load(out / "lab" / "report.json") or {}
+    c = lab.get("calibration", {})
+    row("sandtable-3: registration rms, the nodes' self-calibration (mm)", c.get("rms_mm"),
+        "-", None)
+    reg = lab.get("registration", {})
+    row("model found: offset from the truth (mm)", reg.get("model_offset_mm"), "-", None)
+    rd = lab.get("render", {})
+    row("show: table grid across projectors, rms (mm)", rd.get("grid", {}).get("rms_mm"),
+        "-", None)
+    row("show: frame time p50, llvmpipe, nodes sharing 2 cores (ms)", rd.get("frame_ms_p50"),
+        "<= 16 ms", 16.0, digits=1)
+    ph = lab.get("photometric", {})
+    row("blend: table, 99th percentile step over 5 mm (%)", ph.get("table", {}).get("p99_pct"),
+        "-", None, digits=2)
+    row("blend: table, largest step over 5 mm (%)", ph.get("table", {}).get("max_pct"),
+        "< 1.5 %", 1.5, digits=1)
+    row("blend: walls, largest step over 5 mm (%)", ph.get("walls", {}).get("max_pct"),
+        "< 2 %", 2.0, digits=1)
+    chaos = read_csv(out / "chaos" / "chaos.csv") if (out / "chaos" / "chaos.csv").exists() else []
+    if chaos:
+        lost = sum(int(r["annotations_lost"]) for r in chaos if r["passed"] == "1")
+        crashed = sum(max(0, int(r["crashed"])) for r in chaos)
+        passed = sum(r["passed"] == "1" for r in chaos)
+        rows.append(f"| chaos: runs passed | {passed} of {len(chaos)} | all | "
+                    f"{'pass' if passed == len(chaos) else '**FAIL**'} |")
+        row("chaos: acknowledged annotation points lost", lost if passed else None, "0", 0,
+            digits=0)
+        row("chaos: processes crashed", crashed if passed else None, "0", 0, digits=0)
+        reblend = [float(r["kill_reblend_ms"]) for r in chaos if float(r["kill_reblend_ms"]) >= 0]
+        row("chaos: re-blend after a kill, last neighbour (ms)", max(reblend) if reblend else None,
+            "< 100 ms", 100.0, digits=0)
+    scale = read_csv(out / "scale" / "scale.csv") if (out / "scale" / "scale.csv").exists() else []
+    per_node = [float(r["messages_per_node"]) for r in scale
+                if r["ok"] == "1" and int(r["nodes"]) >= 4]
+    if len(per_node) >= 2:
+        row("scale (grid-4..8 here): messages per node, largest / smallest",
+            max(per_node) / min(per_node), "< 2x (4 to 64 nodes)", 2.0, digits=2)
+    sweep = read_csv(out / "sweep" / "sweep.csv") if (out / "sweep" / "sweep.csv").exists() else []
+    defaults = [r for r in sweep if r["config"] == "defaults" and r["ok"] == "1"]
+    if defaults:
+        d = defaults[0]
+        on_front = d["front_device"] == "1" or d["front_compute"] == "1"
+        rows.append(f"| sweep: the shipped defaults on a Pareto front | "
+                    f"{'yes' if on_front else 'no'} | on it, or the docs say why | "
+                    f"{'pass' if on_front else 'see docs/results.md, Sweep'} |")
+    lines = ["## Summary", "",
+             "Every headline figure of this run beside the issues' target where they set one "
+             "(\"-\": none). The full-size "
+             "figures (5 chaos seeds, the whole sweep, scale to 64 nodes) and the command for "
+             "each are in docs/results.md.", "",
+             "| figure | this run | target | verdict |", "| --- | --- | --- | --- |"] + rows + [""]
+    return lines
+
+
+def pictures_section(out):
+    """The pictures people would rather look at than read."""
+    lines = []
+    lab = load(out / "lab" / "report.json") or {}
+    pics = lab.get("photometric", {}).get("pictures", {})
+    shots = [(pics.get("before"), "raw white from above: footprint and shadow steps"),
+             (pics.get("after"), "white through the blend from above"),
+             (pics.get("steps_over_1pct"), "where a step over 5 mm exceeds 1 %")]
+    for unit, png in sorted(pics.get("alpha", {}).items()):
+        shots.append((png, f"unit {unit}: its blend mask (alpha) in projector pixels"))
+    for unit, png in sorted(lab.get("render", {}).get("unit_grid_top_png", {}).items()):
+        shots.append((png, f"unit {unit}: its output alone, seen from above (the table grid)"))
+    shown = [(f"lab/{png}", cap) for png, cap in shots if png and (out / "lab" / png).exists()]
+    if shown:
+        lines += ["## The blend and each projector's output (sandtable-3; docs/blend.md)", ""]
+        for png, caption in shown:
+            lines += [f"![{caption}]({png})  ", f"*{caption}*", ""]
+    sweep = out / "sweep"
+    if (sweep / "sweep.md").exists():
+        lines += ["## Sweep: error against projection and compute time", "",
+                  "Four configurations here (`sandtable-lab sweep --only ...`, deploy/demo_run.sh); "
+                  "the whole sweep and why the defaults stay: docs/results.md, Sweep. Table: "
+                  "[`sweep/sweep.md`](sweep/sweep.md).", ""]
+        for png, caption in [("sweep/sweep_projection.png", "rms error against modeled projection time"),
+                             ("sweep/sweep_compute.png", "rms error against compute time")]:
+            if (out / png).exists():
+                lines += [f"![{caption}]({png})  ", f"*{caption}* (Pareto front in red)", ""]
+    scale = out / "scale"
+    if (scale / "scale.md").exists():
+        lines += ["## Scale: grid-2, 4, 8 at half resolution", "",
+                  "64 nodes: docs/results.md, Scale. Table: [`scale/scale.md`](scale/scale.md).", ""]
+        for png, caption in [("scale/scale_per_node.png", "messages and bytes per node against N"),
+                             ("scale/scale_time.png", "calibration time and CPU against N")]:
+            if (out / png).exists():
+                lines += [f"![{caption}]({png})  ", f"*{caption}*", ""]
+    chaos = out / "chaos" / "chaos.csv"
+    if chaos.exists():
+        lines += ["## Chaos: one seeded run on sandtable-3", "",
+                  "| seed | passed | annotations acknowledged / lost | crashed | kill detected (ms) "
+                  "| re-blend (ms) | join (ms) | coordinator back (ms) | frames lost (worst node) |",
+                  "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+        for r in read_csv(chaos):
+            lines.append(f"| {r['seed']} | {'yes' if r['passed'] == '1' else 'no: ' + r['error']} "
+                         f"| {r['annotations_acknowledged']} / {r['annotations_lost']} "
+                         f"| {r['crashed']} | {r['kill_detected_ms']} | {r['kill_reblend_ms']} "
+                         f"| {r['join_ms']} | {r['coordinator_ready_ms']} | {r['frames_lost_max']} |")
+        lines += ["", "Details: [`chaos/chaos.md`](chaos/chaos.md).", ""]
+    return lines
+
+
 def main():
     out = pathlib.Path(sys.argv[1])
     lines = ["# Sandtable demo report", ""]
@@ -96,10 +224,13 @@ def main():
         "nodes hold against the world's ground truth (docs/lab.md). Its own report: "
         "[`lab/report.md`](lab/report.md). The other sections below run the parts beside it: "
         "the simulated world alone, structured light and unit calibration on real captures, "
-        "the geometry core's sweeps, and the protocol's event latency.",
+        "the geometry core's sweeps, and the protocol's event latency. `report.html` is this "
+        "report as one page with every picture inlined.",
         "",
     ]
+    lines += summary_section(out)
     lines += lab_section(out)
+    lines += pictures_section(out)
     lines += [
         "## Steps",
         "",

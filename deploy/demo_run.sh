@@ -45,6 +45,14 @@ step lab_true_pose "$lab" run --site sandtable-3 --scene sandtable --calibration
   --out "$out/lab-true-pose" --progress plain
 step lab_grid8 "$lab" run --site grid-8 --scene city --out "$out/lab-grid8" --progress plain
 
+# The lab's other commands, small enough for the demo (docs/results.md has the full ones): run
+# time against error over four configurations, the cost of grid-2/4/8 at half resolution, and
+# one seeded chaos run (kills, a join over faulty links, a stall, the coordinator restarted).
+step sweep "$lab" sweep --out "$out/sweep" --only defaults --only gray-cell-px=8 \
+  --only phase-steps=4 --only grid-step-px=32
+step scale "$lab" scale --nodes 2,4,8 --out "$out/scale"
+step chaos "$lab" chaos --runs 1 --out "$out/chaos"
+
 # 2. The simulated world alone: a TR09-017 sand table lit white by three projectors.
 step scene "$world" make-scene --preset sandtable --seed 1 -o "$out/scene.gltf"
 step site "$world" make-site --preset sandtable-3 --seed 1 -o "$out/site.json"
@@ -67,5 +75,7 @@ step numerics_plots bash tests/bench/plot_sweeps.sh "$out/numerics"
 step event_latency "$bench/bench_event_latency" 1200 120 3
 
 python3 "$root/deploy/demo_report.py" "$out"
-echo "demo: report written to $out/report.md"
+# The same report as one page, every picture inlined.
+"$lab" html "$out/report.md" --title "Sandtable demo report" || failed=1
+echo "demo: report written to $out/report.md and $out/report.html"
 exit "$failed"
