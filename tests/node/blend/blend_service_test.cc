@@ -17,12 +17,12 @@
 #include "node/blend/blend_service.h"
 #include "node/net/node_runtime.h"
 #include "sim/site/site_presets.h"
+#include "tests/node/net/node_site_test_util.h"
 
 namespace sandtable::node {
 namespace {
 
 using std::chrono::milliseconds;
-using SteadyClock = std::chrono::steady_clock;
 
 constexpr milliseconds kHeartbeat{50};
 constexpr milliseconds kAskAgain{100};
@@ -30,36 +30,15 @@ constexpr milliseconds kAskAgain{100};
 constexpr milliseconds kBlendDeadline{60000};
 
 coordinator::CoordinatorOptions CoordinatorFor() {
-  coordinator::CoordinatorOptions o;
-  o.membership.heartbeat_period = kHeartbeat;
-  o.membership.misses_allowed = 40;  // no unit is dropped while a worker casts
-  o.republish_period = milliseconds(200);
-  return o;
+  // No unit is dropped while a worker casts.
+  return test_site::SiteCoordinatorOptions(kHeartbeat, /*misses_allowed=*/40);
 }
 
 NodeOptions NodeFor(NodeId id, const coordinator::CoordinatorServer& c) {
-  NodeOptions o;
-  o.id = id;
-  o.coordinator_requests = c.request_endpoint();
-  o.coordinator_events = c.event_endpoint();
-  o.heartbeat_period = kHeartbeat;
-  o.coordinator_timeout = milliseconds(4000);
-  o.peer_timeout = milliseconds(4000);
-  return o;
+  return test_site::SiteNodeOptions(id, c, kHeartbeat, milliseconds(4000));
 }
 
-bool StepUntil(coordinator::CoordinatorServer& c, const std::vector<NodeRuntime*>& nodes,
-               const std::function<bool()>& done, milliseconds deadline) {
-  const auto until = SteadyClock::now() + deadline;
-  while (SteadyClock::now() < until) {
-    if (!c.Step(milliseconds(2)).ok()) return false;
-    for (NodeRuntime* n : nodes) {
-      if (!n->Step(milliseconds(2)).ok()) return false;
-    }
-    if (done()) return true;
-  }
-  return done();
-}
+using test_site::StepUntil;
 
 UnitCalibration TrueCalibration(const sim::Site& site, NodeId unit) {
   UnitCalibration c;

@@ -17,6 +17,7 @@
 #include "node/net/node_runtime.h"
 #include "node/net/worker_pool.h"
 #include "tests/net/test_wait.h"
+#include "tests/node/net/node_site_test_util.h"
 
 namespace sandtable::node {
 namespace {
@@ -28,37 +29,14 @@ constexpr milliseconds kHeartbeat{50};
 constexpr milliseconds kJoinDeadline{5000};
 
 coordinator::CoordinatorOptions CoordinatorFor() {
-  coordinator::CoordinatorOptions o;
-  o.membership.heartbeat_period = kHeartbeat;
-  o.membership.misses_allowed = 4;  // dead after 200 ms of silence
-  o.republish_period = milliseconds(200);
-  return o;
+  return test_site::SiteCoordinatorOptions(kHeartbeat, /*misses_allowed=*/4);  // dead after 200 ms
 }
 
 NodeOptions NodeFor(NodeId id, const coordinator::CoordinatorServer& c) {
-  NodeOptions o;
-  o.id = id;
-  o.coordinator_requests = c.request_endpoint();
-  o.coordinator_events = c.event_endpoint();
-  o.heartbeat_period = kHeartbeat;
-  o.coordinator_timeout = milliseconds(400);
-  o.peer_timeout = milliseconds(400);
-  return o;
+  return test_site::SiteNodeOptions(id, c, kHeartbeat, milliseconds(400));
 }
 
-// Steps the coordinator and every node in turn until `done` or the deadline.
-bool StepUntil(coordinator::CoordinatorServer& c, const std::vector<NodeRuntime*>& nodes,
-               const std::function<bool()>& done, milliseconds deadline) {
-  const auto until = SteadyClock::now() + deadline;
-  while (SteadyClock::now() < until) {
-    if (!c.Step(milliseconds(2)).ok()) return false;
-    for (NodeRuntime* n : nodes) {
-      if (!n->Step(milliseconds(2)).ok()) return false;
-    }
-    if (done()) return true;
-  }
-  return done();
-}
+using test_site::StepUntil;
 
 TEST(WorkerPoolTest, CompletionRunsOnTheCallingThreadAfterTheJob) {
   WorkerPool pool(2);
