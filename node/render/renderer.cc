@@ -632,18 +632,26 @@ Status Renderer::SetMask(const cv::Mat& mask) {
     cv::max(cv::min(lift, 1.0), 0.0, lift);
     cv::minMaxLoc(lift, nullptr, &lift_max);
   }
+  // 16-bit normalized, converted here: a float upload into RG16 goes through the driver's
+  // per-texel conversion, which made the whole swap 2-3x slower on llvmpipe (9.6-17 ms against
+  // 4.3-5.2 ms at 1280x800, sandtable_render_bench's set_mask_ms), and a re-blend's first frame
+  // waits for it. A float output keeps the float values for tests.
+  const bool is_float = context_->float_output();
+  if (!is_float) {
+    factor.convertTo(factor, CV_16U, 65535.0);
+    lift.convertTo(lift, CV_16U, 65535.0);
+  }
   cv::Mat both;
   cv::merge(std::vector<cv::Mat>{factor, lift}, both);
   const cv::Mat gl_rows = FlippedContinuous(both);
+  const GLenum type = is_float ? GL_FLOAT : GL_UNSIGNED_SHORT;
   if (!mask_texture_) {
-    // 16-bit normalized (a float output keeps the float values for tests).
-    mask_texture_ = MakeTexture2D(context_->float_output() ? GL_RG32F : GL_RG16, size_.width,
-                                  size_.height, GL_RG, GL_FLOAT, gl_rows.data, GL_NEAREST);
+    mask_texture_ = MakeTexture2D(is_float ? GL_RG32F : GL_RG16, size_.width, size_.height, GL_RG,
+                                  type, gl_rows.data, GL_NEAREST);
   } else {
     glBindTexture(GL_TEXTURE_2D, mask_texture_);
     glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
-    glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, size_.width, size_.height, GL_RG, GL_FLOAT,
-                    gl_rows.data);
+    glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, size_.width, size_.height, GL_RG, type, gl_rows.data);
   }
   has_mask_ = true;
   has_lift_ = lift_max > 0.0;

@@ -12,11 +12,14 @@
 // work finished), the per-pass times of a second run that finishes after each pass, the floor,
 // and the context's description (llvmpipe, or a GPU's driver). docs/render.md.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <iostream>
 #include <random>
 
+#define GL_GLEXT_PROTOTYPES 1
+#include <GL/glcorearb.h>
 #include <nlohmann/json.hpp>
 
 #include "common/cli/command_line.h"
@@ -217,6 +220,26 @@ int main(int argc, char** argv) {
       run["pass_ms_p50"][name] = Percentile(pass_ms[p], 0.5);
       run["pass_frames"][name] = pass_ms[p].size();
     }
+  }
+  // What a re-blend adds before its first frame (a new mask swapped in) and what every frame
+  // costs after the passes (the read back of the output for the projector).
+  {
+    Expected<std::unique_ptr<Renderer>> renderer =
+        Renderer::Create(context->get(), scene, RendererOptions{});
+    if (!renderer.ok() || !(*renderer)->SetView(*view).ok()) return 1;
+    std::vector<double> set_mask_ms, read_ms;
+    for (int i = 0; i < 30; ++i) {
+      const auto t0 = std::chrono::steady_clock::now();
+      if (!(*renderer)->SetMask(mask).ok()) return 1;
+      glFinish();
+      const auto t1 = std::chrono::steady_clock::now();
+      if (!(*context)->ReadOutput().ok()) return 1;
+      const auto t2 = std::chrono::steady_clock::now();
+      set_mask_ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+      read_ms.push_back(std::chrono::duration<double, std::milli>(t2 - t1).count());
+    }
+    report["set_mask_ms_p50"] = Percentile(set_mask_ms, 0.5);
+    report["read_output_ms_p50"] = Percentile(read_ms, 0.5);
   }
   report["frame_ms_p50"] = report["separate_warp_pass"]["frame_ms_p50"];
   report["frame_ms_p99"] = report["separate_warp_pass"]["frame_ms_p99"];
