@@ -436,6 +436,7 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
     int width_px = 0, height_px = 0;
     Status status = OkStatus();
     int64_t shown_ns = 0;
+    MaskFrameTimes frame;  // where the time went for the frame that showed it
     double compose_ms = 0.0;
     double black_peak = 0.0, black_target = 0.0, lift_max = 0.0;
   };
@@ -488,6 +489,7 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           out.status = shown.status();
         } else {
           out.shown_ns = *shown;
+          out.frame = loop->LastMaskFrame();
         }
         return out;
       },
@@ -531,6 +533,11 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
         line["compose_ms"] = shown.compose_ms;
         line["cast_ms"] = cast_ms_;
         line["shown_ns"] = shown.shown_ns;
+        line["frame"] = {{"wait_ms", shown.frame.wait_ms},
+                         {"set_mask_ms", shown.frame.set_mask_ms},
+                         {"render_ms", shown.frame.render_ms},
+                         {"read_ms", shown.frame.read_ms},
+                         {"show_ms", shown.frame.show_ms}};
         line["bytes_sent"] = bytes_sent_;
         line["bytes_received"] = bytes_received_;
         print_(line);

@@ -12,6 +12,10 @@ namespace sandtable::node {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+double MsBetween(Clock::time_point from, Clock::time_point to) {
+  return std::chrono::duration<double, std::milli>(to - from).count();
+}
 constexpr size_t kKeptFrames = 2000;  // frame times kept for the percentiles
 
 int64_t NowNs() {
@@ -163,6 +167,7 @@ Status RenderLoop::ShowCalibration(const UnitCalibration& calibration,
       blend_factor_.release();
       blend_lift_.release();
       pending_mask_ = ComposedMask();
+      mask_posted_ = Clock::now();
     }
     generation = ++generation_;
     summary_.calibrated = true;
@@ -200,6 +205,7 @@ Status RenderLoop::ShowMask(const cv::Mat& mask, std::chrono::milliseconds timeo
       blank_factor_ = mask.clone();
     }
     pending_mask_ = ComposedMask();
+    mask_posted_ = Clock::now();
     generation = ++generation_;
   }
   changed_.notify_all();
@@ -220,12 +226,18 @@ Expected<int64_t> RenderLoop::ShowBlend(const cv::Mat& factor, const cv::Mat& li
     blend_factor_ = factor.clone();
     blend_lift_ = lift.clone();
     pending_mask_ = ComposedMask();
+    mask_posted_ = Clock::now();
     generation = ++generation_;
   }
   changed_.notify_all();
   ST_RETURN_IF_ERROR(WaitForShown(generation, timeout));
   std::lock_guard<std::mutex> lock(mutex_);
   return last_shown_ns_;
+}
+
+MaskFrameTimes RenderLoop::LastMaskFrame() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return last_mask_frame_;
 }
 
 Status RenderLoop::WaitForShown(uint64_t generation, std::chrono::milliseconds timeout) {
@@ -298,6 +310,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
     std::optional<ProjectorView> view;
     std::optional<Scene> scene;
     std::optional<cv::Mat> mask;
+    MaskFrameTimes mask_frame;
     {
       std::unique_lock<std::mutex> lock(mutex_);
       changed_.wait_for(lock, std::chrono::milliseconds(20), [&] {
@@ -320,6 +333,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
       version = inputs_version_;
       generation = generation_;
       if (!view && !mask && version == drawn_version && !timeline.playing) continue;
+      if (mask) mask_frame.wait_ms = MsBetween(mask_posted_, Clock::now());
     }
     // At most max_fps; a new mask (a re-blend after a neighbour left) is not held back.
     const Clock::time_point next = last_frame + std::chrono::duration_cast<Clock::duration>(period);
@@ -357,7 +371,11 @@ void RenderLoop::Run(std::promise<Status>* started) {
       if (!current_mask_.empty()) mask = current_mask_;
     }
     if (view) status = renderer->SetView(*view);
-    if (status.ok() && mask) status = renderer->SetMask(*mask);
+    if (status.ok() && mask) {
+      const Clock::time_point t0 = Clock::now();
+      status = renderer->SetMask(*mask);
+      mask_frame.set_mask_ms = MsBetween(t0, Clock::now());
+    }
     if (mask) {
       std::lock_guard<std::mutex> lock(mutex_);
       current_mask_ = *mask;
@@ -366,9 +384,11 @@ void RenderLoop::Run(std::promise<Status>* started) {
     const double media_time_s = timeline.MediaTimeAt(draw_ns);
     Expected<FrameStats> stats = status.ok() ? renderer->Render(BuildContent(inputs, media_time_s))
                                              : Expected<FrameStats>(status);
+    const Clock::time_point read_start = Clock::now();
     Expected<cv::Mat> frame =
         stats.ok() ? (*context)->ReadOutput() : Expected<cv::Mat>(stats.status());
     last_frame = Clock::now();
+    mask_frame.read_ms = MsBetween(read_start, last_frame);
     drawn_version = version;
     bool shown = false, unchanged = false;
     const Clock::time_point show_start = Clock::now();
@@ -413,6 +433,12 @@ void RenderLoop::Run(std::promise<Status>* started) {
         Keep(&show_ms_, show_ms);
         for (int p = 0; p < kPassCount; ++p) summary_.pass_runs[p] += stats->ran[p] ? 1 : 0;
         summary_.groups_culled += static_cast<uint64_t>(stats->groups_culled);
+      }
+      if (shown && mask) {
+        mask_frame.generation = generation;
+        mask_frame.render_ms = stats->frame_ms;
+        mask_frame.show_ms = show_ms;
+        last_mask_frame_ = mask_frame;
       }
       if (shown) {
         summary_.pattern = TestPatternName(inputs.pattern);

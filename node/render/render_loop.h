@@ -76,6 +76,15 @@ struct RenderSummary {
   bool calibrated = false;
 };
 
+// Where the time went for the first frame drawn with a new mask (a re-blend's frame), ms:
+// from the mask's hand-over to the render thread taking it (a frame in progress finishes
+// first), its upload (Renderer::SetMask), the frame's passes, the read back, the projector's
+// Show.
+struct MaskFrameTimes {
+  uint64_t generation = 0;  // 0: no mask frame shown yet
+  double wait_ms = 0.0, set_mask_ms = 0.0, render_ms = 0.0, read_ms = 0.0, show_ms = 0.0;
+};
+
 class RenderLoop {
  public:
   // `projector` outlives the loop. `model`: the glTF model in its own frame (placed with each
@@ -111,6 +120,8 @@ class RenderLoop {
   // (renderer.h SetMask), blanked with it.
   Expected<int64_t> ShowBlend(const cv::Mat& factor, const cv::Mat& lift = cv::Mat(),
                               std::chrono::milliseconds timeout = std::chrono::seconds(10));
+  // The times of the last frame shown with a new mask (ShowMask, ShowBlend).
+  MaskFrameTimes LastMaskFrame() const;
   void Suspend();
   void Resume();
 
@@ -154,6 +165,8 @@ class RenderLoop {
   double display_gamma_ = 0.0;
   std::shared_ptr<const std::vector<DrapedTrack>> pending_tracks_, draped_tracks_;
   std::optional<cv::Mat> pending_mask_;
+  std::chrono::steady_clock::time_point mask_posted_;  // when pending_mask_ was set
+  MaskFrameTimes last_mask_frame_;
   cv::Mat blank_factor_, blend_factor_,
       blend_lift_;                           // CV_32FC1 or empty; their product is the mask
   cv::Mat current_mask_;                     // the composed mask (re-applied to a new renderer)

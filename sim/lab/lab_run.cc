@@ -535,7 +535,8 @@ class LabRun {
       const double detected_ms = (line.value("detected_ns", int64_t{0}) - kill_ns_) * 1e-6;
       reblend[id] = {{"detected_ms", detected_ms},
                      {"shown_ms", shown_ms},
-                     {"compose_ms", line.value("compose_ms", 0.0)}};
+                     {"compose_ms", line.value("compose_ms", 0.0)},
+                     {"frame", line.value("frame", json::object())}};
       reblend_max_ms = std::max(reblend_max_ms, shown_ms);
     }
     if (!reblend.empty()) {
