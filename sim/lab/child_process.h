@@ -27,6 +27,9 @@ struct ChildSpec {
   std::string role;               // "world", "coordinator", "node"
   std::vector<std::string> argv;  // argv[0]: the program's path
   std::string log_path;
+  // NAME=VALUE set in the child's environment (the lab's own, with these replacing a variable
+  // of the same name).
+  std::vector<std::string> env = {};
 };
 
 class ChildProcess {

@@ -436,7 +436,9 @@ class LabRun {
                      "--fault-corrupt-share", std::to_string(options_.fault_corrupt_share),
                      "--fault-seed", std::to_string(options_.seed)});
       }
-      ChildProcess* node = StartChild("node-" + id, "node", argv);
+      ChildProcess* node = StartChild(
+          "node-" + id, "node", argv,
+          options_.node_huge_pages == "on" ? NodeHugePagesEnv() : std::vector<std::string>{});
       if (!node) return false;
     }
     return true;
@@ -541,6 +543,7 @@ class LabRun {
     }
     if (!reblend.empty()) {
       result_.live["reblend_ms_max"] = reblend_max_ms;
+      result_.live["node_huge_pages"] = options_.node_huge_pages == "on";
       result_.live["reblend"] = reblend;
       result_.live["recalibrated_after_the_kill"] = recalibrated.size();
     }
@@ -1585,13 +1588,25 @@ class LabRun {
     return relative.string();
   }
 
+  // GLIBC_TUNABLES with glibc's malloc on transparent huge pages (LabOptions::node_huge_pages),
+  // added to what the lab's environment already tunes.
+  static std::vector<std::string> NodeHugePagesEnv() {
+    const char* tunables = std::getenv("GLIBC_TUNABLES");
+    std::string value = tunables != nullptr ? tunables : "";
+    if (value.find("glibc.malloc.hugetlb") == std::string::npos) {
+      value += (value.empty() ? "" : ":") + std::string("glibc.malloc.hugetlb=1");
+    }
+    return {"GLIBC_TUNABLES=" + value};
+  }
+
   ChildProcess* StartChild(const std::string& name, const std::string& role,
-                           std::vector<std::string> argv) {
+                           std::vector<std::string> argv, std::vector<std::string> env = {}) {
     if (!curve_keys_path_.empty() && (role == "world" || role == "coordinator" || role == "node")) {
       argv.insert(argv.end(), {"--curve-keys", curve_keys_path_});
     }
     ChildSpec spec{name, role, std::move(argv),
-                   (fs::path(options_.out_dir) / "logs" / (name + ".log")).string()};
+                   (fs::path(options_.out_dir) / "logs" / (name + ".log")).string(),
+                   std::move(env)};
     Expected<ChildProcess*> child = supervisor_.Start(spec);
     if (!child.ok()) {
       FailedWith(progress_phase_, "cannot start " + name + ": " + child.status().ToString());

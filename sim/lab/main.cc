@@ -146,6 +146,10 @@ static int Run(int argc, char** argv) {
                   "the nodes raise the black where fewer projectors overlap (measured: "
                   "photometric.black_step_pct): on or off")
       ->check(CLI::IsMember({"on", "off"}));
+  run->add_option("--node-huge-pages", options.node_huge_pages,
+                  "each node's heap on transparent huge pages (a killed node's sockets close "
+                  "sooner): on or off")
+      ->check(CLI::IsMember({"on", "off"}));
   run->add_option("--show-s", options.show_s, "how long the show plays (s)")
       ->check(CLI::Range(0.0, 3600.0));
   run->add_option("--render-max-fps", options.render_max_fps, "frames a second per node at most")

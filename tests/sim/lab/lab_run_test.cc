@@ -655,6 +655,7 @@ TEST_F(LabRunTest, HelpListsEveryFlag) {
                            "--join-late",
                            "--blend",
                            "--black-match",
+                           "--node-huge-pages",
                            "--kill-unit",
                            "--stall-unit",
                            "--stall-after-calibration",
