@@ -300,6 +300,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
   std::unique_ptr<Renderer> renderer;
   uint64_t drawn_version = ~uint64_t{0};
   uint64_t drawn_generation = 0;
+  double drawn_media_time_s = 0.0;  // of the frame last drawn
   Clock::time_point last_frame{};
   Clock::time_point last_flush = Clock::now();
   const auto period = std::chrono::duration<double>(1.0 / options_.max_fps);
@@ -380,15 +381,22 @@ void RenderLoop::Run(std::promise<Status>* started) {
       std::lock_guard<std::mutex> lock(mutex_);
       current_mask_ = *mask;
     }
+    // Only the mask changed (a re-blend, a join's blanking): the frame already drawn goes out
+    // again under it, the warp pass alone, instead of waiting for a whole frame. The next
+    // frame is drawn as usual.
+    const bool rewarp =
+        status.ok() && mask && !view && !scene && version == drawn_version && renderer->CanRewarp();
     const int64_t draw_ns = NowNs();
-    const double media_time_s = timeline.MediaTimeAt(draw_ns);
-    Expected<FrameStats> stats = status.ok() ? renderer->Render(BuildContent(inputs, media_time_s))
-                                             : Expected<FrameStats>(status);
+    const double media_time_s = rewarp ? drawn_media_time_s : timeline.MediaTimeAt(draw_ns);
+    Expected<FrameStats> stats = !status.ok() ? Expected<FrameStats>(status)
+                                 : rewarp     ? renderer->Rewarp()
+                                          : renderer->Render(BuildContent(inputs, media_time_s));
+    if (stats.ok()) drawn_media_time_s = media_time_s;
     const Clock::time_point read_start = Clock::now();
     Expected<cv::Mat> frame =
         stats.ok() ? (*context)->ReadOutput() : Expected<cv::Mat>(stats.status());
-    last_frame = Clock::now();
-    mask_frame.read_ms = MsBetween(read_start, last_frame);
+    if (!rewarp) last_frame = Clock::now();
+    mask_frame.read_ms = MsBetween(read_start, Clock::now());
     drawn_version = version;
     bool shown = false, unchanged = false;
     const Clock::time_point show_start = Clock::now();
@@ -429,7 +437,12 @@ void RenderLoop::Run(std::promise<Status>* started) {
       if (unchanged) ++summary_.frames_unchanged;
       if (shown && !unchanged) {
         ++summary_.frames_shown;
-        Keep(&frame_ms_, stats->frame_ms);
+        // A re-warped frame is one pass, not a frame's work: kept out of the frame times.
+        if (rewarp) {
+          ++summary_.frames_rewarped;
+        } else {
+          Keep(&frame_ms_, stats->frame_ms);
+        }
         Keep(&show_ms_, show_ms);
         for (int p = 0; p < kPassCount; ++p) summary_.pass_runs[p] += stats->ran[p] ? 1 : 0;
         summary_.groups_culled += static_cast<uint64_t>(stats->groups_culled);
@@ -437,6 +450,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
       if (shown && mask) {
         mask_frame.generation = generation;
         mask_frame.render_ms = stats->frame_ms;
+        mask_frame.rewarped = rewarp;
         mask_frame.show_ms = show_ms;
         last_mask_frame_ = mask_frame;
       }

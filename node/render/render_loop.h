@@ -67,6 +67,7 @@ struct RenderSummary {
   uint64_t frames_shown = 0;
   uint64_t frames_failed = 0;     // render or show errors (logged)
   uint64_t frames_unchanged = 0;  // drawn, equal to what the projector shows: not sent again
+  uint64_t frames_rewarped = 0;   // a new mask over the last frame (Renderer::Rewarp)
   double frame_ms_p50 = 0.0, frame_ms_p99 = 0.0;  // rendering, GL work finished
   double show_ms_p50 = 0.0;                       // read back and projector's Show
   double floor_ms = 0.0;                          // one full-screen textured pass (median)
@@ -78,11 +79,12 @@ struct RenderSummary {
 
 // Where the time went for the first frame drawn with a new mask (a re-blend's frame), ms:
 // from the mask's hand-over to the render thread taking it (a frame in progress finishes
-// first), its upload (Renderer::SetMask), the frame's passes, the read back, the projector's
-// Show.
+// first), its upload (Renderer::SetMask), the frame's passes (only the warp pass when the
+// frame already drawn was re-warped under the new mask), the read back, the projector's Show.
 struct MaskFrameTimes {
   uint64_t generation = 0;  // 0: no mask frame shown yet
   double wait_ms = 0.0, set_mask_ms = 0.0, render_ms = 0.0, read_ms = 0.0, show_ms = 0.0;
+  bool rewarped = false;  // the last frame under the new mask (the warp pass alone)
 };
 
 class RenderLoop {

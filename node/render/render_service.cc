@@ -92,6 +92,7 @@ nlohmann::json RenderService::SummaryJson(NodeId id) const {
           {"frames", s.frames_shown},
           {"failed", s.frames_failed},
           {"unchanged", s.frames_unchanged},
+          {"rewarped", s.frames_rewarped},
           {"frame_ms_p50", s.frame_ms_p50},
           {"frame_ms_p99", s.frame_ms_p99},
           {"floor_ms", s.floor_ms},

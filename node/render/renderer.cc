@@ -553,6 +553,7 @@ Status Renderer::SetView(const ProjectorView& view) {
   ST_RETURN_IF_ERROR(context_->MakeCurrent());
   view_ = view;
   has_view_ = true;
+  last_warped_ = false;
   overlay_view_dirty_ = true;
   if (source_texture_) {
     glDeleteTextures(1, &source_texture_);
@@ -701,6 +702,7 @@ Expected<FrameStats> Renderer::Render(const RenderContent& content) {
   const bool raw = content.pattern == TestPattern::kProjectorId ||
                    content.pattern == TestPattern::kColourBars ||
                    content.pattern == TestPattern::kRawWhite;
+  last_warped_ = false;
   if (raw || !has_view_) {
     // Raw patterns need no calibration; without one, anything else is black.
     ST_RETURN_IF_ERROR(timed(Pass::kPattern, [&] {
@@ -735,11 +737,31 @@ Expected<FrameStats> Renderer::Render(const RenderContent& content) {
     }
     if (warp) {
       ST_RETURN_IF_ERROR(timed(Pass::kWarp, [&] { return DrawWarp(); }));
+      last_warped_ = true;
     }
   }
   glFinish();
   ST_RETURN_IF_ERROR(CheckGl("rendering a frame"));
   stats.frame_ms = MsSince(start);
+  return stats;
+}
+
+Expected<FrameStats> Renderer::Rewarp() {
+  if (!CanRewarp()) {
+    return UnavailableError(
+        "renderer: no frame to warp again (the last one did not go through the warp pass, or "
+        "the view changed since)");
+  }
+  const Clock::time_point start = Clock::now();
+  ST_RETURN_IF_ERROR(context_->MakeCurrent());
+  FrameStats stats;
+  ST_RETURN_IF_ERROR(DrawWarp());
+  glFinish();
+  ST_RETURN_IF_ERROR(CheckGl("warping the last frame again"));
+  stats.ran[static_cast<int>(Pass::kWarp)] = true;
+  stats.prewarp = view_.needs_prewarp();
+  stats.masked = has_mask_;
+  stats.frame_ms = stats.pass_ms[static_cast<int>(Pass::kWarp)] = MsSince(start);
   return stats;
 }
 

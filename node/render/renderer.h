@@ -99,6 +99,12 @@ class Renderer {
 
   // Draws one frame into the context's output framebuffer (not presented: GlContext::Present).
   Expected<FrameStats> Render(const RenderContent& content);
+  // The last frame again under the current mask: the warp pass alone over the ideal image the
+  // last Render left (a mask swap, a re-blend, needs nothing else; FrameStats has only kWarp).
+  // UNAVAILABLE unless CanRewarp().
+  Expected<FrameStats> Rewarp();
+  // The last Render went through the warp pass (unfolded) and no view was set since.
+  bool CanRewarp() const { return last_warped_ && has_view_ && !options_.fold_prewarp; }
   // The floor: one full-screen textured pass at the output size, GL work finished; ms.
   Expected<double> RenderFloor();
 
@@ -151,8 +157,9 @@ class Renderer {
   unsigned int source_texture_ = 0, mask_texture_ = 0, pattern_texture_ = 0;
   unsigned int floor_texture_ = 0;
   bool has_view_ = false, has_mask_ = false;
-  bool has_lift_ = false;  // the mask carries a black-level lift (SetMask, CV_32FC2)
-  cv::Mat mask_linear_;    // the factor as given (CV_32FC1), for the unfolded warp pass
+  bool last_warped_ = false;  // the ideal image holds the last frame (see CanRewarp)
+  bool has_lift_ = false;     // the mask carries a black-level lift (SetMask, CV_32FC2)
+  cv::Mat mask_linear_;       // the factor as given (CV_32FC1), for the unfolded warp pass
   ProjectorView view_;
   std::optional<Eigen::Vector3d> shadow_sun_;  // the sun of the current shadow map
   Eigen::Matrix4d sun_clip_from_table_ = Eigen::Matrix4d::Identity();

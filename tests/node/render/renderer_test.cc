@@ -307,6 +307,42 @@ TEST(RendererTest, MaskMultipliesInLinearLight) {
   EXPECT_NEAR(image.at<cv::Vec3b>(left)[0], 186, 1);
 }
 
+// A mask swapped in after a frame: the warp pass alone over the last frame shows what a whole
+// new frame with that mask shows; nothing to warp before a frame or after a new view.
+TEST(RendererTest, RewarpShowsTheLastFrameUnderANewMask) {
+  std::unique_ptr<GlContext> context = MakeContext();
+  ASSERT_TRUE(context);
+  std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), /*distortion=*/true);
+  ASSERT_TRUE(renderer);
+  EXPECT_FALSE(renderer->CanRewarp());
+  EXPECT_EQ(renderer->Rewarp().status().code(), StatusCode::kUnavailable);
+  RenderContent content;
+  content.sun_direction_in_table = SunDirection(10.0);
+  const cv::Mat before = RenderToImage(context.get(), renderer.get(), content);
+  ASSERT_TRUE(renderer->CanRewarp()) << "distortion: the frame went through the warp pass";
+  cv::Mat mask(kH, kW, CV_32FC1, cv::Scalar(1.0));
+  mask.colRange(0, kW / 2).setTo(0.25);
+  ASSERT_TRUE(renderer->SetMask(mask).ok());
+  Expected<FrameStats> rewarped = renderer->Rewarp();
+  ASSERT_TRUE(rewarped.ok()) << rewarped.status().ToString();
+  EXPECT_TRUE(rewarped->ran[static_cast<int>(Pass::kWarp)]);
+  EXPECT_FALSE(rewarped->ran[static_cast<int>(Pass::kScene)]);
+  Expected<cv::Mat> fast = context->ReadOutput();
+  ASSERT_TRUE(fast.ok());
+  const cv::Mat full = RenderToImage(context.get(), renderer.get(), content);
+  EXPECT_EQ(cv::norm(*fast, full, cv::NORM_INF), 0.0) << "the same frame under the same mask";
+  EXPECT_GT(cv::norm(before, full, cv::NORM_INF), 50.0) << "the mask changed the frame";
+  Expected<ProjectorView> view = PrepareProjectorView(testing::RenderTestProjector(kW, kH, true),
+                                                      testing::RenderTestProjectorFromTable(),
+                                                      testing::RenderTestScene().Bounds());
+  ASSERT_TRUE(view.ok());
+  ASSERT_TRUE(renderer->SetView(*view).ok());
+  EXPECT_FALSE(renderer->CanRewarp()) << "the ideal image is of the old view";
+  content.pattern = TestPattern::kColourBars;
+  RenderToImage(context.get(), renderer.get(), content);
+  EXPECT_FALSE(renderer->CanRewarp()) << "a raw pattern does not go through the warp pass";
+}
+
 // Black-level matching: a (factor, lift) mask adds the lift in linear light after the factor,
 // in the pre-warp pass and folded into the scene pass alike; "black" through the pipeline shows
 // the lift alone.
