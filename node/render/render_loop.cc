@@ -338,7 +338,17 @@ void RenderLoop::Run(std::promise<Status>* started) {
     }
     // At most max_fps; a new mask (a re-blend after a neighbour left) is not held back.
     const Clock::time_point next = last_frame + std::chrono::duration_cast<Clock::duration>(period);
-    if (!mask && Clock::now() < next) std::this_thread::sleep_until(next);
+    if (!mask && Clock::now() < next) {
+      // Until the next frame is due, or a new mask comes (taken at once, not after this frame).
+      std::unique_lock<std::mutex> lock(mutex_);
+      if (changed_.wait_until(lock, next, [&] { return stop_ || pending_mask_.has_value(); })) {
+        if (stop_) break;
+        mask = std::move(pending_mask_);
+        pending_mask_.reset();
+        generation = generation_;
+        mask_frame.wait_ms = MsBetween(mask_posted_, Clock::now());
+      }
+    }
 
     Status status = OkStatus();
     if (scene) {
@@ -381,11 +391,10 @@ void RenderLoop::Run(std::promise<Status>* started) {
       std::lock_guard<std::mutex> lock(mutex_);
       current_mask_ = *mask;
     }
-    // Only the mask changed (a re-blend, a join's blanking): the frame already drawn goes out
-    // again under it, the warp pass alone, instead of waiting for a whole frame. The next
-    // frame is drawn as usual.
-    const bool rewarp =
-        status.ok() && mask && !view && !scene && version == drawn_version && renderer->CanRewarp();
+    // A new mask (a re-blend, a join's blanking) with the same calibration: the frame already
+    // drawn goes out again under it at once, the warp pass alone, instead of waiting for a whole
+    // frame; what else changed (strokes, the timeline) is drawn in the next frame, right after.
+    const bool rewarp = status.ok() && mask && !view && !scene && renderer->CanRewarp();
     const int64_t draw_ns = NowNs();
     const double media_time_s = rewarp ? drawn_media_time_s : timeline.MediaTimeAt(draw_ns);
     Expected<FrameStats> stats = !status.ok() ? Expected<FrameStats>(status)
@@ -397,7 +406,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
         stats.ok() ? (*context)->ReadOutput() : Expected<cv::Mat>(stats.status());
     if (!rewarp) last_frame = Clock::now();
     mask_frame.read_ms = MsBetween(read_start, Clock::now());
-    drawn_version = version;
+    if (!rewarp) drawn_version = version;
     bool shown = false, unchanged = false;
     const Clock::time_point show_start = Clock::now();
     if (frame.ok()) {
