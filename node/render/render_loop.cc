@@ -391,10 +391,12 @@ void RenderLoop::Run(std::promise<Status>* started) {
       std::lock_guard<std::mutex> lock(mutex_);
       current_mask_ = *mask;
     }
-    // A new mask (a re-blend, a join's blanking) with the same calibration: the frame already
-    // drawn goes out again under it at once, the warp pass alone, instead of waiting for a whole
-    // frame; what else changed (strokes, the timeline) is drawn in the next frame, right after.
-    const bool rewarp = status.ok() && mask && !view && !scene && renderer->CanRewarp();
+    // Only the mask changed (a re-blend, a join's blanking): the frame already drawn goes out
+    // again under it, the warp pass alone, instead of waiting for a whole frame. New inputs
+    // (strokes, a pattern) are drawn whole: a caller of ShowBlend or ShowMask expects what it
+    // set to show under the mask. The next frame is drawn as usual.
+    const bool rewarp =
+        status.ok() && mask && !view && !scene && version == drawn_version && renderer->CanRewarp();
     const int64_t draw_ns = NowNs();
     const double media_time_s = rewarp ? drawn_media_time_s : timeline.MediaTimeAt(draw_ns);
     Expected<FrameStats> stats = !status.ok() ? Expected<FrameStats>(status)
@@ -406,7 +408,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
         stats.ok() ? (*context)->ReadOutput() : Expected<cv::Mat>(stats.status());
     if (!rewarp) last_frame = Clock::now();
     mask_frame.read_ms = MsBetween(read_start, Clock::now());
-    if (!rewarp) drawn_version = version;
+    drawn_version = version;
     bool shown = false, unchanged = false;
     const Clock::time_point show_start = Clock::now();
     if (frame.ok()) {
