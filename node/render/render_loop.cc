@@ -4,6 +4,7 @@
 #include <cstring>
 #include <vector>
 
+#include "common/base/bytes_hash.h"
 #include "common/base/log.h"
 #include "common/scene/procedural_scene.h"
 #include "node/render/gl_context.h"
@@ -32,22 +33,10 @@ double Percentile(const std::deque<double>& values, double p) {
   return v[i];
 }
 
-// A 64-bit hash of a frame's bytes (8 at a time): frames equal to the last shown are not
-// shown again.
+// A 64-bit hash of a frame's bytes: frames equal to the last shown are not shown again.
 uint64_t FrameHash(const cv::Mat& frame) {
   const cv::Mat packed = frame.isContinuous() ? frame : frame.clone();
-  const size_t bytes = packed.total() * packed.elemSize();
-  const auto* data = packed.data;
-  uint64_t h = 0x9e3779b97f4a7c15ull ^ bytes;
-  size_t i = 0;
-  for (; i + 8 <= bytes; i += 8) {
-    uint64_t word;
-    std::memcpy(&word, data + i, 8);
-    h = (h ^ word) * 0x100000001b3ull;
-    h ^= h >> 29;
-  }
-  for (; i < bytes; ++i) h = (h ^ data[i]) * 0x100000001b3ull;
-  return h;
+  return HashBytes64(packed.data, packed.total() * packed.elemSize());
 }
 
 void Keep(std::deque<double>* values, double v) {

@@ -104,7 +104,7 @@ class Renderer {
   // UNAVAILABLE unless CanRewarp().
   Expected<FrameStats> Rewarp();
   // The last Render went through the warp pass (unfolded) and no view was set since.
-  bool CanRewarp() const { return last_warped_ && has_view_ && !options_.fold_prewarp; }
+  bool CanRewarp() const { return last_warped_; }
   // The floor: one full-screen textured pass at the output size, GL work finished; ms.
   Expected<double> RenderFloor();
 
@@ -159,7 +159,6 @@ class Renderer {
   bool has_view_ = false, has_mask_ = false;
   bool last_warped_ = false;  // the ideal image holds the last frame (see CanRewarp)
   bool has_lift_ = false;     // the mask carries a black-level lift (SetMask, CV_32FC2)
-  cv::Mat mask_linear_;       // the factor as given (CV_32FC1), for the unfolded warp pass
   ProjectorView view_;
   std::optional<Eigen::Vector3d> shadow_sun_;  // the sun of the current shadow map
   Eigen::Matrix4d sun_clip_from_table_ = Eigen::Matrix4d::Identity();

@@ -55,8 +55,8 @@ struct WorldServerOptions {
   proto::CodecLimits limits;
   std::optional<net::CurveKeyPair> curve;  // site keys: require CURVE from every client
   // Every frame a projector is given, one JSON line each (appended, flushed):
-  // {"projector":N,"frame_index":I,"hash":"<FNV-1a 64 over the pixels' 8-byte words,
-  // hex>","time_ms":T} (T: system clock, ms since the epoch). Empty: none.
+  // {"projector":N,"frame_index":I,"hash":"<HashBytes64 of the pixels, hex>","time_ms":T}
+  // (T: system clock, ms since the epoch; common/base/bytes_hash.h). Empty: none.
   std::string frame_log_path;
   Status Check() const;
 };
