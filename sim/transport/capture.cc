@@ -30,14 +30,29 @@ Expected<LinearFrame> DecodeProjectorFrame(const ProjectorSpec& projector, const
                                 std::to_string(projector.model.width_px) + "x" +
                                 std::to_string(projector.model.height_px));
   }
-  if (frame.type() != CV_8UC1 && frame.type() != CV_8UC3) {
-    return InvalidArgumentError("projector frame must be 8-bit grey (CV_8UC1) or BGR (CV_8UC3)");
+  if (frame.type() != CV_8UC1 && frame.type() != CV_8UC3 && frame.type() != CV_16UC1) {
+    return InvalidArgumentError(
+        "projector frame must be 8-bit grey (CV_8UC1), BGR (CV_8UC3) or 16-bit grey (CV_16UC1)");
   }
   const std::array<float, 256> table = EmissionTable(projector);
   LinearFrame out;
   out.width_px = frame.cols;
   out.height_px = frame.rows;
   out.emission.assign(static_cast<size_t>(out.padded_width()) * out.padded_height(), 0.0f);
+  if (frame.type() == CV_16UC1) {
+    // A deeper input (the same response over v / 65535): what 8-bit quantisation costs.
+    for (int y = 0; y < frame.rows; ++y) {
+      const uint16_t* row = frame.ptr<uint16_t>(y);
+      float* dst = &out.emission[static_cast<size_t>(y + kFramePadding_px) * out.padded_width() +
+                                 kFramePadding_px];
+      for (int x = 0; x < frame.cols; ++x) {
+        dst[x] = static_cast<float>(projector.black_level +
+                                    (1.0 - projector.black_level) *
+                                        std::pow(row[x] / 65535.0, projector.gamma));
+      }
+    }
+    return out;
+  }
   for (int y = 0; y < frame.rows; ++y) {
     const uint8_t* row = frame.ptr<uint8_t>(y);
     float* dst = &out.emission[static_cast<size_t>(y + kFramePadding_px) * out.padded_width() +

@@ -1,7 +1,8 @@
 // Capture synthesis: the cheap per-frame gather over a TransportMap.
 //
 //   1. DecodeProjectorFrame: 8-bit frame (CV_8UC1, or CV_8UC3 BGR reduced to Rec. 709 luma) ->
-//      emission e = black_level + (1 - black_level) (v / 255)^gamma, a fraction of peak.
+//      emission e = black_level + (1 - black_level) (v / 255)^gamma, a fraction of peak; a 16-bit
+//      grey frame (CV_16UC1) the same over v / 65535 (a deeper input than the nodes send).
 //   2. GatherLuminance: L = albedo ambient + sum over projectors of the entry's 4 x 4 separable
 //      kernel over e (the projector's piecewise-constant pixels integrated over the view
 //      pixel's footprint, transport_map.h). L is in nits (cd/m^2) per view pixel.

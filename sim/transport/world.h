@@ -54,7 +54,8 @@ class World {
   const Scene& scene() const { return *scene_; }
   const RayCaster& caster() const { return *caster_; }
 
-  // Frames: CV_8UC1 or CV_8UC3 at the projector's resolution. Every projector starts black.
+  // Frames: CV_8UC1, CV_8UC3 or CV_16UC1 at the projector's resolution (capture.h). Every
+  // projector starts black.
   Status SetProjectorFrame(NodeId unit, const cv::Mat& frame);
   Status SetProjectorUniform(NodeId unit, int value);
   // A switched-off (or removed) projector emits nothing, not even its black level.

@@ -13,6 +13,7 @@
 #include "common/base/units.h"
 #include "common/scene/procedural_scene.h"
 #include "sim/site/site_presets.h"
+#include "sim/transport/capture.h"
 
 namespace sandtable::sim {
 namespace {
@@ -69,6 +70,34 @@ std::optional<Eigen::Vector3d> TablePointOfCameraPixel(const Site& site,
   const Eigen::Vector3d direction = table_from_camera.rotation * *ray;
   if (direction.z() >= 0) return std::nullopt;
   return origin - origin.z() / direction.z() * direction;
+}
+
+// A 16-bit grey frame follows the same response over v / 65535: its codes that are 8-bit codes
+// times 257 emit what the 8-bit codes emit, and a code between two 8-bit ones emits in between.
+TEST(WorldPhysics, SixteenBitFrameFollowsTheSameResponse) {
+  constexpr double kTolerance = 1e-6;
+  ProjectorSpec projector = DefaultProjector();
+  projector.black_level = 0.002;
+  const int w = projector.model.width_px, h = projector.model.height_px;
+  for (int v : {0, 1, 77, 128, 254, 255}) {
+    Expected<LinearFrame> eight =
+        DecodeProjectorFrame(projector, cv::Mat(h, w, CV_8UC1, cv::Scalar(v)));
+    Expected<LinearFrame> sixteen =
+        DecodeProjectorFrame(projector, cv::Mat(h, w, CV_16UC1, cv::Scalar(v * 257)));
+    ASSERT_TRUE(eight.ok() && sixteen.ok());
+    EXPECT_NEAR(sixteen->At(w / 2, h / 2), eight->At(w / 2, h / 2), kTolerance) << v;
+    EXPECT_NEAR(sixteen->At(0, 0), eight->At(0, 0), kTolerance) << v;
+  }
+  Expected<LinearFrame> low =
+      DecodeProjectorFrame(projector, cv::Mat(h, w, CV_16UC1, cv::Scalar(128 * 257)));
+  Expected<LinearFrame> mid =
+      DecodeProjectorFrame(projector, cv::Mat(h, w, CV_16UC1, cv::Scalar(128 * 257 + 128)));
+  Expected<LinearFrame> high =
+      DecodeProjectorFrame(projector, cv::Mat(h, w, CV_16UC1, cv::Scalar(129 * 257)));
+  ASSERT_TRUE(low.ok() && mid.ok() && high.ok());
+  EXPECT_GT(mid->At(1, 1), low->At(1, 1));
+  EXPECT_LT(mid->At(1, 1), high->At(1, 1));
+  EXPECT_FALSE(DecodeProjectorFrame(projector, cv::Mat(h, w, CV_32FC1, cv::Scalar(0.5))).ok());
 }
 
 TEST(WorldPhysics, WhiteFrameFollowsCosOverDistanceSquared) {
