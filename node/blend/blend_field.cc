@@ -116,6 +116,12 @@ Status BlendOptions::Check() const {
   if (!(shadow_ray_offset_m > 0.0) || !(shadow_ray_offset_m < 0.01)) {
     return InvalidArgumentError("blend: shadow_ray_offset_m must be in (0, 0.01)");
   }
+  if (!(density_weight >= 0.0) || !(density_weight <= 4.0)) {
+    return InvalidArgumentError("blend: density_weight must be in [0, 4]");
+  }
+  if (!(fill_limit >= 1.0) || !(fill_limit <= 100.0)) {
+    return InvalidArgumentError("blend: fill_limit must be in [1, 100]");
+  }
   return OkStatus();
 }
 
@@ -418,8 +424,10 @@ Blender::Blender(ProjectorSurface surface, DistanceField own, const RayCaster* c
   own_reach_.assign(n, 0.0f);
   for (size_t i = 0; i < n; ++i) {
     if (surface_.range_m[i] <= 0) continue;
-    own_w_[i] = static_cast<float>((own_d_[i] + options_.distance_floor_m) *
-                                   IncidenceWeight(surface_.cos_incidence[i], options_));
+    own_w_[i] = static_cast<float>(
+        (own_d_[i] + options_.distance_floor_m) *
+        IncidenceWeight(surface_.cos_incidence[i], options_) *
+        DensityWeight(own_.projector, surface_.cos_incidence[i], surface_.range_m[i], options_));
     own_reach_[i] = static_cast<float>(Reach(surface_.cos_incidence[i], options_));
   }
   own_wr_.assign(n, 0.0f);
@@ -433,6 +441,15 @@ Blender::Blender(ProjectorSurface surface, DistanceField own, const RayCaster* c
 
 double Reach(double cos_incidence, const BlendOptions& options) {
   return std::min(1.0, cos_incidence / std::cos(DegToRad(options.correction_limit_deg)));
+}
+
+double DensityWeight(const CameraModel& projector, double cos_incidence, double range_m,
+                     const BlendOptions& options) {
+  if (options.density_weight == 0.0) return 1.0;
+  // Pixels per mm^2 of the surface: f^2 cos(theta) / d^2.
+  const double density =
+      projector.fx_px * projector.fy_px * cos_incidence / (range_m * range_m) * 1e-6;
+  return std::pow(std::max(density, 1e-12), options.density_weight);
 }
 
 double IncidenceWeight(double cos_incidence, const BlendOptions& options) {
@@ -463,8 +480,10 @@ void Blender::SetNeighbour(const DistanceField& field) {
     const std::optional<Eigen::Vector2d> pixel =
         field.projector.Project(field.projector_from_table * x);
     if (!pixel || !field.projector.InImage(*pixel)) continue;
-    w[i] = static_cast<float>((field.DistanceAtPixel(*pixel) + options_.distance_floor_m) *
-                              IncidenceWeight(cos_incidence, options_));
+    w[i] = static_cast<float>(
+        (field.DistanceAtPixel(*pixel) + options_.distance_floor_m) *
+        IncidenceWeight(cos_incidence, options_) *
+        DensityWeight(field.projector, cos_incidence, to_centre.norm(), options_));
     reach[i] = w[i] * static_cast<float>(Reach(cos_incidence, options_));  // w r
     gain[i] = static_cast<float>(cos_incidence / to_centre.squaredNorm());
     candidates.push_back(i);
@@ -525,22 +544,86 @@ double Blender::LevelBound() const {
   return bound;
 }
 
-cv::Mat Blender::Factor(double level) const {
+cv::Mat Blender::Factor(double level) const { return Factor(level, options_.fill_limit); }
+
+cv::Mat Blender::Factor(double level, double fill_limit) const {
   // A_i T / (E'_i R), R = sum_j A_j r_j: the share of the intended light the projectors lighting
   // the point deliver together (a projector past the correction limit delivers r < 1 of it);
   // dividing by R restores the level where one that faces the surface better can make it up.
   // A_i / R = w_i / sum_j w_j r_j. One pass over the pixels with the neighbours' w r gathered
   // (a re-blend after a neighbour left is this alone).
+  //
+  // Past the correction limit that can ask a projector for more than it has (A T / (E' R) > 1).
+  // Clipped alone, the others' shares stay as they were and the total follows the clipped
+  // projector's alpha: a step wherever the alphas change (walls met at 60-85 degrees). With
+  // fill_limit > 1 the others make up the shortfall (water filling): every projector lighting
+  // the point delivers min(its capacity cos / d^2, c x its share of the intended light), one c
+  // for all, the smallest that reaches the intended light, at most fill_limit: a projector's
+  // light must still end continuously where its share does (its edges, D -> 0; an unbounded c
+  // lit grazing projectors fully up to their image edge: steps of 35 %). Every node computes the
+  // same c from the same terms (its own and its neighbours' w r and capacity), so the
+  // projectors still add up to one level, lower only where together they cannot reach it.
   cv::Mat factor(surface_.height_px, surface_.width_px, CV_32FC1, cv::Scalar(0));
   float* f = factor.ptr<float>();
-  std::vector<const float*> others;
-  for (const auto& [unit, wr] : neighbour_reach_) others.push_back(wr.data());
+  struct Other {
+    const float *wr, *cap;
+  };
+  std::vector<Other> others;
+  for (const auto& [unit, wr] : neighbour_reach_) {
+    others.push_back({wr.data(), neighbour_gain_.at(unit).data()});
+  }
+  const double limit = fill_limit;
+  struct Term {
+    double room, share;  // what it may deliver (irradiance); its share of the intended light
+  };
+  std::vector<Term> terms;
   const size_t n = own_d_.size();
   for (size_t i = 0; i < n; ++i) {
     if (own_gain_[i] <= 0) continue;
     float delivered = own_wr_[i];
-    for (const float* wr : others) delivered += wr[i];
-    f[i] = std::min(1.0f, static_cast<float>(level) * own_gain_[i] / std::max(delivered, 1e-30f));
+    for (const Other& o : others) delivered += o.wr[i];
+    const float unclipped = static_cast<float>(level) * own_gain_[i] / std::max(delivered, 1e-30f);
+    if (limit <= 1.0) {
+      f[i] = std::min(1.0f, unclipped);
+      continue;
+    }
+    // The intended irradiance at the point (the surface shows T whatever its albedo).
+    const double range = surface_.range_m[i];
+    const double own_cap = surface_.cos_incidence[i] / (range * range);
+    const double target = level / std::max(static_cast<double>(surface_.albedo[i]), 0.01);
+    const double own_share = own_wr_[i] / delivered;
+    bool any_clips = unclipped > 1.0f;
+    for (const Other& o : others) {
+      any_clips = any_clips || (o.wr[i] > 0 && o.wr[i] / delivered * target > o.cap[i]);
+    }
+    if (!any_clips) {
+      f[i] = unclipped;
+      continue;
+    }
+    terms.clear();
+    const double own_room = std::min(own_cap, limit * own_share * target);
+    terms.push_back({own_room, own_share});
+    for (const Other& o : others) {
+      if (o.wr[i] <= 0) continue;
+      const double share = o.wr[i] / delivered;
+      terms.push_back({std::min(static_cast<double>(o.cap[i]), limit * share * target), share});
+    }
+    // Raise every share by one factor c until the intended light is reached; the terms run
+    // out of room in the order of room / share.
+    std::sort(terms.begin(), terms.end(),
+              [](const Term& x, const Term& y) { return x.room * y.share < y.room * x.share; });
+    double fixed = 0.0, free_share = 1.0, c = std::numeric_limits<double>::infinity();
+    for (const Term& t : terms) {
+      if (free_share <= 1e-12) break;
+      const double full_at = t.room / (t.share * target);  // c at which t has no room left
+      if (fixed + full_at * free_share * target >= target) {
+        c = (target - fixed) / (free_share * target);
+        break;
+      }
+      fixed += t.room;
+      free_share -= t.share;
+    }
+    f[i] = static_cast<float>(std::min(1.0, std::min(own_room, c * own_share * target) / own_cap));
   }
   return factor;
 }

@@ -58,6 +58,8 @@ struct BlendOptions {
   double correction_limit_deg = 60.0;  // the intensity correction stops here
   double weight_falloff_deg = 80.0;    // the incidence factor g is ~0 (1e-3) from here on
   bool incidence_weight = true;        // false: g = 1 (plain Algorithm 1)
+  // The weight's pixel-density factor: (pixels per mm^2 of surface)^density_weight (0: none).
+  double density_weight = 0.0;
   // Neighbouring grid points farther apart in 3D than this times the spacing the pixel step
   // gives at their range (range x step / f) are checked for a break (two surfaces) by casting
   // the pixels between them.
@@ -67,7 +69,11 @@ struct BlendOptions {
   double shadow_ray_offset_m = 1e-4;
   // Added to every lighting projector's D in the alpha, so that a point all of whose
   // projectors have D = 0 (the field's seeds) is shared among them rather than dark.
-  double distance_floor_m = 1e-4;
+  double distance_floor_m = 1e-6;
+  // Where a projector cannot deliver its share (past the correction limit), the others make up
+  // the shortfall, each raising its own share at most this many times (Blender::Factor); 1: the
+  // projector clips alone.
+  double fill_limit = 2.0;
   Status Check() const;
 };
 
@@ -120,6 +126,9 @@ DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
 
 // The incidence factor g of a projector meeting a surface at cos(theta).
 double IncidenceWeight(double cos_incidence, const BlendOptions& options);
+// The pixel-density factor of the weight (1 when options.density_weight is 0).
+double DensityWeight(const CameraModel& projector, double cos_incidence, double range_m,
+                     const BlendOptions& options);
 
 // The share of the intended light a projector meeting a surface at cos(theta) delivers when
 // its correction stops at the limit: min(1, cos theta / cos(correction_limit)).
@@ -152,6 +161,8 @@ class Blender {
   // projectors lighting the point deliver, < 1 only past the correction limit).
   cv::Mat Alpha() const;
   cv::Mat Factor(double level) const;
+  // The same with another fill limit than the options' (BlendOptions::fill_limit).
+  cv::Mat Factor(double level, double fill_limit) const;
 
   // Black-level matching. A projector showing black still emits its black level b; where
   // footprints overlap those add up. Black light at a lit pixel's point: sum over the

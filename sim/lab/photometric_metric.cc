@@ -46,6 +46,15 @@ bool InTriangle2d(const Eigen::Vector2d& p, const Eigen::Vector2d& a, const Eige
 
 double RelativeStepPct(double a, double b) { return 200.0 * std::abs(a - b) / (a + b); }
 
+// Keeps the largest of `over` (all pairs over 1 %) in `stats->worst`, largest first.
+void KeepWorst(std::vector<StepStats::Pair>* over, StepStats* stats) {
+  const size_t n = std::min<size_t>(over->size(), StepStats::kWorstPairs);
+  std::partial_sort(
+      over->begin(), over->begin() + static_cast<std::ptrdiff_t>(n), over->end(),
+      [](const StepStats::Pair& x, const StepStats::Pair& y) { return x.step_pct > y.step_pct; });
+  stats->worst.assign(over->begin(), over->begin() + static_cast<std::ptrdiff_t>(n));
+}
+
 StepStats Summarise(std::vector<double>* steps) {
   StepStats s;
   s.pairs = static_cast<int>(steps->size());
@@ -267,6 +276,36 @@ cv::Mat TopViewStraddled(const RayCaster& truth, const StraddleTest& test,
   return out;
 }
 
+const char* StepPlaceName(StepPlace place) {
+  switch (place) {
+    case StepPlace::kInterior:
+      return "interior";
+    case StepPlace::kOneEdge:
+      return "one_edge";
+    case StepPlace::kTwoEdges:
+      return "two_edges";
+  }
+  return "?";
+}
+
+StepPlace PlaceOfStep(const std::vector<ProjectorPairTruth>& projectors, double near_px) {
+  int edges = 0;
+  for (const ProjectorPairTruth& p : projectors) {
+    bool edge = p.a.visible != p.b.visible || p.a.lit_varies_near || p.b.lit_varies_near;
+    for (const SampleTruth* t : {&p.a, &p.b}) {
+      if (!t->projectable) continue;
+      const Eigen::Vector2d& px = t->pixel_px;
+      // Distance to the image's border (pixel edges at -0.5 and size - 0.5), either side.
+      const double d = std::min({std::abs(px.x() + 0.5), std::abs(p.width_px - 0.5 - px.x()),
+                                 std::abs(px.y() + 0.5), std::abs(p.height_px - 0.5 - px.y())});
+      if (d < near_px && (t->visible || p.a.visible || p.b.visible)) edge = true;
+    }
+    edges += edge;
+  }
+  return edges == 0 ? StepPlace::kInterior
+                    : (edges == 1 ? StepPlace::kOneEdge : StepPlace::kTwoEdges);
+}
+
 nlohmann::json StepStats::ToJson() const {
   return {{"pairs", pairs},
           {"pairs_straddled", pairs_straddled},
@@ -284,6 +323,7 @@ StepStats MeasureImageSteps(const cv::Mat& luminance, const cv::Mat& face_ids,
   double max_step = -1;
   Eigen::Vector3d max_at = Eigen::Vector3d::Zero();
   int straddled_pairs = 0;
+  std::vector<StepStats::Pair> over;
   auto good = [&](int y, int x, int* face) {
     if (!inner.at<uint8_t>(y, x)) return false;
     *face = face_ids.at<int32_t>(y, x);
@@ -310,9 +350,12 @@ StepStats MeasureImageSteps(const cv::Mat& luminance, const cv::Mat& face_ids,
           max_step = step;
           max_at = Eigen::Vector3d(x, y, 0);
         }
-        if (over_1pct && step > 1.0) {
-          over_1pct->at<uint8_t>(y, x) = 255;
-          over_1pct->at<uint8_t>(o[0], o[1]) = 255;
+        if (step > 1.0) {
+          over.push_back({Eigen::Vector3d(x, y, 0), Eigen::Vector3d(o[1], o[0], 0), step});
+          if (over_1pct) {
+            over_1pct->at<uint8_t>(y, x) = 255;
+            over_1pct->at<uint8_t>(o[0], o[1]) = 255;
+          }
         }
       }
     }
@@ -320,6 +363,7 @@ StepStats MeasureImageSteps(const cv::Mat& luminance, const cv::Mat& face_ids,
   StepStats stats = Summarise(&steps);
   stats.max_at = max_at;
   stats.pairs_straddled = straddled_pairs;
+  KeepWorst(&over, &stats);
   return stats;
 }
 
@@ -446,6 +490,7 @@ StepStats MeasureSampleSteps(const std::vector<double>& luminance_nits,
   int straddled_pairs = 0;
   double max_step = -1;
   Eigen::Vector3d max_at = Eigen::Vector3d::Zero();
+  std::vector<StepStats::Pair> over;
   for (const auto& [a, b] : lattice.pairs) {
     const double la = luminance_nits[a], lb = luminance_nits[b];
     if (!(la > lit_nits) || !(lb > lit_nits)) continue;
@@ -454,6 +499,9 @@ StepStats MeasureSampleSteps(const std::vector<double>& luminance_nits,
       continue;
     }
     steps.push_back(RelativeStepPct(la, lb));
+    if (steps.back() > 1.0) {
+      over.push_back({lattice.points_in_table_m[a], lattice.points_in_table_m[b], steps.back()});
+    }
     if (steps.back() > max_step) {
       max_step = steps.back();
       max_at = lattice.points_in_table_m[a];
@@ -462,6 +510,7 @@ StepStats MeasureSampleSteps(const std::vector<double>& luminance_nits,
   StepStats stats = Summarise(&steps);
   stats.max_at = max_at;
   stats.pairs_straddled = straddled_pairs;
+  KeepWorst(&over, &stats);
   return stats;
 }
 

@@ -79,8 +79,36 @@ struct StepStats {
   // Where the largest step is: the pair's first sample (image: pixel x, y; lattice: table frame,
   // m).
   Eigen::Vector3d max_at = Eigen::Vector3d::Zero();
+  // The largest steps over 1 %, largest first, at most kWorstPairs: where each pair's samples
+  // are (as max_at) and its step.
+  struct Pair {
+    Eigen::Vector3d a = Eigen::Vector3d::Zero(), b = Eigen::Vector3d::Zero();
+    double step_pct = 0.0;
+  };
+  static constexpr int kWorstPairs = 4096;
+  std::vector<Pair> worst;
   nlohmann::json ToJson() const;
 };
+
+// Where a large step lies, from each projector's truth at the pair's two samples: near the edge
+// of one projector's light (its image border within `near_px` of either sample's pixel, it
+// lights one sample and not the other, or what it lights varies around a sample), near the edges of
+// two or more (where two projectors' edges cross, every alpha must go from 0 to 1 within a pixel or
+// two: a pixel-size limit like a straddling pixel), or away from every edge.
+struct SampleTruth {
+  bool projectable = false, visible = false;
+  Eigen::Vector2d pixel_px = Eigen::Vector2d::Zero();
+  // The projector lights some points around the sample (within a few mm, the caller's ring) and
+  // not others: a shadow's or a silhouette's edge is near.
+  bool lit_varies_near = false;
+};
+struct ProjectorPairTruth {
+  int width_px = 0, height_px = 0;
+  SampleTruth a, b;
+};
+enum class StepPlace { kInterior, kOneEdge, kTwoEdges };
+const char* StepPlaceName(StepPlace place);
+StepPlace PlaceOfStep(const std::vector<ProjectorPairTruth>& projectors, double near_px = 8.0);
 
 // Steps in a top view's luminance (CV_32FC1) on faces of `kind`, pairs `spacing_px` apart.
 // `over_1pct` (optional): CV_8UC1 of the view's size, 255 at both pixels of each pair whose

@@ -31,6 +31,12 @@ constexpr double kRoofStepPct = 2.0;
 // guards against regressions, not the issue's bounds.
 constexpr double kWallStepP99Pct = 6.0;
 constexpr double kRoofLatticeStepP99Pct = 4.0;
+// The table's largest step away from every projector's edge (PlaceOfStep): 2.1 % today over 5
+// pairs (1.8 % with 16-bit frames); a guard, not the issue's bound.
+constexpr double kTableInteriorStepPct = 3.0;
+// The walls' 99th percentile when the others make up a clipped projector's shortfall, at least
+// this much below clipping alone (4.7 % -> 3.8 % today).
+constexpr double kWallFillGainPct = 0.5;
 // Raw white has hard footprint and shadow edges: at least this on the table.
 constexpr double kUnblendedTableStepPct = 20.0;
 constexpr double kStepSpacing_m = 0.005;
@@ -78,12 +84,20 @@ cv::Mat Encode(const cv::Mat& factor) {
   cv::Mat encoded;
   cv::pow(factor, 1.0 / kDisplayGamma, encoded);
   cv::Mat frame;
+  if (std::getenv("SANDTABLE_BLEND_16")) {
+    encoded.convertTo(frame, CV_16UC1, 65535.0);
+    return frame;
+  }
   encoded.convertTo(frame, CV_8UC1, 255.0);
   return frame;
 }
 
 struct Measured {
   sim::StepStats table, shadow, roof_top, wall, roof;
+  // The table's pairs over kTableStepPct by place (interior, one edge, two edges), and the
+  // largest step among those away from every projector's edge.
+  int table_over_bound[3] = {0, 0, 0};
+  double table_interior_max_pct = 0.0;
   double uniformity = 0.0;
 };
 
@@ -121,6 +135,48 @@ Measured Measure(Fixture& f, const cv::Mat& shadow_ids) {
     cv::resize(over(crop), c, cv::Size(), 3, 3, cv::INTER_NEAREST);
     cv::imwrite(std::string(dir) + "/crop_over" + std::to_string(n) + ".png", c);
     ++n;
+  }
+  {
+    // Where the table's steps over the bound lie (PlaceOfStep).
+    const Eigen::Vector2d span = (b.max() - b.min()).head<2>();
+    auto at = [&](const Eigen::Vector3d& px) {
+      return Eigen::Vector3d(b.min().x() + (px.x() + 0.5) / luminance.cols * span.x(),
+                             b.max().y() - (px.y() + 0.5) / luminance.rows * span.y(), 1e-4);
+    };
+    for (const sim::StepStats::Pair& pair : m.table.worst) {
+      if (pair.step_pct <= kTableStepPct) break;
+      std::vector<sim::ProjectorPairTruth> truths;
+      for (const sim::UnitSpec& unit : f.site.units) {
+        sim::ProjectorPairTruth t;
+        t.width_px = unit.projector.model.width_px;
+        t.height_px = unit.projector.model.height_px;
+        for (auto [point, sample] : {std::pair{pair.a, &t.a}, std::pair{pair.b, &t.b}}) {
+          Expected<sim::ProjectorTruth> truth =
+              f.world->ProjectorTruthAtPoint(unit.id, at(point), 2e-4);
+          if (!truth.ok()) continue;
+          sample->projectable = truth->sample.projectable;
+          sample->visible = truth->sample.visible;
+          sample->pixel_px = truth->sample.pixel_px;
+          // A ring of 8 points 3 view pixels (~3 mm) around the sample.
+          for (int k = 0; k < 8 && !sample->lit_varies_near; ++k) {
+            const double angle = k * M_PI / 4;
+            const Eigen::Vector3d q =
+                point + 3.0 * Eigen::Vector3d(std::cos(angle), std::sin(angle), 0.0);
+            Expected<sim::ProjectorTruth> near =
+                f.world->ProjectorTruthAtPoint(unit.id, at(q), 2e-4);
+            if (near.ok() && near->sample.visible != truth->sample.visible) {
+              sample->lit_varies_near = true;
+            }
+          }
+        }
+        truths.push_back(t);
+      }
+      const sim::StepPlace place = sim::PlaceOfStep(truths);
+      ++m.table_over_bound[static_cast<int>(place)];
+      if (place == sim::StepPlace::kInterior) {
+        m.table_interior_max_pct = std::max(m.table_interior_max_pct, pair.step_pct);
+      }
+    }
   }
   m.roof_top = sim::MeasureImageSteps(luminance, ids, f.faces, sim::SurfaceKind::kRoof, spacing_px,
                                       f.lit_nits, nullptr, straddled);
@@ -183,6 +239,16 @@ void Print(const char* label, const Measured& m) {
             << m.wall.p99_pct << ", " << m.wall.pairs << " pairs, " << m.wall.pairs_straddled
             << " straddled), roofs max " << m.roof.max_pct << " % (" << m.roof.pairs
             << "), table uniformity " << m.uniformity << "\n"
+            << "  table pairs over " << kTableStepPct
+            << " %: " << m.table_over_bound[static_cast<int>(sim::StepPlace::kInterior)]
+            << " away from every projector's edge (largest " << m.table_interior_max_pct << " %), "
+            << m.table_over_bound[static_cast<int>(sim::StepPlace::kOneEdge)]
+            << " near one projector's edge, "
+            << m.table_over_bound[static_cast<int>(sim::StepPlace::kTwoEdges)]
+            << " near two; walls over 2 %: "
+            << std::count_if(m.wall.worst.begin(), m.wall.worst.end(),
+                             [](const sim::StepStats::Pair& p) { return p.step_pct > 2.0; })
+            << " of " << m.wall.pairs << "\n"
             << "  max at: table " << m.table.max_at.transpose() << ", wall "
             << m.wall.max_at.transpose() << ", roof " << m.roof.max_at.transpose() << "\n";
 }
@@ -195,6 +261,11 @@ TEST(BlendThroughWorldTest, NoVisibleStepOnTableWallsRoofsOrShadows) {
     options.grid_step_px = std::atoi(step);
   if (const char* plain = std::getenv("SANDTABLE_BLEND_PLAIN"); plain && *plain)
     options.incidence_weight = false;
+  if (const char* fl = std::getenv("SANDTABLE_BLEND_FLOOR"))
+    options.distance_floor_m = std::atof(fl);
+  if (const char* dw = std::getenv("SANDTABLE_BLEND_DENSITY"))
+    options.density_weight = std::atof(dw);
+  if (const char* fl = std::getenv("SANDTABLE_BLEND_FILL")) options.fill_limit = std::atof(fl);
   ASSERT_TRUE(options.Check().ok());
   const auto start = std::chrono::steady_clock::now();
   std::map<NodeId, DistanceField> fields;
@@ -217,6 +288,24 @@ TEST(BlendThroughWorldTest, NoVisibleStepOnTableWallsRoofsOrShadows) {
   }
   const double blend_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  {
+    double wall_px = 0, up_px = 0, wall_n = 0, up_n = 0;
+    for (auto& [id, blender] : blenders) {
+      const cv::Mat alpha = blender->Alpha();
+      const ProjectorSurface& s = blender->surface();
+      for (size_t i = 0; i < s.range_m.size(); ++i) {
+        if (s.range_m[i] <= 0) continue;
+        const bool wall = std::abs(s.normal_in_table[i].z()) < 0.3f;
+        (wall ? wall_px : up_px) += alpha.ptr<float>()[i];
+        (wall ? wall_n : up_n) += 1;
+      }
+    }
+    // Pixels delivered: each pixel counts by its alpha (the delivered pixel density, integrated
+    // over the surface); of all lit pixels.
+    std::printf(
+        "pixels delivered (sum of alpha): walls %.0f of %.0f, table and roofs %.0f of %.0f\n",
+        wall_px, wall_n, up_px, up_n);
+  }
   std::cout << "blend of 3 projectors: " << blend_s << " s, level " << level << " / m^2\n";
   ASSERT_TRUE(std::isfinite(level));
   ASSERT_GT(level, 0.0);
@@ -242,10 +331,19 @@ TEST(BlendThroughWorldTest, NoVisibleStepOnTableWallsRoofsOrShadows) {
   }
   const Measured after = Measure(f, shadow);
   Print("blended", after);
+  // The same blend with each projector clipping alone where it cannot deliver its share (past
+  // the correction limit): the others do not make up for it.
+  for (auto& [id, blender] : blenders) {
+    ASSERT_TRUE(f.world->SetProjectorFrame(id, Encode(blender->Factor(level, 1.0))).ok());
+  }
+  const Measured clipped = Measure(f, shadow);
+  Print("clipped alone", clipped);
 
   // The issue bounds the largest step; what is asserted here is the 99th percentile (the
   // largest steps are single-pixel lines at silhouettes and pixel-quantization contours, see
-  // docs/blend.md "Measured"), with the issue's numbers as its bounds, walls aside.
+  // docs/blend.md "Measured"), with the issue's numbers as its bounds, walls aside; and away
+  // from every projector's edge, the table's largest step (the rest lie within a few mm of an
+  // edge, most where two projectors' edges meet).
   EXPECT_GT(before.table.max_pct, kUnblendedTableStepPct);
   EXPECT_GT(after.table.pairs, 1000000);
   EXPECT_LT(after.table.p99_pct, kTableStepPct);
@@ -257,6 +355,9 @@ TEST(BlendThroughWorldTest, NoVisibleStepOnTableWallsRoofsOrShadows) {
   EXPECT_GT(after.wall.pairs, 1000);
   EXPECT_LT(after.wall.p99_pct, kWallStepP99Pct);
   EXPECT_LT(after.wall.p99_pct, before.wall.max_pct);
+  EXPECT_LT(after.table_interior_max_pct, kTableInteriorStepPct);
+  // Making up a clipped projector's shortfall flattens the walls.
+  EXPECT_LT(after.wall.p99_pct, clipped.wall.p99_pct - kWallFillGainPct);
 }
 
 // Black through the full pipeline: each projector's black level adds up where footprints
