@@ -649,6 +649,25 @@ std::string LabReportMarkdown(const LabResult& r) {
                ? "matched: each node raises its black where fewer projectors overlap "
                  "(`--black-match on`).\n\n"
                : "not matched (`--black-match off`).\n\n")
+       << (p["table"].contains("over_bound")
+               ? [&] {
+                   const json& o = p["table"]["over_bound"];
+                   return "Where the table's " + std::to_string(o.value("pairs", 0)) +
+                          " pairs over " + Fixed(o.value("bound_pct", 0.0), 1) +
+                          " % lie: " + std::to_string(o.value("two_edges", 0)) +
+                          " near the edges of two projectors' light (where two edges meet every "
+                          "alpha must go from 0 to 1 within a pixel or two), " +
+                          std::to_string(o.value("one_edge", 0)) + " near one projector's edge, " +
+                          std::to_string(o.value("interior", 0)) +
+                          " away from every edge (largest " +
+                          Fixed(o.value("interior_max_pct", 0.0), 2) + " %)" +
+                          (o.value("pairs_capped", false) ? " (the largest " +
+                                                                std::to_string(o.value("pairs", 0)) +
+                                                                " only)"
+                                                          : std::string()) +
+                          ".\n\n";
+                 }()
+               : std::string())
        << "Table uniformity (min / max): " << Fixed(p.value("uniformity_min_over_max", 0.0), 3)
        << " blended, " << Fixed(p.value("uniformity_unblended", 0.0), 3)
        << " raw white. Level: " << Fixed(p.value("level_per_m2", 0.0), 4)

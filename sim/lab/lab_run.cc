@@ -52,6 +52,8 @@ using std::chrono::milliseconds;
 // ambient luminance of a white surface.
 constexpr double kStepSpacing_m = 0.005;
 constexpr double kLitAmbientFactor = 3.0;
+// The bound on the table's step over 5 mm: the steps over it are located (PlaceSteps).
+constexpr double kTableStepBoundPct = 1.5;
 
 // Mean of an MPCDI region's alpha map in [0, 1] (-1 without one): 1 until the blend fills it.
 double AlphaMean(const MpcdiRegion& region) {
@@ -1022,6 +1024,98 @@ class LabRun {
     return out;
   }
 
+  // Each projector's truth at points: whether it can project there, lights them, and its pixel.
+  Expected<std::vector<SampleTruth>> TruthSamples(NodeId projector,
+                                                  const std::vector<Eigen::Vector3d>& points) {
+    wire::Envelope request;
+    wire::GroundTruthRequest* r = request.mutable_ground_truth_request();
+    r->set_projector_id(projector);
+    for (const Eigen::Vector3d& p : points) {
+      wire::Vector3* v = r->add_points_in_table_m();
+      v->set_x(p.x());
+      v->set_y(p.y());
+      v->set_z(p.z());
+    }
+    Expected<wire::Envelope> reply =
+        Call(world_endpoint_, std::move(request), wire::Envelope::kGroundTruthReply, ToMs(5));
+    if (!reply.ok()) return reply.status();
+    const wire::GroundTruthReply& g = reply->ground_truth_reply();
+    if (!g.ok() || g.samples_size() != static_cast<int>(points.size())) {
+      return UnavailableError("ground truth: " + g.message());
+    }
+    std::vector<SampleTruth> out(points.size());
+    for (int i = 0; i < g.samples_size(); ++i) {
+      out[i].projectable = g.samples(i).projectable();
+      out[i].visible = g.samples(i).visible();
+      out[i].pixel_px =
+          Eigen::Vector2d(g.samples(i).projector_px().x(), g.samples(i).projector_px().y());
+    }
+    return out;
+  }
+
+  // Where the table's steps over the bound lie (PlaceOfStep): each pair's two samples
+  // and a ring of 8 points 3 view pixels around each, in every calibrated projector's truth.
+  Expected<json> PlaceSteps(const StepStats& steps, const TopView& view, double bound_pct) {
+    constexpr int kRing = 8;
+    constexpr double kRingRadius_px = 3.0;
+    const Eigen::Vector2d span = view.area_max_m - view.area_min_m;
+    auto at = [&](double x, double y) {
+      return Eigen::Vector3d(
+          view.area_min_m.x() + (x + 0.5) / view.luminance.cols * span.x(),
+          view.area_min_m.y() + (1.0 - (y + 0.5) / view.luminance.rows) * span.y(), 0.0);
+    };
+    std::vector<const StepStats::Pair*> pairs;
+    std::vector<Eigen::Vector3d> points;  // per pair: a, a's ring, b, b's ring
+    for (const StepStats::Pair& pair : steps.worst) {
+      if (pair.step_pct <= bound_pct) break;
+      pairs.push_back(&pair);
+      for (const Eigen::Vector3d& px : {pair.a, pair.b}) {
+        points.push_back(at(px.x(), px.y()));
+        for (int k = 0; k < kRing; ++k) {
+          const double angle = k * 2.0 * M_PI / kRing;
+          points.push_back(at(px.x() + kRingRadius_px * std::cos(angle),
+                              px.y() + kRingRadius_px * std::sin(angle)));
+        }
+      }
+    }
+    const size_t per_pair = 2 * (kRing + 1);
+    std::vector<std::vector<ProjectorPairTruth>> truths(pairs.size());
+    for (const UnitSpec& unit : inputs_.site.units) {
+      if (!calibrated_.count(unit.id) || points.empty()) continue;
+      Expected<std::vector<SampleTruth>> t = TruthSamples(unit.id, points);
+      if (!t.ok()) return t.status();
+      for (size_t i = 0; i < pairs.size(); ++i) {
+        ProjectorPairTruth p;
+        p.width_px = unit.projector.model.width_px;
+        p.height_px = unit.projector.model.height_px;
+        for (int side = 0; side < 2; ++side) {
+          const size_t base = i * per_pair + side * (kRing + 1);
+          SampleTruth s = (*t)[base];
+          for (int k = 1; k <= kRing; ++k) {
+            if ((*t)[base + k].visible != s.visible) s.lit_varies_near = true;
+          }
+          (side == 0 ? p.a : p.b) = s;
+        }
+        truths[i].push_back(p);
+      }
+    }
+    int count[3] = {0, 0, 0};
+    double interior_max = 0.0;
+    for (size_t i = 0; i < pairs.size(); ++i) {
+      const StepPlace place = PlaceOfStep(truths[i]);
+      ++count[static_cast<int>(place)];
+      if (place == StepPlace::kInterior) interior_max = std::max(interior_max, pairs[i]->step_pct);
+    }
+    return json{{"bound_pct", bound_pct},
+                {"pairs", pairs.size()},
+                {"pairs_capped", steps.worst.size() == StepStats::kWorstPairs &&
+                                     steps.worst.back().step_pct > bound_pct},
+                {StepPlaceName(StepPlace::kInterior), count[0]},
+                {StepPlaceName(StepPlace::kOneEdge), count[1]},
+                {StepPlaceName(StepPlace::kTwoEdges), count[2]},
+                {"interior_max_pct", interior_max}};
+  }
+
   bool Blend() {
     if (options_.render == "off" || options_.blend == "off" || calibrated_.empty() ||
         !render_unavailable_.empty()) {
@@ -1151,6 +1245,12 @@ class LabRun {
               p["black_step_pct"] = black_table.max_pct;
               p["black_match"] = options_.black_match == "on";
               p["table"] = table.ToJson();
+              Expected<json> places = PlaceSteps(table, a, kTableStepBoundPct);
+              if (!places.ok()) {
+                m.error = places.status().ToString();
+                return m;
+              }
+              p["table"]["over_bound"] = *places;
               p["roofs_from_above"] = roof_top.ToJson();
               p["table_unblended"] = table_before.ToJson();
               p["uniformity_min_over_max"] =

@@ -237,6 +237,14 @@ TEST_F(LabRunTest, Sandtable3SelfCalibratesAndFindsTheModel) {
   EXPECT_GT(p["uniformity_min_over_max"].get<double>(), p["uniformity_unblended"].get<double>());
   EXPECT_GT(p["walls"]["pairs"].get<int>(), 1000);
   EXPECT_GT(p["level_per_m2"].get<double>(), 0.0);
+  // Where the table's steps over the bound lie: every one placed, most near an edge of
+  // the projectors' light (docs/blend.md).
+  ASSERT_TRUE(p["table"].contains("over_bound")) << p["table"].dump();
+  const json& places = p["table"]["over_bound"];
+  EXPECT_EQ(places["interior"].get<int>() + places["one_edge"].get<int>() +
+                places["two_edges"].get<int>(),
+            places["pairs"].get<int>());
+  EXPECT_LT(places["interior"].get<int>(), places["pairs"].get<int>() / 10 + 1) << places.dump();
   for (const char* id : {"0", "1", "2"}) {
     EXPECT_EQ(p["nodes"][id]["neighbours"].size(), 2u) << p["nodes"][id].dump();
     ASSERT_TRUE(p["pictures"]["alpha"].contains(id)) << p["pictures"].dump();
