@@ -155,6 +155,12 @@ def summary_section(out):
         rows.append(f"| sweep: the shipped defaults on a Pareto front | "
                     f"{'yes' if on_front else 'no'} | on it, or the docs say why | "
                     f"{'pass' if on_front else 'see docs/results.md, Sweep'} |")
+    blend = [r for r in sweep if r.get("config") == "blend" and r["ok"] == "1"]
+    if blend:
+        on_front = blend[0].get("front_blend") == "1"
+        rows.append(f"| sweep: the shipped blend on the blend's front (walls p99 against cast) | "
+                    f"{'yes' if on_front else 'no'} | on it, or the docs say why | "
+                    f"{'pass' if on_front else 'see docs/results.md, Sweep'} |")
     lines = ["## Summary", "",
              "Every headline figure of this run beside the issues' target where they set one "
              "(\"-\": none). The full-size "
@@ -184,11 +190,13 @@ def pictures_section(out):
     sweep = out / "sweep"
     if (sweep / "sweep.md").exists():
         lines += ["## Sweep: error against projection and compute time", "",
-                  "Four configurations here (`sandtable-lab sweep --only ...`, deploy/demo_run.sh); "
+                  "Four calibration and two blend configurations here (`sandtable-lab sweep "
+                  "--only ...`, deploy/demo_run.sh); "
                   "the whole sweep and why the defaults stay: docs/results.md, Sweep. Table: "
                   "[`sweep/sweep.md`](sweep/sweep.md).", ""]
         for png, caption in [("sweep/sweep_projection.png", "rms error against modeled projection time"),
-                             ("sweep/sweep_compute.png", "rms error against compute time")]:
+                             ("sweep/sweep_compute.png", "rms error against compute time"),
+                             ("sweep/sweep_blend.png", "blend: walls' p99 step against cast time")]:
             if (out / png).exists():
                 lines += [f"![{caption}]({png})  ", f"*{caption}* (Pareto front in red)", ""]
     scale = out / "scale"

@@ -46,10 +46,11 @@ step lab_true_pose "$lab" run --site sandtable-3 --scene sandtable --calibration
 step lab_grid8 "$lab" run --site grid-8 --scene city --out "$out/lab-grid8" --progress plain
 
 # The lab's other commands, small enough for the demo (docs/results.md has the full ones): run
-# time against error over four configurations, the cost of grid-2/4/8 at half resolution, and
+# time against error over four calibration configurations and two of the blend, the cost of
+# grid-2/4/8 at half resolution, and
 # one seeded chaos run (kills, a join over faulty links, a stall, the coordinator restarted).
 step sweep "$lab" sweep --out "$out/sweep" --only defaults --only gray-cell-px=8 \
-  --only phase-steps=4 --only grid-step-px=32
+  --only phase-steps=4 --only grid-step-px=32 --only blend --only blend-fill-limit=1
 step scale "$lab" scale --nodes 2,4,8 --out "$out/scale"
 step chaos "$lab" chaos --runs 1 --out "$out/chaos"
 

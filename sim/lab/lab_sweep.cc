@@ -28,7 +28,12 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 SweepConfig Knob(const std::string& knob, const std::string& value) {
-  return {knob + "=" + value, knob, value, {"--" + knob + "=" + value}};
+  return {knob + "=" + value, knob, value, {"--" + knob + "=" + value}, false};
+}
+SweepConfig BlendKnob(const std::string& knob, const std::string& value) {
+  SweepConfig c = Knob(knob, value);
+  c.blend = true;
+  return c;
 }
 
 std::string Fixed(double v, int digits) {
@@ -91,6 +96,25 @@ void ReadRun(const fs::path& report_path, SweepPoint* point) {
               std::isfinite(point->compute_s) && !failures;
   if (!point->ok) {
     point->error = failures ? "units failed: " + c["failures"].dump() : "no calibration figures";
+    return;
+  }
+  if (!point->config.blend) return;
+  const json p = report.value("photometric", json::object());
+  auto steps = [&p](const char* surface, const char* key) {
+    return p.contains(surface) && p[surface].contains(key) && p[surface][key].is_number()
+               ? p[surface][key].get<double>()
+               : std::numeric_limits<double>::quiet_NaN();
+  };
+  point->table_p99_pct = steps("table", "p99_pct");
+  point->table_max_pct = steps("table", "max_pct");
+  point->walls_p99_pct = steps("walls", "p99_pct");
+  point->walls_max_pct = steps("walls", "max_pct");
+  point->uniformity = p.value("uniformity_min_over_max", 0.0);
+  point->cast_ms = p.value("blend_cast_ms_max", std::numeric_limits<double>::quiet_NaN());
+  if (!std::isfinite(point->table_p99_pct) || !std::isfinite(point->walls_p99_pct) ||
+      !std::isfinite(point->cast_ms)) {
+    point->ok = false;
+    point->error = "no blend figures (photometric) in the report";
   }
 }
 
@@ -103,7 +127,7 @@ std::string PlotScript(const std::vector<SweepPoint>& points, bool device, const
   std::ofstream all(data), on(front), def(defaults);
   std::vector<const SweepPoint*> sorted;
   for (const SweepPoint& p : points) {
-    if (!p.ok) continue;
+    if (!p.ok || p.config.blend) continue;
     const double x = device ? p.device_time_s : p.compute_s;
     all << x << " " << p.rms_mm << " " << p.config.name << "\n";
     if (p.config.knob.empty()) def << x << " " << p.rms_mm << "\n";
@@ -124,6 +148,39 @@ std::string PlotScript(const std::vector<SweepPoint>& points, bool device, const
     << "set xlabel '" << (device ? "modeled projection time (s)" : "compute time (s)") << "'\n"
     << "set ylabel 'registration rms (mm)'\n"
     << "set logscale y\nset grid\nset key top right\n"
+    << "plot '" << data << "' using 1:2 with points pt 7 ps 1.2 lc rgb '#4477aa' title "
+    << "'configurations', '" << data
+    << "' using 1:2:3 with labels offset char 0.5,0.6 left font ',8' notitle, '" << front
+    << "' using 1:2 with steps lw 2 lc rgb '#cc3311' title 'Pareto front', '" << defaults
+    << "' using 1:2 with points pt 6 ps 3 lw 2 lc rgb '#228833' title 'shipped defaults'\n";
+  return s.str();
+}
+
+// The blend's plot: the walls' p99 step against the slowest node's cast time.
+std::string BlendPlotScript(const std::vector<SweepPoint>& points, const fs::path& dir,
+                            const std::string& png) {
+  const std::string data = (dir / (png + ".dat")).string();
+  const std::string front = (dir / (png + ".front.dat")).string();
+  const std::string defaults = (dir / (png + ".defaults.dat")).string();
+  std::ofstream all(data), on(front), def(defaults);
+  std::vector<const SweepPoint*> sorted;
+  for (const SweepPoint& p : points) {
+    if (!p.ok || !p.config.blend) continue;
+    all << p.cast_ms << " " << p.walls_p99_pct << " " << p.config.name << "\n";
+    if (p.config.knob.empty()) def << p.cast_ms << " " << p.walls_p99_pct << "\n";
+    if (p.front_blend) sorted.push_back(&p);
+  }
+  std::sort(sorted.begin(), sorted.end(),
+            [](const SweepPoint* a, const SweepPoint* b) { return a->cast_ms < b->cast_ms; });
+  for (const SweepPoint* p : sorted) on << p->cast_ms << " " << p->walls_p99_pct << "\n";
+  std::ostringstream s;
+  s << "set terminal png size 1000,640\n"
+    << "set output '" << (dir / (png + ".png")).string() << "'\n"
+    << "set title 'blend: walls 99th-percentile step over 5 mm against cast time (slowest "
+       "node)'\n"
+    << "set xlabel 'cast: surface + distance field (ms)'\n"
+    << "set ylabel 'walls p99 step (%)'\n"
+    << "set grid\nset key top right\n"
     << "plot '" << data << "' using 1:2 with points pt 7 ps 1.2 lc rgb '#4477aa' title "
     << "'configurations', '" << data
     << "' using 1:2:3 with labels offset char 0.5,0.6 left font ',8' notitle, '" << front
@@ -178,16 +235,30 @@ std::vector<SweepConfig> DefaultSweep() {
   for (const char* v : {"8", "32"}) c.push_back(Knob("grid-step-px", v));
   for (const char* v : {"3", "10"}) c.push_back(Knob("bundle-iterations", v));
   c.push_back(Knob("bundle-free", "poses"));
+  SweepConfig blend{"blend", "", "", {}, true};
+  c.push_back(blend);
+  for (const char* v : {"4", "16"}) c.push_back(BlendKnob("blend-step-px", v));
+  for (const char* v : {"1", "3"}) c.push_back(BlendKnob("blend-fill-limit", v));
   return c;
 }
 
 void MarkParetoFronts(std::vector<SweepPoint>& points) {
   for (SweepPoint& p : points) {
-    p.front_device = p.front_compute = false;
+    p.front_device = p.front_compute = p.front_blend = false;
     if (!p.ok) continue;
+    if (p.config.blend) {
+      bool beaten = false;
+      for (const SweepPoint& q : points) {
+        if (&q == &p || !q.ok || !q.config.blend) continue;
+        beaten |= q.walls_p99_pct <= p.walls_p99_pct && q.cast_ms <= p.cast_ms &&
+                  (q.walls_p99_pct < p.walls_p99_pct || q.cast_ms < p.cast_ms);
+      }
+      p.front_blend = !beaten;
+      continue;
+    }
     bool beaten_device = false, beaten_compute = false;
     for (const SweepPoint& q : points) {
-      if (&q == &p || !q.ok) continue;
+      if (&q == &p || !q.ok || q.config.blend) continue;
       const bool q_error = q.rms_mm <= p.rms_mm;
       beaten_device |= q_error && q.device_time_s <= p.device_time_s &&
                        (q.rms_mm < p.rms_mm || q.device_time_s < p.device_time_s);
@@ -202,7 +273,8 @@ void MarkParetoFronts(std::vector<SweepPoint>& points) {
 std::string SweepCsv(const std::vector<SweepPoint>& points) {
   std::ostringstream s;
   s << "config,knob,value,ok,frames_per_projector,device_time_s,compute_s,round_wall_s,rms_mm,"
-       "p99_mm,max_mm,front_device,front_compute,error\n";
+       "p99_mm,max_mm,front_device,front_compute,blend,table_p99_pct,table_max_pct,walls_p99_pct,"
+       "walls_max_pct,uniformity,cast_ms,front_blend,error\n";
   for (const SweepPoint& p : points) {
     std::string error = p.error;
     std::replace(error.begin(), error.end(), ',', ';');
@@ -211,7 +283,11 @@ std::string SweepCsv(const std::vector<SweepPoint>& points) {
       << "," << p.frames_per_projector << "," << Fixed(p.device_time_s, 4) << ","
       << Fixed(p.compute_s, 3) << "," << Fixed(p.round_wall_s, 2) << "," << Fixed(p.rms_mm, 4)
       << "," << Fixed(p.p99_mm, 4) << "," << Fixed(p.max_mm, 4) << "," << (p.front_device ? 1 : 0)
-      << "," << (p.front_compute ? 1 : 0) << ",\"" << error << "\"\n";
+      << "," << (p.front_compute ? 1 : 0) << "," << (p.config.blend ? 1 : 0) << ","
+      << Fixed(p.table_p99_pct, 3) << "," << Fixed(p.table_max_pct, 2) << ","
+      << Fixed(p.walls_p99_pct, 3) << "," << Fixed(p.walls_max_pct, 2) << ","
+      << Fixed(p.uniformity, 3) << "," << Fixed(p.cast_ms, 0) << "," << (p.front_blend ? 1 : 0)
+      << ",\"" << error << "\"\n";
   }
   return s.str();
 }
@@ -253,10 +329,11 @@ int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std:
                                      "--scene",       options.scene,
                                      "--seed",        std::to_string(options.seed),
                                      "--out",         run_dir.string(),
-                                     "--render",      "off",
                                      "--samples",     std::to_string(options.metric_samples),
                                      "--image-width", "200",
                                      "--progress",    "plain"};
+    // Calibration configurations need no show; blend ones show and blend (the default run).
+    if (!point.config.blend) args.insert(args.end(), {"--render", "off"});
     if (!options.bin_dir.empty()) args.insert(args.end(), {"--bin-dir", options.bin_dir});
     for (const std::string& a : point.config.node_args) args.push_back("--node-arg=" + a);
     err << "sweep: " << (i + 1) << "/" << configs.size() << " " << point.config.name << " ..."
@@ -269,10 +346,13 @@ int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std:
       point.error = exit_error;
     }
     err << "sweep: " << point.config.name << ": "
-        << (point.ok ? "rms " + Fixed(point.rms_mm, 3) + " mm, projection " +
-                           Fixed(point.device_time_s, 3) + " s, compute " +
-                           Fixed(point.compute_s, 2) + " s"
-                     : "FAILED (" + point.error + ")")
+        << (!point.ok ? "FAILED (" + point.error + ")"
+            : point.config.blend
+                ? "walls p99 " + Fixed(point.walls_p99_pct, 2) + " %, table p99 " +
+                      Fixed(point.table_p99_pct, 2) + " %, cast " + Fixed(point.cast_ms, 0) + " ms"
+                : "rms " + Fixed(point.rms_mm, 3) + " mm, projection " +
+                      Fixed(point.device_time_s, 3) + " s, compute " + Fixed(point.compute_s, 2) +
+                      " s")
         << std::endl;
     points.push_back(std::move(point));
   }
@@ -281,12 +361,23 @@ int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std:
   std::ofstream(dir / "sweep.csv") << SweepCsv(points);
   // Plots (gnuplot: docs/lab.md); the CSV stands without them.
   std::vector<std::string> plot_notes;
+  const bool any_calibration = std::any_of(
+      points.begin(), points.end(), [](const SweepPoint& p) { return !p.config.blend && p.ok; });
   for (const bool device : {true, false}) {
+    if (!any_calibration) break;
     const std::string png = device ? "sweep_projection" : "sweep_compute";
     const fs::path script = dir / (png + ".gp");
     std::ofstream(script) << PlotScript(points, device, dir, png);
     const std::string why = RunGnuplot(script.string(), (dir / (png + ".log")).string());
     if (!why.empty()) plot_notes.push_back(png + ".png not drawn: " + why);
+  }
+  const bool any_blend = std::any_of(points.begin(), points.end(),
+                                     [](const SweepPoint& p) { return p.config.blend && p.ok; });
+  if (any_blend) {
+    const fs::path script = dir / "sweep_blend.gp";
+    std::ofstream(script) << BlendPlotScript(points, dir, "sweep_blend");
+    const std::string why = RunGnuplot(script.string(), (dir / "sweep_blend.log").string());
+    if (!why.empty()) plot_notes.push_back("sweep_blend.png not drawn: " + why);
   }
 
   // sweep.md and sweep.html.
@@ -307,6 +398,7 @@ int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std:
      << "| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n";
   const SweepPoint* defaults = nullptr;
   for (const SweepPoint& p : points) {
+    if (p.config.blend) continue;
     if (p.config.knob.empty()) defaults = &p;
     if (!p.ok) {
       md << "| " << p.config.name << " | failed: " << p.error << " | | | | | | | |\n";
@@ -325,7 +417,7 @@ int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std:
        << " the projection front and " << (defaults->front_compute ? "on" : "**not** on")
        << " the compute front.";
     for (const SweepPoint& p : points) {
-      if (&p == defaults || !p.ok || p.rms_mm > defaults->rms_mm) continue;
+      if (&p == defaults || !p.ok || p.config.blend || p.rms_mm > defaults->rms_mm) continue;
       if (p.device_time_s <= defaults->device_time_s || p.compute_s <= defaults->compute_s) {
         md << " `" << p.config.name << "` is as accurate or better (" << Fixed(p.rms_mm, 3)
            << " mm) at " << Fixed(p.device_time_s, 3) << " s projection, " << Fixed(p.compute_s, 2)
@@ -335,9 +427,42 @@ int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std:
     md << " (docs/results.md says why the defaults stay where they are not on a front.)\n\n";
   }
   for (const std::string& note : plot_notes) md << "- " << note << "\n";
-  md << "\n![error against projection time](sweep_projection.png)\n\n"
-     << "![error against compute time](sweep_compute.png)\n\n"
-     << "Each run's report: `runs/<configuration>/report.md`; the figures: `sweep.csv`.\n";
+  if (any_calibration) {
+    md << "\n![error against projection time](sweep_projection.png)\n\n"
+       << "![error against compute time](sweep_compute.png)\n\n";
+  }
+  if (std::any_of(points.begin(), points.end(),
+                  [](const SweepPoint& p) { return p.config.blend; })) {
+    md << "## The blend\n\n"
+       << "Each run shows and blends (the default run); steps over 5 mm through the world's "
+          "truth (docs/blend.md), the cast is the slowest node's surface and distance field. "
+          "Knobs: the blend's sampling resolution (`blend-step-px`, the distance field's grid "
+          "step) and how far the others make up a clipped projector's shortfall "
+          "(`blend-fill-limit`). Front (B): walls' p99 against cast time.\n\n"
+       << "| configuration | table p99 (%) | table max (%) | walls p99 (%) | walls max (%) | "
+          "uniformity | cast (ms) | front |\n"
+       << "| --- | --- | --- | --- | --- | --- | --- | --- |\n";
+    const SweepPoint* blend_defaults = nullptr;
+    for (const SweepPoint& p : points) {
+      if (!p.config.blend) continue;
+      if (p.config.knob.empty()) blend_defaults = &p;
+      if (!p.ok) {
+        md << "| " << p.config.name << " | failed: " << p.error << " | | | | | | |\n";
+        continue;
+      }
+      md << "| " << (p.config.knob.empty() ? "**blend defaults**" : "`" + p.config.name + "`")
+         << " | " << Fixed(p.table_p99_pct, 2) << " | " << Fixed(p.table_max_pct, 1) << " | "
+         << Fixed(p.walls_p99_pct, 2) << " | " << Fixed(p.walls_max_pct, 1) << " | "
+         << Fixed(p.uniformity, 3) << " | " << Fixed(p.cast_ms, 0) << " | "
+         << (p.front_blend ? "B" : "-") << " |\n";
+    }
+    if (blend_defaults && blend_defaults->ok) {
+      md << "\nThe shipped blend is " << (blend_defaults->front_blend ? "on" : "**not** on")
+         << " the blend's front.\n";
+    }
+    md << "\n![blend: walls step against cast time](sweep_blend.png)\n\n";
+  }
+  md << "Each run's report: `runs/<configuration>/report.md`; the figures: `sweep.csv`.\n";
   std::ofstream(dir / "sweep.md") << md.str();
   Expected<std::string> html = MarkdownToHtmlPage(md.str(), dir.string(), "Sandtable sweep");
   if (html.ok()) std::ofstream(dir / "sweep.html") << *html;

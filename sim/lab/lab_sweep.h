@@ -20,9 +20,13 @@ struct SweepConfig {
   std::string knob;   // "phase-steps"; empty for the defaults
   std::string value;  // "4"
   std::vector<std::string> node_args;
+  // A blend configuration: the run shows and blends (its figures: the blend's steps against its
+  // cast time), "blend" for the shipped blend.
+  bool blend = false;
 };
 
-// The configurations swept: the defaults first, then each knob's values one at a time.
+// The configurations swept: the defaults first, then each calibration knob's values one at a
+// time, then the blend's (blend sampling resolution, the shortfall's fill limit).
 std::vector<SweepConfig> DefaultSweep();
 
 struct SweepPoint {
@@ -35,10 +39,15 @@ struct SweepPoint {
   double round_wall_s = 0;       // the round's wall time on this machine
   int frames_per_projector = 0;  // most
   bool front_device = false, front_compute = false;
+  // Blend configurations: the steps over 5 mm (%) and the slowest node's cast (surface + field).
+  double table_p99_pct = 0, table_max_pct = 0, walls_p99_pct = 0, walls_max_pct = 0;
+  double uniformity = 0, cast_ms = 0;
+  bool front_blend = false;  // walls' p99 against cast time
 };
 
 // Marks the points no other ok point beats on both error and time (front_device against the
-// modeled projection time, front_compute against compute).
+// modeled projection time, front_compute against compute; blend points among themselves,
+// front_blend: walls' p99 step against cast time).
 void MarkParetoFronts(std::vector<SweepPoint>& points);
 
 // The sweep's table as CSV (header + one line per point).

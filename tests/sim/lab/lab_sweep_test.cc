@@ -82,10 +82,51 @@ TEST(SweepConfigTest, DefaultsFirstThenOneKnobAtATime) {
   ASSERT_GE(configs.size(), 5u);
   EXPECT_EQ(configs[0].name, "defaults");
   EXPECT_TRUE(configs[0].node_args.empty());
+  EXPECT_FALSE(configs[0].blend);
+  int blend_defaults = 0, blend_knobs = 0;
   for (size_t i = 1; i < configs.size(); ++i) {
+    if (configs[i].knob.empty()) {  // the shipped blend, shown and blended
+      EXPECT_TRUE(configs[i].blend) << configs[i].name;
+      EXPECT_TRUE(configs[i].node_args.empty());
+      ++blend_defaults;
+      continue;
+    }
     ASSERT_EQ(configs[i].node_args.size(), 1u) << configs[i].name;
     EXPECT_EQ(configs[i].node_args[0], "--" + configs[i].knob + "=" + configs[i].value);
+    blend_knobs += configs[i].blend;
+    // Blend knobs are the node's blend flags.
+    EXPECT_EQ(configs[i].blend, configs[i].knob.rfind("blend-", 0) == 0) << configs[i].name;
   }
+  EXPECT_EQ(blend_defaults, 1);
+  EXPECT_GE(blend_knobs, 2);
+}
+
+// Blend points have a front of their own (walls' p99 against cast time), apart from the
+// calibration's: a blend run never beats a calibration run, nor the other way round.
+TEST(SweepFrontTest, BlendPointsHaveTheirOwnFront) {
+  std::vector<SweepPoint> points = {Point("defaults", 0.12, 2.7, 3.4)};
+  auto blend = [](const std::string& name, double walls_p99, double cast_ms) {
+    SweepPoint p = Point(name, 0.01, 0.1, 0.1);  // better calibration figures than any
+    p.config.blend = true;
+    p.walls_p99_pct = walls_p99;
+    p.cast_ms = cast_ms;
+    return p;
+  };
+  points.push_back(blend("blend", 3.8, 700));
+  points.push_back(blend("blend-step-px=4", 3.9, 1200));  // beaten by the shipped blend
+  points.push_back(blend("blend-step-px=16", 3.6, 650));  // beats it
+  MarkParetoFronts(points);
+  EXPECT_TRUE(points[0].front_device && points[0].front_compute);
+  EXPECT_FALSE(points[0].front_blend);
+  EXPECT_FALSE(points[1].front_blend);
+  EXPECT_FALSE(points[2].front_blend);
+  EXPECT_TRUE(points[3].front_blend);
+  for (size_t i = 1; i < points.size(); ++i) {
+    EXPECT_FALSE(points[i].front_device || points[i].front_compute) << points[i].config.name;
+  }
+  const std::string csv = SweepCsv(points);
+  EXPECT_NE(csv.find("blend-step-px=16,k,,1,"), std::string::npos) << csv;
+  EXPECT_NE(csv.find(",3.600,"), std::string::npos) << csv;
 }
 
 // The subcommand end to end: two configurations, CSV, both plots, sweep.md and sweep.html.
