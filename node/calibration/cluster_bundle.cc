@@ -1,6 +1,7 @@
 #include "node/calibration/cluster_bundle.h"
 
 #include <cmath>
+#include <optional>
 
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
@@ -118,7 +119,41 @@ struct Residual {
   bool camera = false;
 };
 
+// A track's point from the units' models and these poses; none when a view is missing or the
+// rays miss each other by more than 5 px (rms).
+std::optional<Eigen::Vector3d> TriangulateTrack(const ClusterObservations& observations,
+                                                const std::map<NodeId, Rigid3d>& poses,
+                                                const Track& track) {
+  const auto pose = poses.find(track.projector_unit);
+  if (pose == poses.end()) return std::nullopt;
+  TriangulationOptions triangulation;
+  triangulation.min_angle_deg = 1.0;
+  std::vector<TriangulationView> views;
+  const UnitModel& pu = observations.units.at(track.projector_unit);
+  views.push_back({pu.projector, pose->second, track.projector_px});
+  for (const CameraObservation& o : track.cameras) {
+    const auto camera_pose = poses.find(o.camera_unit);
+    if (camera_pose == poses.end()) continue;
+    const UnitModel& cu = observations.units.at(o.camera_unit);
+    views.push_back(
+        {cu.camera, cu.projector_from_camera.Inverse() * camera_pose->second, o.camera_px});
+  }
+  if (views.size() < 2) return std::nullopt;
+  Expected<TriangulationReport> point = TriangulatePoint(views, triangulation);
+  if (!point.ok() || point->rms_px > 5.0) return std::nullopt;
+  return point->point_in_world;
+}
+
 }  // namespace
+
+int TracksThatTriangulate(const ClusterObservations& observations,
+                          const std::map<NodeId, Rigid3d>& projector_from_world) {
+  int n = 0;
+  for (const Track& track : observations.tracks) {
+    n += TriangulateTrack(observations, projector_from_world, track).has_value();
+  }
+  return n;
+}
 
 Status BundleOptions::Check() const {
   if (!(observation_sigma_px > 0) || !(huber_whitened >= 0) || !(outlier_px > 0)) {
@@ -166,39 +201,20 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
   }
   BundleResult result;
   // Triangulate every track from the initial poses.
-  TriangulationOptions triangulation;
-  triangulation.min_angle_deg = 1.0;
   if (warm_start) {
     result.points_in_world = warm->previous->points_in_world;
     result.point_track = warm->previous->point_track;
   }
+  std::map<NodeId, Rigid3d> initial_poses;
+  for (const auto& [id, b] : blocks) initial_poses[id] = PoseFromArray(b.pose);
   for (size_t t = 0; t < (warm_start ? 0 : observations.tracks.size()); ++t) {
-    const Track& track = observations.tracks[t];
-    if (!blocks.count(track.projector_unit)) {
+    const std::optional<Eigen::Vector3d> point =
+        TriangulateTrack(observations, initial_poses, observations.tracks[t]);
+    if (!point) {
       ++result.report.tracks_untriangulated;
       continue;
     }
-    std::vector<TriangulationView> views;
-    const UnitModel& pu = observations.units.at(track.projector_unit);
-    const Rigid3d projector_from_world = PoseFromArray(blocks[track.projector_unit].pose);
-    views.push_back({pu.projector, projector_from_world, track.projector_px});
-    for (const CameraObservation& o : track.cameras) {
-      if (!blocks.count(o.camera_unit)) continue;
-      const UnitModel& cu = observations.units.at(o.camera_unit);
-      const Rigid3d camera_from_world =
-          cu.projector_from_camera.Inverse() * PoseFromArray(blocks[o.camera_unit].pose);
-      views.push_back({cu.camera, camera_from_world, o.camera_px});
-    }
-    if (views.size() < 2) {
-      ++result.report.tracks_untriangulated;
-      continue;
-    }
-    Expected<TriangulationReport> point = TriangulatePoint(views, triangulation);
-    if (!point.ok() || point->rms_px > 5.0) {
-      ++result.report.tracks_untriangulated;
-      continue;
-    }
-    result.points_in_world.push_back(point->point_in_world);
+    result.points_in_world.push_back(*point);
     result.point_track.push_back(static_cast<int>(t));
   }
   const int n_points = static_cast<int>(result.points_in_world.size());

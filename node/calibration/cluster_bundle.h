@@ -110,6 +110,12 @@ struct BundleWarmStart {
   double surface_sigma_m = 0.0002;
 };
 
+// How many tracks triangulate (from the units' models in `observations`) at these poses, by the
+// same test AdjustCluster applies to its initial poses: a solved set of poses can bring in
+// tracks that the initial ones put too far off.
+int TracksThatTriangulate(const ClusterObservations& observations,
+                          const std::map<NodeId, Rigid3d>& projector_from_world);
+
 Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
                                      const std::map<NodeId, Rigid3d>& initial_projector_from_world,
                                      NodeId root, const BundleOptions& options = {},

@@ -33,6 +33,13 @@ namespace sandtable::node {
 
 struct ClusterSolveOptions {
   BundleOptions bundle;
+  // Solves of the bundle at most: after one that left a unit starved (fewer projector
+  // observations than bundle_starved_share of the median unit's), again from its poses when they
+  // let bundle_pass_gain more tracks triangulate than it used (a long chain of initial poses
+  // leaves tracks out).
+  int bundle_passes = 3;
+  double bundle_pass_gain = 0.05;
+  double bundle_starved_share = 0.25;
   PlaneFitOptions plane;  // inlier threshold 3 mm by default here (set in the constructor)
   ModelRegistrationOptions model;
   ModelChangeOptions changes;  // what differs from the model, once it is found

@@ -122,6 +122,7 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
   }
   const Scene model = MovedScene(options.model ? *options.model : scene, options.model_from_table);
   const NodeId root = observations.units.begin()->first;
+  if (options.observations_out) *options.observations_out = observations;
   Expected<node::ClusterSolution> solution = node::ClusterSolution{};
   if (options.planar_path) {
     solution = node::SolvePlanarCluster(root, observations, options.use_model ? &model : nullptr,

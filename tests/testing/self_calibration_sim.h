@@ -39,6 +39,8 @@ struct SimCalibrationOptions {
   bool planar_path = false;
   bool planar_gray_cells = false;  // with the planar path: Gray frames only, decoded to cells
   node::PlanarSolveOptions planar;
+  // When set: the observations the solve was given (the nodes' tracks and factory models).
+  node::ClusterObservations* observations_out = nullptr;
 };
 
 struct SimCalibrationResult {
