@@ -997,9 +997,8 @@ class LabRun {
     return true;
   }
 
-  // {"projector_id": .., "points": ..} -> luminance of each point from that projector (0 where it
-  // does not light it), from the world's truth.
-  Expected<std::vector<double>> TruthLuminance(NodeId projector,
+  // The world's truth of one projector at points (one sample per point, in order).
+  Expected<wire::GroundTruthReply> GroundTruth(NodeId projector,
                                                const std::vector<Eigen::Vector3d>& points) {
     wire::Envelope request;
     wire::GroundTruthRequest* r = request.mutable_ground_truth_request();
@@ -1017,38 +1016,32 @@ class LabRun {
     if (!g.ok() || g.samples_size() != static_cast<int>(points.size())) {
       return UnavailableError("ground truth: " + g.message());
     }
+    return g;
+  }
+
+  // The luminance of each point from that projector (0 where it does not light it).
+  Expected<std::vector<double>> TruthLuminance(NodeId projector,
+                                               const std::vector<Eigen::Vector3d>& points) {
+    Expected<wire::GroundTruthReply> g = GroundTruth(projector, points);
+    if (!g.ok()) return g.status();
     std::vector<double> out(points.size(), 0.0);
-    for (int i = 0; i < g.samples_size(); ++i) {
-      if (g.samples(i).visible()) out[i] = g.samples(i).luminance_cd_per_m2();
+    for (int i = 0; i < g->samples_size(); ++i) {
+      if (g->samples(i).visible()) out[i] = g->samples(i).luminance_cd_per_m2();
     }
     return out;
   }
 
-  // Each projector's truth at points: whether it can project there, lights them, and its pixel.
+  // Whether that projector can project at each point, lights it, and its pixel there.
   Expected<std::vector<SampleTruth>> TruthSamples(NodeId projector,
                                                   const std::vector<Eigen::Vector3d>& points) {
-    wire::Envelope request;
-    wire::GroundTruthRequest* r = request.mutable_ground_truth_request();
-    r->set_projector_id(projector);
-    for (const Eigen::Vector3d& p : points) {
-      wire::Vector3* v = r->add_points_in_table_m();
-      v->set_x(p.x());
-      v->set_y(p.y());
-      v->set_z(p.z());
-    }
-    Expected<wire::Envelope> reply =
-        Call(world_endpoint_, std::move(request), wire::Envelope::kGroundTruthReply, ToMs(5));
-    if (!reply.ok()) return reply.status();
-    const wire::GroundTruthReply& g = reply->ground_truth_reply();
-    if (!g.ok() || g.samples_size() != static_cast<int>(points.size())) {
-      return UnavailableError("ground truth: " + g.message());
-    }
+    Expected<wire::GroundTruthReply> g = GroundTruth(projector, points);
+    if (!g.ok()) return g.status();
     std::vector<SampleTruth> out(points.size());
-    for (int i = 0; i < g.samples_size(); ++i) {
-      out[i].projectable = g.samples(i).projectable();
-      out[i].visible = g.samples(i).visible();
-      out[i].pixel_px =
-          Eigen::Vector2d(g.samples(i).projector_px().x(), g.samples(i).projector_px().y());
+    for (int i = 0; i < g->samples_size(); ++i) {
+      const wire::GroundTruthSample& sample = g->samples(i);
+      out[i].projectable = sample.projectable();
+      out[i].visible = sample.visible();
+      out[i].pixel_px = Eigen::Vector2d(sample.projector_px().x(), sample.projector_px().y());
     }
     return out;
   }

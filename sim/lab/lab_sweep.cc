@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iomanip>
 #include <limits>
 #include <memory>
@@ -118,36 +119,38 @@ void ReadRun(const fs::path& report_path, SweepPoint* point) {
   }
 }
 
-// One plot: error against `x` (device or compute time); the front drawn as a step line.
-std::string PlotScript(const std::vector<SweepPoint>& points, bool device, const fs::path& dir,
-                       const std::string& png) {
+// One plot of the points `in` keeps: y against x, every point labelled, the front (`on_front`)
+// as a step line, the shipped defaults circled.
+struct PlotAxes {
+  std::function<bool(const SweepPoint&)> in, on_front;
+  std::function<double(const SweepPoint&)> x, y;
+  std::string title, x_label, y_label;
+  bool log_y = false;
+};
+
+std::string PlotScript(const std::vector<SweepPoint>& points, const PlotAxes& axes,
+                       const fs::path& dir, const std::string& png) {
   const std::string data = (dir / (png + ".dat")).string();
   const std::string front = (dir / (png + ".front.dat")).string();
   const std::string defaults = (dir / (png + ".defaults.dat")).string();
   std::ofstream all(data), on(front), def(defaults);
   std::vector<const SweepPoint*> sorted;
   for (const SweepPoint& p : points) {
-    if (!p.ok || p.config.blend) continue;
-    const double x = device ? p.device_time_s : p.compute_s;
-    all << x << " " << p.rms_mm << " " << p.config.name << "\n";
-    if (p.config.knob.empty()) def << x << " " << p.rms_mm << "\n";
-    if (device ? p.front_device : p.front_compute) sorted.push_back(&p);
+    if (!p.ok || !axes.in(p)) continue;
+    all << axes.x(p) << " " << axes.y(p) << " " << p.config.name << "\n";
+    if (p.config.knob.empty()) def << axes.x(p) << " " << axes.y(p) << "\n";
+    if (axes.on_front(p)) sorted.push_back(&p);
   }
-  std::sort(sorted.begin(), sorted.end(), [device](const SweepPoint* a, const SweepPoint* b) {
-    return device ? a->device_time_s < b->device_time_s : a->compute_s < b->compute_s;
-  });
-  for (const SweepPoint* p : sorted) {
-    on << (device ? p->device_time_s : p->compute_s) << " " << p->rms_mm << "\n";
-  }
+  std::sort(sorted.begin(), sorted.end(),
+            [&axes](const SweepPoint* a, const SweepPoint* b) { return axes.x(*a) < axes.x(*b); });
+  for (const SweepPoint* p : sorted) on << axes.x(*p) << " " << axes.y(*p) << "\n";
   std::ostringstream s;
   s << "set terminal png size 1000,640\n"
     << "set output '" << (dir / (png + ".png")).string() << "'\n"
-    << "set title 'registration error against "
-    << (device ? "modeled projection time (whole site)" : "compute time (slowest node, one core)")
-    << "'\n"
-    << "set xlabel '" << (device ? "modeled projection time (s)" : "compute time (s)") << "'\n"
-    << "set ylabel 'registration rms (mm)'\n"
-    << "set logscale y\nset grid\nset key top right\n"
+    << "set title '" << axes.title << "'\n"
+    << "set xlabel '" << axes.x_label << "'\n"
+    << "set ylabel '" << axes.y_label << "'\n"
+    << (axes.log_y ? "set logscale y\n" : "") << "set grid\nset key top right\n"
     << "plot '" << data << "' using 1:2 with points pt 7 ps 1.2 lc rgb '#4477aa' title "
     << "'configurations', '" << data
     << "' using 1:2:3 with labels offset char 0.5,0.6 left font ',8' notitle, '" << front
@@ -156,37 +159,33 @@ std::string PlotScript(const std::vector<SweepPoint>& points, bool device, const
   return s.str();
 }
 
-// The blend's plot: the walls' p99 step against the slowest node's cast time.
-std::string BlendPlotScript(const std::vector<SweepPoint>& points, const fs::path& dir,
-                            const std::string& png) {
-  const std::string data = (dir / (png + ".dat")).string();
-  const std::string front = (dir / (png + ".front.dat")).string();
-  const std::string defaults = (dir / (png + ".defaults.dat")).string();
-  std::ofstream all(data), on(front), def(defaults);
-  std::vector<const SweepPoint*> sorted;
-  for (const SweepPoint& p : points) {
-    if (!p.ok || !p.config.blend) continue;
-    all << p.cast_ms << " " << p.walls_p99_pct << " " << p.config.name << "\n";
-    if (p.config.knob.empty()) def << p.cast_ms << " " << p.walls_p99_pct << "\n";
-    if (p.front_blend) sorted.push_back(&p);
-  }
-  std::sort(sorted.begin(), sorted.end(),
-            [](const SweepPoint* a, const SweepPoint* b) { return a->cast_ms < b->cast_ms; });
-  for (const SweepPoint* p : sorted) on << p->cast_ms << " " << p->walls_p99_pct << "\n";
-  std::ostringstream s;
-  s << "set terminal png size 1000,640\n"
-    << "set output '" << (dir / (png + ".png")).string() << "'\n"
-    << "set title 'blend: walls 99th-percentile step over 5 mm against cast time (slowest "
-       "node)'\n"
-    << "set xlabel 'cast: surface + distance field (ms)'\n"
-    << "set ylabel 'walls p99 step (%)'\n"
-    << "set grid\nset key top right\n"
-    << "plot '" << data << "' using 1:2 with points pt 7 ps 1.2 lc rgb '#4477aa' title "
-    << "'configurations', '" << data
-    << "' using 1:2:3 with labels offset char 0.5,0.6 left font ',8' notitle, '" << front
-    << "' using 1:2 with steps lw 2 lc rgb '#cc3311' title 'Pareto front', '" << defaults
-    << "' using 1:2 with points pt 6 ps 3 lw 2 lc rgb '#228833' title 'shipped defaults'\n";
-  return s.str();
+// Registration error against the modeled projection time (device) or the compute time.
+PlotAxes CalibrationAxes(bool device) {
+  PlotAxes a;
+  a.in = [](const SweepPoint& p) { return !p.config.blend; };
+  a.on_front = [device](const SweepPoint& p) { return device ? p.front_device : p.front_compute; };
+  a.x = [device](const SweepPoint& p) { return device ? p.device_time_s : p.compute_s; };
+  a.y = [](const SweepPoint& p) { return p.rms_mm; };
+  a.title =
+      std::string("registration error against ") +
+      (device ? "modeled projection time (whole site)" : "compute time (slowest node, one core)");
+  a.x_label = device ? "modeled projection time (s)" : "compute time (s)";
+  a.y_label = "registration rms (mm)";
+  a.log_y = true;
+  return a;
+}
+
+// The blend's: the walls' p99 step against the slowest node's cast time.
+PlotAxes BlendAxes() {
+  PlotAxes a;
+  a.in = [](const SweepPoint& p) { return p.config.blend; };
+  a.on_front = [](const SweepPoint& p) { return p.front_blend; };
+  a.x = [](const SweepPoint& p) { return p.cast_ms; };
+  a.y = [](const SweepPoint& p) { return p.walls_p99_pct; };
+  a.title = "blend: walls 99th-percentile step over 5 mm against cast time (slowest node)";
+  a.x_label = "cast: surface + distance field (ms)";
+  a.y_label = "walls p99 step (%)";
+  return a;
 }
 
 }  // namespace
@@ -367,7 +366,7 @@ int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std:
     if (!any_calibration) break;
     const std::string png = device ? "sweep_projection" : "sweep_compute";
     const fs::path script = dir / (png + ".gp");
-    std::ofstream(script) << PlotScript(points, device, dir, png);
+    std::ofstream(script) << PlotScript(points, CalibrationAxes(device), dir, png);
     const std::string why = RunGnuplot(script.string(), (dir / (png + ".log")).string());
     if (!why.empty()) plot_notes.push_back(png + ".png not drawn: " + why);
   }
@@ -375,7 +374,7 @@ int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std:
                                      [](const SweepPoint& p) { return p.config.blend && p.ok; });
   if (any_blend) {
     const fs::path script = dir / "sweep_blend.gp";
-    std::ofstream(script) << BlendPlotScript(points, dir, "sweep_blend");
+    std::ofstream(script) << PlotScript(points, BlendAxes(), dir, "sweep_blend");
     const std::string why = RunGnuplot(script.string(), (dir / "sweep_blend.log").string());
     if (!why.empty()) plot_notes.push_back("sweep_blend.png not drawn: " + why);
   }
