@@ -4,6 +4,8 @@
 #include <cmath>
 
 #include "common/base/thread_cpu_time.h"
+#include "common/estimation/resection.h"
+#include "common/estimation/triangulation.h"
 
 namespace sandtable::node {
 namespace {
@@ -61,6 +63,77 @@ UnitCalibration SolvedUnitCalibration(NodeId id, const UnitModel& unit,
   return c;
 }
 
+namespace {
+
+// The units with fewer projector observations in `report` than `share` of the median unit's.
+std::vector<NodeId> StarvedUnits(const BundleReport& report, double share) {
+  std::vector<int> seen;
+  for (const auto& [id, u] : report.units) seen.push_back(u.projector_observations);
+  std::vector<NodeId> out;
+  if (seen.size() < 2) return out;
+  std::sort(seen.begin(), seen.end());
+  const double bound = share * seen[seen.size() / 2];
+  for (const auto& [id, u] : report.units) {
+    if (u.projector_observations < bound) out.push_back(id);
+  }
+  return out;
+}
+
+}  // namespace
+
+std::vector<NodeId> ResectStarvedUnits(const ClusterObservations& observations,
+                                       const BundleResult& bundle,
+                                       const ClusterSolveOptions& options,
+                                       std::map<NodeId, Rigid3d>* projector_from_world) {
+  constexpr int kMinPoints = 12;
+  constexpr double kMaxTriangulationRms_px = 2.0;
+  constexpr double kMaxResectionRms_px = 3.0;
+  const std::vector<NodeId> starved = StarvedUnits(bundle.report, options.bundle_starved_share);
+  std::vector<NodeId> moved;
+  TriangulationOptions triangulation;
+  triangulation.min_angle_deg = 2.0;
+  for (NodeId id : starved) {
+    const auto unit = observations.units.find(id);
+    if (unit == observations.units.end()) continue;
+    std::vector<Eigen::Vector3d> points;
+    std::vector<Eigen::Vector2d> pixels;
+    for (const Track& track : observations.tracks) {
+      if (track.projector_unit != id) continue;
+      std::vector<TriangulationView> views;
+      for (const CameraObservation& o : track.cameras) {
+        if (o.camera_unit == id ||
+            std::find(starved.begin(), starved.end(), o.camera_unit) != starved.end()) {
+          continue;
+        }
+        const auto pose = bundle.projector_from_world.find(o.camera_unit);
+        const auto model = bundle.units.find(o.camera_unit);
+        if (pose == bundle.projector_from_world.end() || model == bundle.units.end()) continue;
+        views.push_back({model->second.camera,
+                         model->second.projector_from_camera.Inverse() * pose->second,
+                         o.camera_px});
+      }
+      if (views.size() < 2) continue;
+      Expected<TriangulationReport> point = TriangulatePoint(views, triangulation);
+      if (!point.ok() || point->rms_px > kMaxTriangulationRms_px) continue;
+      points.push_back(point->point_in_world);
+      pixels.push_back(track.projector_px);
+    }
+    if (static_cast<int>(points.size()) < kMinPoints) continue;
+    ResectionOptions resection;
+    resection.fix_intrinsics = resection.fix_distortion = true;
+    resection.initial_camera = unit->second.projector;
+    resection.loss = ResectionLoss::kHuber;
+    resection.loss_scale_px = 2.0;
+    resection.estimate_uncertainty = false;
+    Expected<ResectionResult> r = EstimateResection(points, pixels, unit->second.projector.width_px,
+                                                    unit->second.projector.height_px, resection);
+    if (!r.ok() || r->report.final_rms_px > kMaxResectionRms_px) continue;
+    (*projector_from_world)[id] = r->camera_from_world;
+    moved.push_back(id);
+  }
+  return moved;
+}
+
 Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& observations,
                                        const std::map<NodeId, LocalGeometry>& local,
                                        const Scene* model, const ClusterSolveOptions& options) {
@@ -89,11 +162,7 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
   // on sandtable-3, with no unit starved, a second solve took 29 % more tracks, the ones the
   // first poses rejected, and registered 0.142 mm rms against 0.123.)
   auto starved = [&](const BundleReport& report) {
-    std::vector<int> seen;
-    for (const auto& [id, u] : report.units) seen.push_back(u.projector_observations);
-    if (seen.size() < 2) return false;
-    std::sort(seen.begin(), seen.end());
-    return seen.front() < options.bundle_starved_share * seen[seen.size() / 2];
+    return !StarvedUnits(report, options.bundle_starved_share).empty();
   };
   for (int pass = 1; pass < options.bundle_passes && starved(bundle->report); ++pass) {
     const int could = TracksThatTriangulate(observations, bundle->projector_from_world);
@@ -105,6 +174,25 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
         "bundle solved again from its own poses: " + std::to_string(bundle->report.tracks_used) +
         " -> " + std::to_string(again->report.tracks_used) + " tracks");
     bundle = std::move(again);
+  }
+  // A unit whose pose was far off, not a few pixels (grid-32 at half resolution: two units 126
+  // and 201 mm off with 43 observations), gains nothing from that. Its projector is resected
+  // instead from the points the other units' cameras triangulate on its light, with its factory
+  // intrinsics, and the bundle solved again from there if that lets more tracks in.
+  if (starved(bundle->report)) {
+    std::map<NodeId, Rigid3d> poses = bundle->projector_from_world;
+    const std::vector<NodeId> moved = ResectStarvedUnits(observations, *bundle, options, &poses);
+    if (!moved.empty()) {
+      Expected<BundleResult> again = AdjustCluster(observations, poses, root, options.bundle);
+      if (again.ok() && again->report.tracks_used > bundle->report.tracks_used) {
+        std::string ids;
+        for (NodeId id : moved) ids += (ids.empty() ? "" : ", ") + std::to_string(id);
+        out.notes.push_back("unit(s) " + ids + " resected from the others' points; bundle " +
+                            std::to_string(bundle->report.tracks_used) + " -> " +
+                            std::to_string(again->report.tracks_used) + " tracks");
+        bundle = std::move(again);
+      }
+    }
   }
   stage_done("bundle");
   out.bundle = bundle->report;

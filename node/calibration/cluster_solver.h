@@ -88,6 +88,15 @@ UnitCalibration SolvedUnitCalibration(NodeId id, const UnitModel& unit,
                                       const Rigid3d& table_from_projector,
                                       const ClusterSolution& solution);
 
+// Units the bundle left starved (ClusterSolveOptions::bundle_starved_share) get a pose resected
+// from the points the other units' cameras triangulate on their light (their factory
+// projector intrinsics held; at least 12 points, resection rms under 3 px), written into
+// `projector_from_world`. Returns the units moved.
+std::vector<NodeId> ResectStarvedUnits(const ClusterObservations& observations,
+                                       const BundleResult& bundle,
+                                       const ClusterSolveOptions& options,
+                                       std::map<NodeId, Rigid3d>* projector_from_world);
+
 Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& observations,
                                        const std::map<NodeId, LocalGeometry>& local,
                                        const Scene* model, const ClusterSolveOptions& options = {});
