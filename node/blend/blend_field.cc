@@ -572,7 +572,6 @@ cv::Mat Blender::Factor(double level, double fill_limit) const {
   for (const auto& [unit, wr] : neighbour_reach_) {
     others.push_back({wr.data(), neighbour_gain_.at(unit).data()});
   }
-  const double limit = fill_limit;
   struct Term {
     double room, share;  // what it may deliver (irradiance); its share of the intended light
   };
@@ -583,7 +582,7 @@ cv::Mat Blender::Factor(double level, double fill_limit) const {
     float delivered = own_wr_[i];
     for (const Other& o : others) delivered += o.wr[i];
     const float unclipped = static_cast<float>(level) * own_gain_[i] / std::max(delivered, 1e-30f);
-    if (limit <= 1.0) {
+    if (fill_limit <= 1.0) {
       f[i] = std::min(1.0f, unclipped);
       continue;
     }
@@ -601,12 +600,13 @@ cv::Mat Blender::Factor(double level, double fill_limit) const {
       continue;
     }
     terms.clear();
-    const double own_room = std::min(own_cap, limit * own_share * target);
+    const double own_room = std::min(own_cap, fill_limit * own_share * target);
     terms.push_back({own_room, own_share});
     for (const Other& o : others) {
       if (o.wr[i] <= 0) continue;
       const double share = o.wr[i] / delivered;
-      terms.push_back({std::min(static_cast<double>(o.cap[i]), limit * share * target), share});
+      terms.push_back(
+          {std::min(static_cast<double>(o.cap[i]), fill_limit * share * target), share});
     }
     // Raise every share by one factor c until the intended light is reached; the terms run
     // out of room in the order of room / share.

@@ -1046,67 +1046,28 @@ class LabRun {
     return out;
   }
 
-  // Where the table's steps over the bound lie (PlaceOfStep): each pair's two samples
-  // and a ring of 8 points 3 view pixels around each, in every calibrated projector's truth.
-  Expected<json> PlaceSteps(const StepStats& steps, const TopView& view, double bound_pct) {
-    constexpr int kRing = 8;
-    constexpr double kRingRadius_px = 3.0;
+  // Where the table's steps over the bound lie (PlaceSteps), in every calibrated
+  // projector's truth.
+  Expected<json> PlaceTableSteps(const StepStats& steps, const TopView& view, double bound_pct) {
     const Eigen::Vector2d span = view.area_max_m - view.area_min_m;
     auto at = [&](double x, double y) {
       return Eigen::Vector3d(
           view.area_min_m.x() + (x + 0.5) / view.luminance.cols * span.x(),
           view.area_min_m.y() + (1.0 - (y + 0.5) / view.luminance.rows) * span.y(), 0.0);
     };
-    std::vector<const StepStats::Pair*> pairs;
-    std::vector<Eigen::Vector3d> points;  // per pair: a, a's ring, b, b's ring
-    for (const StepStats::Pair& pair : steps.worst) {
-      if (pair.step_pct <= bound_pct) break;
-      pairs.push_back(&pair);
-      for (const Eigen::Vector3d& px : {pair.a, pair.b}) {
-        points.push_back(at(px.x(), px.y()));
-        for (int k = 0; k < kRing; ++k) {
-          const double angle = k * 2.0 * M_PI / kRing;
-          points.push_back(at(px.x() + kRingRadius_px * std::cos(angle),
-                              px.y() + kRingRadius_px * std::sin(angle)));
-        }
-      }
-    }
-    const size_t per_pair = 2 * (kRing + 1);
-    std::vector<std::vector<ProjectorPairTruth>> truths(pairs.size());
+    std::vector<ProjectorSize> projectors;
     for (const UnitSpec& unit : inputs_.site.units) {
-      if (!calibrated_.count(unit.id) || points.empty()) continue;
-      Expected<std::vector<SampleTruth>> t = TruthSamples(unit.id, points);
-      if (!t.ok()) return t.status();
-      for (size_t i = 0; i < pairs.size(); ++i) {
-        ProjectorPairTruth p;
-        p.width_px = unit.projector.model.width_px;
-        p.height_px = unit.projector.model.height_px;
-        for (int side = 0; side < 2; ++side) {
-          const size_t base = i * per_pair + side * (kRing + 1);
-          SampleTruth s = (*t)[base];
-          for (int k = 1; k <= kRing; ++k) {
-            if ((*t)[base + k].visible != s.visible) s.lit_varies_near = true;
-          }
-          (side == 0 ? p.a : p.b) = s;
-        }
-        truths[i].push_back(p);
-      }
+      if (!calibrated_.count(unit.id)) continue;
+      projectors.push_back(
+          {unit.id, unit.projector.model.width_px, unit.projector.model.height_px});
     }
-    int count[3] = {0, 0, 0};
-    double interior_max = 0.0;
-    for (size_t i = 0; i < pairs.size(); ++i) {
-      const StepPlace place = PlaceOfStep(truths[i]);
-      ++count[static_cast<int>(place)];
-      if (place == StepPlace::kInterior) interior_max = std::max(interior_max, pairs[i]->step_pct);
-    }
-    return json{{"bound_pct", bound_pct},
-                {"pairs", pairs.size()},
-                {"pairs_capped", steps.worst.size() == StepStats::kWorstPairs &&
-                                     steps.worst.back().step_pct > bound_pct},
-                {StepPlaceName(StepPlace::kInterior), count[0]},
-                {StepPlaceName(StepPlace::kOneEdge), count[1]},
-                {StepPlaceName(StepPlace::kTwoEdges), count[2]},
-                {"interior_max_pct", interior_max}};
+    Expected<StepPlaces> places =
+        PlaceSteps(steps, bound_pct, at, projectors,
+                   [this](NodeId id, const std::vector<Eigen::Vector3d>& points) {
+                     return TruthSamples(id, points);
+                   });
+    if (!places.ok()) return places.status();
+    return places->ToJson(bound_pct);
   }
 
   bool Blend() {
@@ -1238,7 +1199,7 @@ class LabRun {
               p["black_step_pct"] = black_table.max_pct;
               p["black_match"] = options_.black_match == "on";
               p["table"] = table.ToJson();
-              Expected<json> places = PlaceSteps(table, a, kTableStepBoundPct);
+              Expected<json> places = PlaceTableSteps(table, a, kTableStepBoundPct);
               if (!places.ok()) {
                 m.error = places.status().ToString();
                 return m;

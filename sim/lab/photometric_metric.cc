@@ -306,6 +306,74 @@ StepPlace PlaceOfStep(const std::vector<ProjectorPairTruth>& projectors, double 
                     : (edges == 1 ? StepPlace::kOneEdge : StepPlace::kTwoEdges);
 }
 
+Expected<StepPlaces> PlaceSteps(
+    const StepStats& steps, double bound_pct,
+    const std::function<Eigen::Vector3d(double x, double y)>& point_of_pixel,
+    const std::vector<ProjectorSize>& projectors,
+    const std::function<
+        Expected<std::vector<SampleTruth>>(NodeId, const std::vector<Eigen::Vector3d>&)>& truth) {
+  constexpr int kRing = 8;
+  constexpr double kRingRadius_px = 3.0;
+  std::vector<const StepStats::Pair*> pairs;
+  std::vector<Eigen::Vector3d> points;  // per pair: a, a's ring, b, b's ring
+  for (const StepStats::Pair& pair : steps.worst) {
+    if (pair.step_pct <= bound_pct) break;
+    pairs.push_back(&pair);
+    for (const Eigen::Vector3d& px : {pair.a, pair.b}) {
+      points.push_back(point_of_pixel(px.x(), px.y()));
+      for (int k = 0; k < kRing; ++k) {
+        const double angle = k * 2.0 * M_PI / kRing;
+        points.push_back(point_of_pixel(px.x() + kRingRadius_px * std::cos(angle),
+                                        px.y() + kRingRadius_px * std::sin(angle)));
+      }
+    }
+  }
+  const size_t per_pair = 2 * (kRing + 1);
+  std::vector<std::vector<ProjectorPairTruth>> truths(pairs.size());
+  for (const ProjectorSize& projector : projectors) {
+    if (points.empty()) break;
+    Expected<std::vector<SampleTruth>> t = truth(projector.id, points);
+    if (!t.ok()) return t.status();
+    if (t->size() != points.size()) return InternalError("truth: one sample per point expected");
+    for (size_t i = 0; i < pairs.size(); ++i) {
+      ProjectorPairTruth p;
+      p.width_px = projector.width_px;
+      p.height_px = projector.height_px;
+      for (int side = 0; side < 2; ++side) {
+        const size_t base = i * per_pair + side * (kRing + 1);
+        SampleTruth s = (*t)[base];
+        for (int k = 1; k <= kRing; ++k) {
+          if ((*t)[base + k].visible != s.visible) s.lit_varies_near = true;
+        }
+        (side == 0 ? p.a : p.b) = s;
+      }
+      truths[i].push_back(p);
+    }
+  }
+  StepPlaces places;
+  places.pairs = static_cast<int>(pairs.size());
+  places.pairs_capped =
+      steps.worst.size() == StepStats::kWorstPairs && steps.worst.back().step_pct > bound_pct;
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    const StepPlace place = PlaceOfStep(truths[i]);
+    ++places.count[static_cast<int>(place)];
+    if (place == StepPlace::kInterior) {
+      places.interior_max_pct = std::max(places.interior_max_pct, pairs[i]->step_pct);
+    }
+  }
+  return places;
+}
+
+nlohmann::json StepPlaces::ToJson(double bound_pct) const {
+  return {{"bound_pct", bound_pct},
+          {"pairs", pairs},
+          {"pairs_capped", pairs_capped},
+          {StepPlaceName(StepPlace::kInterior), count[0]},
+          {StepPlaceName(StepPlace::kOneEdge), count[1]},
+          {StepPlaceName(StepPlace::kTwoEdges), count[2]},
+          {"interior_max_pct", interior_max_pct}};
+}
+
 nlohmann::json StepStats::ToJson() const {
   return {{"pairs", pairs},
           {"pairs_straddled", pairs_straddled},

@@ -30,6 +30,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
+#include "common/base/ids.h"
 #include "common/base/status.h"
 #include "common/camera/camera_model.h"
 #include "common/geometry/rigid3.h"
@@ -109,6 +110,29 @@ struct ProjectorPairTruth {
 enum class StepPlace { kInterior, kOneEdge, kTwoEdges };
 const char* StepPlaceName(StepPlace place);
 StepPlace PlaceOfStep(const std::vector<ProjectorPairTruth>& projectors, double near_px = 8.0);
+
+// Where the steps of `steps.worst` over `bound_pct` lie (PlaceOfStep), from each projector's
+// truth at each pair's samples and a ring of 8 points 3 pixels around each. `point_of_pixel`
+// maps a top-view pixel (x, y) to its table point; `truth` gives one projector's truth at
+// points (one sample each, in order). Counts per place, and the largest step away from every
+// edge.
+struct ProjectorSize {
+  NodeId id = kInvalidNodeId;
+  int width_px = 0, height_px = 0;
+};
+struct StepPlaces {
+  int pairs = 0;
+  bool pairs_capped = false;  // steps.worst held only the largest kWorstPairs
+  int count[3] = {0, 0, 0};   // by StepPlace
+  double interior_max_pct = 0.0;
+  nlohmann::json ToJson(double bound_pct) const;
+};
+Expected<StepPlaces> PlaceSteps(
+    const StepStats& steps, double bound_pct,
+    const std::function<Eigen::Vector3d(double x, double y)>& point_of_pixel,
+    const std::vector<ProjectorSize>& projectors,
+    const std::function<
+        Expected<std::vector<SampleTruth>>(NodeId, const std::vector<Eigen::Vector3d>&)>& truth);
 
 // Steps in a top view's luminance (CV_32FC1) on faces of `kind`, pairs `spacing_px` apart.
 // `over_1pct` (optional): CV_8UC1 of the view's size, 255 at both pixels of each pair whose

@@ -137,45 +137,33 @@ Measured Measure(Fixture& f, const cv::Mat& shadow_ids) {
     ++n;
   }
   {
-    // Where the table's steps over the bound lie (PlaceOfStep).
+    // Where the table's steps over the bound lie (PlaceSteps).
     const Eigen::Vector2d span = (b.max() - b.min()).head<2>();
-    auto at = [&](const Eigen::Vector3d& px) {
-      return Eigen::Vector3d(b.min().x() + (px.x() + 0.5) / luminance.cols * span.x(),
-                             b.max().y() - (px.y() + 0.5) / luminance.rows * span.y(), 1e-4);
+    auto at = [&](double x, double y) {
+      return Eigen::Vector3d(b.min().x() + (x + 0.5) / luminance.cols * span.x(),
+                             b.max().y() - (y + 0.5) / luminance.rows * span.y(), 0.0);
     };
-    for (const sim::StepStats::Pair& pair : m.table.worst) {
-      if (pair.step_pct <= kTableStepPct) break;
-      std::vector<sim::ProjectorPairTruth> truths;
-      for (const sim::UnitSpec& unit : f.site.units) {
-        sim::ProjectorPairTruth t;
-        t.width_px = unit.projector.model.width_px;
-        t.height_px = unit.projector.model.height_px;
-        for (auto [point, sample] : {std::pair{pair.a, &t.a}, std::pair{pair.b, &t.b}}) {
-          Expected<sim::ProjectorTruth> truth =
-              f.world->ProjectorTruthAtPoint(unit.id, at(point), 2e-4);
-          if (!truth.ok()) continue;
-          sample->projectable = truth->sample.projectable;
-          sample->visible = truth->sample.visible;
-          sample->pixel_px = truth->sample.pixel_px;
-          // A ring of 8 points 3 view pixels (~3 mm) around the sample.
-          for (int k = 0; k < 8 && !sample->lit_varies_near; ++k) {
-            const double angle = k * M_PI / 4;
-            const Eigen::Vector3d q =
-                point + 3.0 * Eigen::Vector3d(std::cos(angle), std::sin(angle), 0.0);
-            Expected<sim::ProjectorTruth> near =
-                f.world->ProjectorTruthAtPoint(unit.id, at(q), 2e-4);
-            if (near.ok() && near->sample.visible != truth->sample.visible) {
-              sample->lit_varies_near = true;
-            }
-          }
-        }
-        truths.push_back(t);
+    std::vector<sim::ProjectorSize> projectors;
+    for (const sim::UnitSpec& unit : f.site.units) {
+      projectors.push_back(
+          {unit.id, unit.projector.model.width_px, unit.projector.model.height_px});
+    }
+    auto truth = [&f](NodeId id, const std::vector<Eigen::Vector3d>& points)
+        -> Expected<std::vector<sim::SampleTruth>> {
+      std::vector<sim::SampleTruth> out(points.size());
+      for (size_t i = 0; i < points.size(); ++i) {
+        Expected<sim::ProjectorTruth> t = f.world->ProjectorTruthAtPoint(id, points[i]);
+        if (!t.ok()) return t.status();
+        out[i] = {t->sample.projectable, t->sample.visible, t->sample.pixel_px, false};
       }
-      const sim::StepPlace place = sim::PlaceOfStep(truths);
-      ++m.table_over_bound[static_cast<int>(place)];
-      if (place == sim::StepPlace::kInterior) {
-        m.table_interior_max_pct = std::max(m.table_interior_max_pct, pair.step_pct);
-      }
+      return out;
+    };
+    Expected<sim::StepPlaces> places =
+        sim::PlaceSteps(m.table, kTableStepPct, at, projectors, truth);
+    EXPECT_TRUE(places.ok()) << places.status().ToString();
+    if (places.ok()) {
+      for (int k = 0; k < 3; ++k) m.table_over_bound[k] = places->count[k];
+      m.table_interior_max_pct = places->interior_max_pct;
     }
   }
   m.roof_top = sim::MeasureImageSteps(luminance, ids, f.faces, sim::SurfaceKind::kRoof, spacing_px,
