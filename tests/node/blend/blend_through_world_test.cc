@@ -236,6 +236,9 @@ void Print(const char* label, const Measured& m) {
             << " near two; walls over 2 %: "
             << std::count_if(m.wall.worst.begin(), m.wall.worst.end(),
                              [](const sim::StepStats::Pair& p) { return p.step_pct > 2.0; })
+            << ", over 5 %: "
+            << std::count_if(m.wall.worst.begin(), m.wall.worst.end(),
+                             [](const sim::StepStats::Pair& p) { return p.step_pct > 5.0; })
             << " of " << m.wall.pairs << "\n"
             << "  max at: table " << m.table.max_at.transpose() << ", wall "
             << m.wall.max_at.transpose() << ", roof " << m.roof.max_at.transpose() << "\n";
