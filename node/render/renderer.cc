@@ -174,25 +174,31 @@ void main() {
 }
 )";
 
-// Output pixel p shows the ideal image at u_source[p] (GL texture coordinates, negative: none),
-// times the mask (encoded on upload, or linear for float targets).
+// Output pixel p shows the ideal image at u_warp[p].xy (GL texture coordinates, negative: none),
+// times the mask u_warp[p].zw (encoded on upload, or linear for float targets); without a
+// pre-warp the mask alone, u_mask[p].xy.
 constexpr const char* kWarpFragment = R"(
 uniform sampler2D u_image;
-uniform sampler2D u_source;
+uniform sampler2D u_warp;
 uniform sampler2D u_mask;
 uniform float u_lift_gamma;
 out vec4 o_colour;
 void main() {
   ivec2 p = ivec2(gl_FragCoord.xy);
 #if DISTORT
-  vec2 t = texelFetch(u_source, p, 0).rg;
+  vec4 w = texelFetch(u_warp, p, 0);
+  vec2 t = w.xy;
   vec3 c = (t.x <= 0.0 || t.y <= 0.0 || t.x >= 1.0 || t.y >= 1.0) ? vec3(0.0)
                                                                   : texture(u_image, t).rgb;
 #else
   vec3 c = texelFetch(u_image, p, 0).rgb;
 #endif
 #if MASKED
+#if DISTORT
+  vec2 m = w.zw;
+#else
   vec2 m = texelFetch(u_mask, p, 0).rg;
+#endif
   c *= m.r;
 #if LIFTED
   c = pow(pow(c, vec3(u_lift_gamma)) + m.g, vec3(1.0 / u_lift_gamma));
@@ -524,7 +530,7 @@ Renderer::~Renderer() {
   }
   for (const auto& [key, p] : variants_) glDeleteProgram(p);
   std::vector<GLuint> textures = textures_;
-  for (GLuint t : {shadow_texture_, ideal_colour_, source_texture_, mask_texture_, pattern_texture_,
+  for (GLuint t : {shadow_texture_, ideal_colour_, warp_texture_, mask_texture_, pattern_texture_,
                    floor_texture_}) {
     if (t) textures.push_back(t);
   }
@@ -555,10 +561,7 @@ Status Renderer::SetView(const ProjectorView& view) {
   has_view_ = true;
   last_warped_ = false;
   overlay_view_dirty_ = true;
-  if (source_texture_) {
-    glDeleteTextures(1, &source_texture_);
-    source_texture_ = 0;
-  }
+  source_rows_.release();
   const bool fold = options_.fold_prewarp && view.needs_prewarp();
   if (fold) {
     // Edges short enough that the lens model's curvature bends them by at most
@@ -588,13 +591,15 @@ Status Renderer::SetView(const ProjectorView& view) {
         }
       }
     }
-    const cv::Mat gl_rows = FlippedContinuous(coords);
-    // 16-bit normalized (0.02 px at 1280 px: a quarter of the bandwidth of RG32F); 0 and 1
-    // (clamped) mean "no source".
-    source_texture_ = MakeTexture2D(GL_RG16, size_.width, size_.height, GL_RG, GL_FLOAT,
-                                    gl_rows.data, GL_NEAREST);
+    // 16-bit normalized for an 8-bit target (0.02 px steps at 1280 px; -1 clamps to 0, and 0
+    // and 1 mean "no source"), floats for a float target. Source and mask go in one texture
+    // (UploadWarpInputs): one fetch a pixel in the warp instead of two 16-bit fetches, 3-4 ms a
+    // frame less on llvmpipe at 1280x800 (docs/render.md).
+    if (!context_->float_output()) coords.convertTo(coords, CV_16UC2, 65535.0);
+    source_rows_ = FlippedContinuous(coords);
     ST_RETURN_IF_ERROR(EnsureIdealTarget());
   }
+  ST_RETURN_IF_ERROR(UploadWarpInputs());
   return CheckGl("setting the projector view");
 }
 
@@ -611,53 +616,104 @@ Status Renderer::SetMask(const cv::Mat& mask) {
         "size " +
         std::to_string(size_.width) + "x" + std::to_string(size_.height));
   }
-  cv::Mat factor, lift;
-  if (mask.type() == CV_8UC1) {
-    mask.convertTo(factor, CV_32F, 1.0 / 255.0);
-  } else if (mask.type() == CV_32FC2) {
-    cv::Mat channels[2];
-    cv::split(mask, channels);
-    factor = channels[0];
-    lift = channels[1];
-  } else {
-    factor = mask.clone();
-  }
-  cv::max(cv::min(factor, 1.0), 0.0, factor);
-  // Encoded once here (the colour note in renderer.h); a float target holds linear values.
-  if (!context_->float_output()) cv::pow(factor, 1.0 / options_.display_gamma, factor);
-  // The lift stays linear (added in linear light in the shader).
-  double lift_max = 0.0;
-  if (lift.empty()) {
-    lift = cv::Mat::zeros(factor.size(), CV_32FC1);
-  } else {
-    cv::max(cv::min(lift, 1.0), 0.0, lift);
-    cv::minMaxLoc(lift, nullptr, &lift_max);
-  }
-  // 16-bit normalized, converted here: a float upload into RG16 goes through the driver's
-  // per-texel conversion, which made the whole swap 2-3x slower on llvmpipe (9.6-17 ms against
-  // 4.3-5.2 ms at 1280x800, sandtable_render_bench's set_mask_ms), and a re-blend's first frame
-  // waits for it. A float output keeps the float values for tests.
+  // One pass over the rows into a buffer kept between masks: clamped to [0, 1] (NaN: 0), the
+  // factor encoded once (the colour note in renderer.h), the lift linear (added in linear light
+  // in the shader); a float target holds linear values. 16-bit normalized for an 8-bit target,
+  // converted here: a float upload into a 16-bit texture goes through the driver's per-texel
+  // conversion, 2-3x slower on llvmpipe. A re-blend's first frame waits for this swap (the
+  // buffers made anew each time cost as much again in page faults; set_mask_ms of
+  // sandtable_render_bench).
   const bool is_float = context_->float_output();
-  if (!is_float) {
-    factor.convertTo(factor, CV_16U, 65535.0);
-    lift.convertTo(lift, CV_16U, 65535.0);
-  }
-  cv::Mat both;
-  cv::merge(std::vector<cv::Mat>{factor, lift}, both);
-  const cv::Mat gl_rows = FlippedContinuous(both);
-  const GLenum type = is_float ? GL_FLOAT : GL_UNSIGNED_SHORT;
-  if (!mask_texture_) {
-    mask_texture_ = MakeTexture2D(is_float ? GL_RG32F : GL_RG16, size_.width, size_.height, GL_RG,
-                                  type, gl_rows.data, GL_NEAREST);
-  } else {
-    glBindTexture(GL_TEXTURE_2D, mask_texture_);
-    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
-    glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, size_.width, size_.height, GL_RG, type, gl_rows.data);
+  const int cols = size_.width;
+  mask_rows_.create(size_, is_float ? CV_32FC2 : CV_16UC2);
+  std::vector<float> factor(cols), lift(cols, 0.0f);
+  cv::Mat factor_row(1, cols, CV_32F, factor.data());
+  auto unit = [](float x) { return x > 0.0f ? (x < 1.0f ? x : 1.0f) : 0.0f; };
+  float lift_max = 0.0f;
+  for (int v = 0; v < size_.height; ++v) {
+    if (mask.type() == CV_8UC1) {
+      const uint8_t* in = mask.ptr<uint8_t>(v);
+      for (int u = 0; u < cols; ++u) factor[u] = in[u] * (1.0f / 255.0f);
+    } else if (mask.type() == CV_32FC1) {
+      const float* in = mask.ptr<float>(v);
+      for (int u = 0; u < cols; ++u) factor[u] = unit(in[u]);
+    } else {
+      const float* in = mask.ptr<float>(v);
+      for (int u = 0; u < cols; ++u) {
+        factor[u] = unit(in[2 * u]);
+        lift[u] = unit(in[2 * u + 1]);
+        lift_max = std::max(lift_max, lift[u]);
+      }
+    }
+    if (!is_float) cv::pow(factor_row, 1.0 / options_.display_gamma, factor_row);
+    const int gl_row = size_.height - 1 - v;
+    if (is_float) {
+      float* out = mask_rows_.ptr<float>(gl_row);
+      for (int u = 0; u < cols; ++u) {
+        out[2 * u] = factor[u];
+        out[2 * u + 1] = lift[u];
+      }
+    } else {
+      uint16_t* out = mask_rows_.ptr<uint16_t>(gl_row);
+      for (int u = 0; u < cols; ++u) {
+        out[2 * u] = static_cast<uint16_t>(factor[u] * 65535.0f + 0.5f);
+        out[2 * u + 1] = static_cast<uint16_t>(lift[u] * 65535.0f + 0.5f);
+      }
+    }
   }
   has_mask_ = true;
-  has_lift_ = lift_max > 0.0;
+  has_lift_ = lift_max > 0.0f;
   if (!options_.fold_prewarp) ST_RETURN_IF_ERROR(EnsureIdealTarget());
+  ST_RETURN_IF_ERROR(UploadWarpInputs());
   return CheckGl("setting the mask");
+}
+
+Status Renderer::UploadWarpInputs() {
+  const bool is_float = context_->float_output();
+  auto upload = [&](unsigned int* texture, const cv::Mat& texels) {
+    const GLenum format = texels.channels() == 4 ? GL_RGBA : GL_RG;
+    const GLint internal = texels.channels() == 4 ? (is_float ? GL_RGBA32F : GL_RGBA16)
+                                                  : (is_float ? GL_RG32F : GL_RG16);
+    const GLenum type = is_float ? GL_FLOAT : GL_UNSIGNED_SHORT;
+    if (!*texture) {
+      *texture = MakeTexture2D(internal, size_.width, size_.height, format, type, texels.data,
+                               GL_NEAREST);
+    } else {
+      glBindTexture(GL_TEXTURE_2D, *texture);
+      glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+      glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, size_.width, size_.height, format, type,
+                      texels.data);
+    }
+  };
+  if (!source_rows_.empty()) {
+    // Packed: (source x, y) from the view, (factor, lift) from the mask, or (1, 0) without one.
+    warp_texels_.create(size_, CV_MAKETYPE(source_rows_.depth(), 4));
+    const int to_source[] = {0, 0, 1, 1};
+    cv::mixChannels(&source_rows_, 1, &warp_texels_, 1, to_source, 2);
+    if (has_mask_) {
+      const int to_mask[] = {0, 2, 1, 3};
+      cv::mixChannels(&mask_rows_, 1, &warp_texels_, 1, to_mask, 2);
+    } else {
+      const double one = is_float ? 1.0 : 65535.0;
+      for (int v = 0; v < warp_texels_.rows; ++v) {
+        for (int u = 0; u < warp_texels_.cols; ++u) {
+          if (is_float) {
+            float* t = warp_texels_.ptr<float>(v, u);
+            t[2] = static_cast<float>(one);
+            t[3] = 0.0f;
+          } else {
+            uint16_t* t = warp_texels_.ptr<uint16_t>(v, u);
+            t[2] = static_cast<uint16_t>(one);
+            t[3] = 0;
+          }
+        }
+      }
+    }
+    upload(&warp_texture_, warp_texels_);
+  } else if (has_mask_) {
+    upload(&mask_texture_, mask_rows_);
+  }
+  return CheckGl("uploading the warp's inputs");
 }
 
 float Renderer::LiftGamma() const {
@@ -902,7 +958,19 @@ Status Renderer::DrawScene(const RenderContent& content, unsigned int target, bo
   glActiveTexture(GL_TEXTURE0);
   glBindVertexArray(scene_vao_);
   GLuint current = 0;
-  for (const Group& g : groups_) {
+  // Nearest groups first (by their bounds' centres along the projector's axis): what a building
+  // hides of the table then fails the depth test before it is shaded.
+  std::vector<std::pair<double, int>> order;
+  for (int i = 0; i < static_cast<int>(groups_.size()); ++i) {
+    const Eigen::Vector3d centre = view_.projector_from_table.rotation *
+                                       groups_[i].bounds.center() +
+                                   view_.projector_from_table.translation;
+    order.emplace_back(groups_[i].bounds.isEmpty() ? 0.0 : centre.z(), i);
+  }
+  std::stable_sort(order.begin(), order.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (const auto& [depth, index] : order) {
+    const Group& g = groups_[index];
     if (OutsideFrustum(view_.clip_from_table, g.bounds)) {
       ++stats->groups_culled;
       continue;
@@ -990,11 +1058,11 @@ Status Renderer::DrawWarp() {
   glUseProgram(*program);
   auto loc = [&](const char* name) { return glGetUniformLocation(*program, name); };
   glUniform1i(loc("u_image"), 0);
-  glUniform1i(loc("u_source"), 1);
+  glUniform1i(loc("u_warp"), 1);
   glUniform1i(loc("u_mask"), 2);
   glUniform1f(loc("u_lift_gamma"), LiftGamma());
   glActiveTexture(GL_TEXTURE1);
-  glBindTexture(GL_TEXTURE_2D, source_texture_);
+  glBindTexture(GL_TEXTURE_2D, warp_texture_);
   glActiveTexture(GL_TEXTURE2);
   glBindTexture(GL_TEXTURE_2D, mask_texture_);
   glActiveTexture(GL_TEXTURE0);

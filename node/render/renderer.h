@@ -127,6 +127,7 @@ class Renderer {
   Status DrawWarp();
   Status DrawPattern(const RenderContent& content);
   Status EnsureIdealTarget();
+  Status UploadWarpInputs();
 
   struct Group {
     int first_vertex = 0, vertex_count = 0;
@@ -154,7 +155,15 @@ class Renderer {
   unsigned int shadow_fbo_ = 0, shadow_texture_ = 0;
   unsigned int ideal_fbo_ = 0, ideal_colour_ = 0, ideal_depth_ = 0;
   unsigned int output_depth_ = 0;
-  unsigned int source_texture_ = 0, mask_texture_ = 0, pattern_texture_ = 0;
+  // The warp pass's inputs (UploadWarpInputs): with an unfolded pre-warp one RGBA texture of
+  // (source x, y, mask factor, lift) per output pixel; otherwise the mask alone (RG). The CPU
+  // copies (GL row order) let either change without the other.
+  unsigned int warp_texture_ = 0, mask_texture_ = 0, pattern_texture_ = 0;
+  cv::Mat source_rows_;  // GL texture coordinates of the ideal image, CV_16UC2 (0: none) or
+                         // CV_32FC2 for a float target (-1: none); empty without a pre-warp
+  cv::Mat mask_rows_;    // factor (encoded; linear for a float target), lift (linear): CV_16UC2
+                         // (CV_32FC2 for a float target)
+  cv::Mat warp_texels_;  // the packed texture's texels, kept between masks
   unsigned int floor_texture_ = 0;
   bool has_view_ = false, has_mask_ = false;
   bool last_warped_ = false;  // the ideal image holds the last frame (see CanRewarp)
