@@ -865,7 +865,18 @@ Status Renderer::DrawShadow(const Eigen::Vector3d& sun) {
   glUniformMatrix4fv(glGetUniformLocation(shadow_program_, "u_sun_clip_from_table"), 1, GL_FALSE,
                      glm::value_ptr(m));
   glBindVertexArray(shadow_vao_);
-  for (const Group& g : shadow_groups_) glDrawArrays(GL_TRIANGLES, g.first_vertex, g.vertex_count);
+  // A group flat at the bottom of the scene (a table, a ground plane) shadows nothing under a sun
+  // above the horizon: everything else is at or above it. Left out, its texels keep the cleared
+  // far depth, and the table is lit there as it would be; on llvmpipe it was most of the pass's
+  // fill (a table covers the whole map).
+  constexpr double kFlatM = 1e-6;
+  for (const Group& g : shadow_groups_) {
+    if (!g.bounds.isEmpty() && g.bounds.sizes().z() < kFlatM &&
+        g.bounds.min().z() < scene_bounds_.min().z() + kFlatM) {
+      continue;
+    }
+    glDrawArrays(GL_TRIANGLES, g.first_vertex, g.vertex_count);
+  }
   glDisable(GL_POLYGON_OFFSET_FILL);
   return CheckGl("drawing the shadow map");
 }
