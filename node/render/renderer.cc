@@ -561,7 +561,14 @@ Status Renderer::SetView(const ProjectorView& view) {
   has_view_ = true;
   last_warped_ = false;
   overlay_view_dirty_ = true;
-  source_rows_.release();
+  const bool packed = view.needs_prewarp() && !options_.fold_prewarp;
+  if (!packed && mask_in_warp_texels_) {
+    // The mask goes back to a texture of its own.
+    mask_rows_.create(size_, CV_MAKETYPE(warp_texels_.depth(), 2));
+    const int from_warp[] = {2, 0, 3, 1};
+    cv::mixChannels(&warp_texels_, 1, &mask_rows_, 1, from_warp, 2);
+    mask_in_warp_texels_ = false;
+  }
   const bool fold = options_.fold_prewarp && view.needs_prewarp();
   if (fold) {
     // Edges short enough that the lens model's curvature bends them by at most
@@ -593,13 +600,32 @@ Status Renderer::SetView(const ProjectorView& view) {
     }
     // 16-bit normalized for an 8-bit target (0.02 px steps at 1280 px; -1 clamps to 0, and 0
     // and 1 mean "no source"), floats for a float target. Source and mask go in one texture
-    // (UploadWarpInputs): one fetch a pixel in the warp instead of two 16-bit fetches, 3-4 ms a
+    // (warp_texels_): one fetch a pixel in the warp instead of two 16-bit fetches, 3-4 ms a
     // frame less on llvmpipe at 1280x800 (docs/render.md).
-    if (!context_->float_output()) coords.convertTo(coords, CV_16UC2, 65535.0);
-    source_rows_ = FlippedContinuous(coords);
+    const bool is_float = context_->float_output();
+    if (!is_float) coords.convertTo(coords, CV_16UC2, 65535.0);
+    const cv::Mat source = FlippedContinuous(coords);
+    warp_texels_.create(size_, CV_MAKETYPE(source.depth(), 4));
+    const int to_source[] = {0, 0, 1, 1};
+    cv::mixChannels(&source, 1, &warp_texels_, 1, to_source, 2);
+    if (has_mask_ && !mask_in_warp_texels_) {
+      const int to_mask[] = {0, 2, 1, 3};
+      cv::mixChannels(&mask_rows_, 1, &warp_texels_, 1, to_mask, 2);
+    } else if (!has_mask_) {
+      // (factor 1, lift 0): what the warp reads when it runs without a mask is unused, but kept
+      // defined.
+      const int to_mask[] = {0, 2, 1, 3};
+      const cv::Mat none(size_, CV_MAKETYPE(source.depth(), 2),
+                         cv::Scalar(is_float ? 1.0 : 65535.0, 0.0));
+      cv::mixChannels(&none, 1, &warp_texels_, 1, to_mask, 2);
+    }
+    mask_in_warp_texels_ = has_mask_;
     ST_RETURN_IF_ERROR(EnsureIdealTarget());
+    UploadTexels(&warp_texture_, warp_texels_);
+  } else if (has_mask_) {
+    UploadTexels(&mask_texture_, mask_rows_);
   }
-  ST_RETURN_IF_ERROR(UploadWarpInputs());
+  packed_warp_ = packed;
   return CheckGl("setting the projector view");
 }
 
@@ -623,9 +649,19 @@ Status Renderer::SetMask(const cv::Mat& mask) {
   // conversion, 2-3x slower on llvmpipe. A re-blend's first frame waits for this swap (the
   // buffers made anew each time cost as much again in page faults; set_mask_ms of
   // sandtable_render_bench).
+  // Written straight into the warp's packed texels (channels 2, 3) when there is a pre-warp,
+  // into the mask's own texels otherwise.
   const bool is_float = context_->float_output();
   const int cols = size_.width;
-  mask_rows_.create(size_, is_float ? CV_32FC2 : CV_16UC2);
+  cv::Mat* texels = &mask_rows_;
+  int stride = 2, offset = 0;
+  if (packed_warp_) {
+    texels = &warp_texels_;
+    stride = 4;
+    offset = 2;
+  } else {
+    mask_rows_.create(size_, is_float ? CV_32FC2 : CV_16UC2);
+  }
   std::vector<float> factor(cols), lift(cols, 0.0f);
   cv::Mat factor_row(1, cols, CV_32F, factor.data());
   auto unit = [](float x) { return x > 0.0f ? (x < 1.0f ? x : 1.0f) : 0.0f; };
@@ -648,72 +684,41 @@ Status Renderer::SetMask(const cv::Mat& mask) {
     if (!is_float) cv::pow(factor_row, 1.0 / options_.display_gamma, factor_row);
     const int gl_row = size_.height - 1 - v;
     if (is_float) {
-      float* out = mask_rows_.ptr<float>(gl_row);
+      float* out = texels->ptr<float>(gl_row) + offset;
       for (int u = 0; u < cols; ++u) {
-        out[2 * u] = factor[u];
-        out[2 * u + 1] = lift[u];
+        out[stride * u] = factor[u];
+        out[stride * u + 1] = lift[u];
       }
     } else {
-      uint16_t* out = mask_rows_.ptr<uint16_t>(gl_row);
+      uint16_t* out = texels->ptr<uint16_t>(gl_row) + offset;
       for (int u = 0; u < cols; ++u) {
-        out[2 * u] = static_cast<uint16_t>(factor[u] * 65535.0f + 0.5f);
-        out[2 * u + 1] = static_cast<uint16_t>(lift[u] * 65535.0f + 0.5f);
+        out[stride * u] = static_cast<uint16_t>(factor[u] * 65535.0f + 0.5f);
+        out[stride * u + 1] = static_cast<uint16_t>(lift[u] * 65535.0f + 0.5f);
       }
     }
   }
   has_mask_ = true;
   has_lift_ = lift_max > 0.0f;
+  mask_in_warp_texels_ = packed_warp_;
   if (!options_.fold_prewarp) ST_RETURN_IF_ERROR(EnsureIdealTarget());
-  ST_RETURN_IF_ERROR(UploadWarpInputs());
+  UploadTexels(packed_warp_ ? &warp_texture_ : &mask_texture_, *texels);
   return CheckGl("setting the mask");
 }
 
-Status Renderer::UploadWarpInputs() {
-  const bool is_float = context_->float_output();
-  auto upload = [&](unsigned int* texture, const cv::Mat& texels) {
-    const GLenum format = texels.channels() == 4 ? GL_RGBA : GL_RG;
-    const GLint internal = texels.channels() == 4 ? (is_float ? GL_RGBA32F : GL_RGBA16)
-                                                  : (is_float ? GL_RG32F : GL_RG16);
-    const GLenum type = is_float ? GL_FLOAT : GL_UNSIGNED_SHORT;
-    if (!*texture) {
-      *texture = MakeTexture2D(internal, size_.width, size_.height, format, type, texels.data,
-                               GL_NEAREST);
-    } else {
-      glBindTexture(GL_TEXTURE_2D, *texture);
-      glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
-      glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, size_.width, size_.height, format, type,
-                      texels.data);
-    }
-  };
-  if (!source_rows_.empty()) {
-    // Packed: (source x, y) from the view, (factor, lift) from the mask, or (1, 0) without one.
-    warp_texels_.create(size_, CV_MAKETYPE(source_rows_.depth(), 4));
-    const int to_source[] = {0, 0, 1, 1};
-    cv::mixChannels(&source_rows_, 1, &warp_texels_, 1, to_source, 2);
-    if (has_mask_) {
-      const int to_mask[] = {0, 2, 1, 3};
-      cv::mixChannels(&mask_rows_, 1, &warp_texels_, 1, to_mask, 2);
-    } else {
-      const double one = is_float ? 1.0 : 65535.0;
-      for (int v = 0; v < warp_texels_.rows; ++v) {
-        for (int u = 0; u < warp_texels_.cols; ++u) {
-          if (is_float) {
-            float* t = warp_texels_.ptr<float>(v, u);
-            t[2] = static_cast<float>(one);
-            t[3] = 0.0f;
-          } else {
-            uint16_t* t = warp_texels_.ptr<uint16_t>(v, u);
-            t[2] = static_cast<uint16_t>(one);
-            t[3] = 0;
-          }
-        }
-      }
-    }
-    upload(&warp_texture_, warp_texels_);
-  } else if (has_mask_) {
-    upload(&mask_texture_, mask_rows_);
+void Renderer::UploadTexels(unsigned int* texture, const cv::Mat& texels) {
+  const bool is_float = texels.depth() == CV_32F;
+  const GLenum format = texels.channels() == 4 ? GL_RGBA : GL_RG;
+  const GLint internal = texels.channels() == 4 ? (is_float ? GL_RGBA32F : GL_RGBA16)
+                                                : (is_float ? GL_RG32F : GL_RG16);
+  const GLenum type = is_float ? GL_FLOAT : GL_UNSIGNED_SHORT;
+  if (!*texture) {
+    *texture =
+        MakeTexture2D(internal, size_.width, size_.height, format, type, texels.data, GL_NEAREST);
+  } else {
+    glBindTexture(GL_TEXTURE_2D, *texture);
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+    glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, size_.width, size_.height, format, type, texels.data);
   }
-  return CheckGl("uploading the warp's inputs");
 }
 
 float Renderer::LiftGamma() const {

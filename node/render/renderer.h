@@ -127,7 +127,7 @@ class Renderer {
   Status DrawWarp();
   Status DrawPattern(const RenderContent& content);
   Status EnsureIdealTarget();
-  Status UploadWarpInputs();
+  void UploadTexels(unsigned int* texture, const cv::Mat& texels);
 
   struct Group {
     int first_vertex = 0, vertex_count = 0;
@@ -155,15 +155,15 @@ class Renderer {
   unsigned int shadow_fbo_ = 0, shadow_texture_ = 0;
   unsigned int ideal_fbo_ = 0, ideal_colour_ = 0, ideal_depth_ = 0;
   unsigned int output_depth_ = 0;
-  // The warp pass's inputs (UploadWarpInputs): with an unfolded pre-warp one RGBA texture of
-  // (source x, y, mask factor, lift) per output pixel; otherwise the mask alone (RG). The CPU
-  // copies (GL row order) let either change without the other.
+  // The warp pass's inputs: with an unfolded pre-warp (packed_warp_) one RGBA texture of
+  // (source x, y, mask factor, lift) per output pixel, one fetch a pixel; otherwise the mask alone
+  // (RG). Texels are 16-bit normalized (32-bit floats for a float target) in GL row order, kept
+  // between masks: a new mask is written into them in place and uploaded.
   unsigned int warp_texture_ = 0, mask_texture_ = 0, pattern_texture_ = 0;
-  cv::Mat source_rows_;  // GL texture coordinates of the ideal image, CV_16UC2 (0: none) or
-                         // CV_32FC2 for a float target (-1: none); empty without a pre-warp
-  cv::Mat mask_rows_;    // factor (encoded; linear for a float target), lift (linear): CV_16UC2
-                         // (CV_32FC2 for a float target)
-  cv::Mat warp_texels_;  // the packed texture's texels, kept between masks
+  cv::Mat warp_texels_;  // source (GL texture coordinates of the ideal image; 0 or -1: none), mask
+  cv::Mat mask_rows_;    // factor (encoded; linear for a float target), lift (linear)
+  bool packed_warp_ = false;
+  bool mask_in_warp_texels_ = false;  // the current mask lives in warp_texels_, not mask_rows_
   unsigned int floor_texture_ = 0;
   bool has_view_ = false, has_mask_ = false;
   bool last_warped_ = false;  // the ideal image holds the last frame (see CanRewarp)

@@ -307,6 +307,53 @@ TEST(RendererTest, MaskMultipliesInLinearLight) {
   EXPECT_NEAR(image.at<cv::Vec3b>(left)[0], 186, 1);
 }
 
+// The mask lives in the warp's packed texture with a pre-warp and in its own without one: it
+// follows the renderer through views with and without distortion, and an empty mask drops it.
+TEST(RendererTest, MaskFollowsViewsWithAndWithoutPrewarp) {
+  std::unique_ptr<GlContext> context = MakeContext();
+  ASSERT_TRUE(context);
+  std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), /*distortion=*/false);
+  ASSERT_TRUE(renderer);
+  cv::Mat mask(kH, kW, CV_32FC1, cv::Scalar(1.0));
+  mask.colRange(0, kW / 2).setTo(0.5);
+  ASSERT_TRUE(renderer->SetMask(mask).ok());
+  RenderContent content;
+  content.pattern = TestPattern::kWhite;
+  auto view_of = [](bool distortion) {
+    return PrepareProjectorView(testing::RenderTestProjector(kW, kH, distortion),
+                                testing::RenderTestProjectorFromTable(),
+                                testing::RenderTestScene().Bounds());
+  };
+  // 255 x 0.5^(1 / 2.2) = 186.1 where the mask is 0.5 (see MaskMultipliesInLinearLight).
+  auto expect_halves = [&](bool distortion, uint8_t left_value, const char* step) {
+    SCOPED_TRACE(step);
+    const cv::Mat image = RenderToImage(context.get(), renderer.get(), content);
+    const cv::Point left = PixelOf({-0.4, -0.3, 0.0}, distortion);
+    const cv::Point right = PixelOf({0.4, -0.3, 0.0}, distortion);
+    ASSERT_LT(left.x, kW / 2);
+    ASSERT_GE(right.x, kW / 2);
+    EXPECT_EQ(image.at<cv::Vec3b>(right), cv::Vec3b(255, 255, 255));
+    EXPECT_NEAR(image.at<cv::Vec3b>(left)[0], left_value, 1);
+  };
+  expect_halves(false, 186, "the mask set before any pre-warp");
+  Expected<ProjectorView> distorted = view_of(true);
+  ASSERT_TRUE(distorted.ok());
+  ASSERT_TRUE(distorted->needs_prewarp());
+  ASSERT_TRUE(renderer->SetView(*distorted).ok());
+  expect_halves(true, 186, "a view with a pre-warp takes the mask into its texture");
+  mask.colRange(0, kW / 2).setTo(0.25);  // 255 x 0.25^(1 / 2.2) = 136.6
+  ASSERT_TRUE(renderer->SetMask(mask).ok());
+  expect_halves(true, 137, "a new mask under the pre-warp");
+  Expected<ProjectorView> plain = view_of(false);
+  ASSERT_TRUE(plain.ok());
+  ASSERT_TRUE(renderer->SetView(*plain).ok());
+  expect_halves(false, 137, "back to a view without a pre-warp: the mask goes with it");
+  ASSERT_TRUE(renderer->SetMask(cv::Mat()).ok());
+  expect_halves(false, 255, "an empty mask drops it");
+  ASSERT_TRUE(renderer->SetView(*distorted).ok());
+  expect_halves(true, 255, "and a pre-warp after it has none");
+}
+
 // A mask swapped in after a frame: the warp pass alone over the last frame shows what a whole
 // new frame with that mask shows; nothing to warp before a frame or after a new view.
 TEST(RendererTest, RewarpShowsTheLastFrameUnderANewMask) {
