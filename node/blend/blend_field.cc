@@ -580,8 +580,18 @@ cv::Mat Blender::Factor(double level, double fill_limit) const {
   for (size_t i = 0; i < n; ++i) {
     if (own_gain_[i] <= 0) continue;
     float delivered = own_wr_[i];
-    for (const Other& o : others) delivered += o.wr[i];
+    bool shared = false;
+    for (const Other& o : others) {
+      delivered += o.wr[i];
+      shared = shared || o.wr[i] > 0;
+    }
     const float unclipped = static_cast<float>(level) * own_gain_[i] / std::max(delivered, 1e-30f);
+    // Lit by this projector alone and within its reach: nothing to fill (most pixels; the
+    // terms below are what a re-blend's compose spent its time on).
+    if (!shared && unclipped <= 1.0f) {
+      f[i] = unclipped;
+      continue;
+    }
     if (fill_limit <= 1.0) {
       f[i] = std::min(1.0f, unclipped);
       continue;
