@@ -104,8 +104,16 @@ RenderLoop::~RenderLoop() {
 void RenderLoop::SetInputs(ShowInputs inputs) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    const bool overlay_only =
+        inputs.pattern == inputs_.pattern && inputs.projector_id == inputs_.projector_id &&
+        inputs.tracks == inputs_.tracks && inputs.sun.enabled == inputs_.sun.enabled &&
+        inputs.sun.start_hour == inputs_.sun.start_hour &&
+        inputs.sun.hours_per_media_s == inputs_.sun.hours_per_media_s &&
+        inputs.sun.max_elevation_deg == inputs_.sun.max_elevation_deg &&
+        inputs.timeline_known == inputs_.timeline_known;
     inputs_ = std::move(inputs);
     ++inputs_version_;
+    if (!overlay_only) ++frame_inputs_version_;
   }
   changed_.notify_all();
 }
@@ -117,7 +125,10 @@ void RenderLoop::SetTimeline(const TimelineView& timeline) {
         timeline.known != timeline_.known || timeline.playing != timeline_.playing ||
         timeline.media_time_s != timeline_.media_time_s || timeline.rate != timeline_.rate;
     timeline_ = timeline;
-    if (changed) ++inputs_version_;
+    if (changed) {
+      ++inputs_version_;
+      ++frame_inputs_version_;
+    }
   }
   changed_.notify_all();
 }
@@ -252,6 +263,7 @@ void RenderLoop::Resume() {
     std::lock_guard<std::mutex> lock(mutex_);
     suspended_ = false;
     ++inputs_version_;
+    ++frame_inputs_version_;
   }
   changed_.notify_all();
 }
@@ -287,7 +299,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
     log << "node_steady_ns,media_time_s,playing,frame_ms,rate\n";
   }
   std::unique_ptr<Renderer> renderer;
-  uint64_t drawn_version = ~uint64_t{0};
+  uint64_t drawn_version = ~uint64_t{0}, drawn_frame_version = ~uint64_t{0};
   uint64_t drawn_generation = 0;
   double drawn_media_time_s = 0.0;  // of the frame last drawn
   Clock::time_point last_frame{};
@@ -296,7 +308,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
   while (true) {
     ShowInputs inputs;
     TimelineView timeline;
-    uint64_t version = 0, generation = 0;
+    uint64_t version = 0, frame_version = 0, generation = 0;
     std::optional<ProjectorView> view;
     std::optional<Scene> scene;
     std::optional<cv::Mat> mask;
@@ -321,6 +333,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
       if (draped_tracks_) inputs.tracks = draped_tracks_;
       timeline = timeline_;
       version = inputs_version_;
+      frame_version = frame_inputs_version_;
       generation = generation_;
       if (!view && !mask && version == drawn_version && !timeline.playing) continue;
       if (mask) mask_frame.wait_ms = MsBetween(mask_posted_, Clock::now());
@@ -380,12 +393,13 @@ void RenderLoop::Run(std::promise<Status>* started) {
       std::lock_guard<std::mutex> lock(mutex_);
       current_mask_ = *mask;
     }
-    // Only the mask changed (a re-blend, a join's blanking): the frame already drawn goes out
-    // again under it, the warp pass alone, instead of waiting for a whole frame. New inputs
-    // (strokes, a pattern) are drawn whole: a caller of ShowBlend or ShowMask expects what it
-    // set to show under the mask. The next frame is drawn as usual.
-    const bool rewarp =
-        status.ok() && mask && !view && !scene && version == drawn_version && renderer->CanRewarp();
+    // Only the mask changed (a re-blend, a join's blanking), or the overlay besides (strokes
+    // being painted): the frame already drawn goes out again under it, the warp pass alone,
+    // instead of waiting for a whole frame; the new strokes follow in the next frame, drawn as
+    // usual. Other new inputs (a pattern, the sun) are drawn whole: a caller of ShowBlend or
+    // ShowMask expects what it set to show under the mask.
+    const bool rewarp = status.ok() && mask && !view && !scene &&
+                        frame_version == drawn_frame_version && renderer->CanRewarp();
     const int64_t draw_ns = NowNs();
     const double media_time_s = rewarp ? drawn_media_time_s : timeline.MediaTimeAt(draw_ns);
     Expected<FrameStats> stats = !status.ok() ? Expected<FrameStats>(status)
@@ -397,7 +411,10 @@ void RenderLoop::Run(std::promise<Status>* started) {
         stats.ok() ? (*context)->ReadOutput() : Expected<cv::Mat>(stats.status());
     if (!rewarp) last_frame = Clock::now();
     mask_frame.read_ms = MsBetween(read_start, Clock::now());
-    drawn_version = version;
+    if (!rewarp) {
+      drawn_version = version;
+      drawn_frame_version = frame_version;
+    }
     bool shown = false, unchanged = false;
     const Clock::time_point show_start = Clock::now();
     if (frame.ok()) {

@@ -214,6 +214,71 @@ TEST(RenderLoopTest, BlendMaskComposesWithTheBlankingAndDropsWithANewCalibration
   EXPECT_FALSE((*loop)->ShowBlend(cv::Mat(200, 320, CV_8UC1)).ok());  // not a factor
 }
 
+// Strokes being painted when a new mask comes (a neighbour left mid-annotation): the frame
+// already drawn goes out under the mask at once (the warp pass alone), and the new strokes
+// follow in the next whole frame. A new pattern is drawn whole (DrawsOnChangeOnly...).
+TEST(RenderLoopTest, NewStrokesDoNotHoldBackANewMask) {
+  KeptFrames projector(cv::Size(320, 200));
+  auto model = std::make_shared<const Scene>(testing::RenderTestScene());
+  RenderLoopOptions options;
+  options.max_fps = 2.0;  // a whole frame waits 0.5 s for its turn; a mask does not
+  Expected<std::unique_ptr<RenderLoop>> loop = RenderLoop::Start(&projector, model, options);
+  ASSERT_TRUE(loop.ok()) << loop.status().ToString();
+  const UnitCalibration calibration = TestCalibration();
+  ASSERT_TRUE((*loop)->ShowCalibration(calibration).ok());
+  // Where a table point shows on the projector (the test scene leaves both in view).
+  auto pixel_of = [&](const Eigen::Vector3d& x_in_table_m) {
+    const std::optional<Eigen::Vector2d> p = calibration.projector.Project(
+        testing::RenderTestProjectorFromTable() * x_in_table_m);
+    EXPECT_TRUE(p.has_value());
+    return p ? cv::Point(static_cast<int>(std::lround(p->x())), static_cast<int>(std::lround(p->y())))
+             : cv::Point(0, 0);
+  };
+  const Eigen::Vector3d a_in_table_m(-0.4, -0.3, 0.0), b_in_table_m(0.4, -0.3, 0.0);
+  auto stroke_at = [](const Eigen::Vector3d& centre, const Eigen::Vector3f& colour) {
+    Polyline line;
+    line.points_in_table_m = {centre - Eigen::Vector3d(0.03, 0, 0),
+                              centre + Eigen::Vector3d(0.03, 0, 0)};
+    line.colour = colour;
+    line.width_m = 0.04;
+    return std::make_shared<const std::vector<Polyline>>(std::vector<Polyline>{line});
+  };
+  // Green where a stroke is: the table and buildings of the test scene are grey.
+  auto green = [](const cv::Mat& frame, cv::Point p) {
+    const cv::Vec3b c = frame.at<cv::Vec3b>(p);
+    return c[1] > 100 && c[0] < 60 && c[2] < 60;
+  };
+  ShowInputs inputs;
+  inputs.sun.enabled = false;
+  inputs.strokes = stroke_at(a_in_table_m, Eigen::Vector3f(0, 1, 0));
+  inputs.strokes_version = 1;
+  (*loop)->SetInputs(inputs);
+  const cv::Point a = pixel_of(a_in_table_m), b = pixel_of(b_in_table_m);
+  for (int i = 0; i < 100 && !green(projector.last(), a); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_TRUE(green(projector.last(), a)) << "stroke A drawn";
+  ASSERT_FALSE(green(projector.last(), b));
+  // Stroke B replaces A, and a mask comes at once.
+  inputs.strokes = stroke_at(b_in_table_m, Eigen::Vector3f(0, 1, 0));
+  inputs.strokes_version = 2;
+  (*loop)->SetInputs(inputs);
+  const cv::Mat half(200, 320, CV_32FC1, cv::Scalar(0.5));
+  ASSERT_TRUE((*loop)->ShowBlend(half).ok());
+  EXPECT_TRUE((*loop)->LastMaskFrame().rewarped);
+  const cv::Mat first = projector.last();
+  EXPECT_TRUE(green(first, a)) << "the frame already drawn, under the mask";
+  EXPECT_FALSE(green(first, b));
+  EXPECT_LT(first.at<cv::Vec3b>(a)[1], 200) << "under the mask (255 x 0.5^(1 / 2.2) = 186)";
+  for (int i = 0; i < 100 && !green(projector.last(), b); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  const cv::Mat next = projector.last();
+  EXPECT_TRUE(green(next, b)) << "the new stroke in the next whole frame";
+  EXPECT_FALSE(green(next, a));
+  EXPECT_EQ((*loop)->Summary().frames_rewarped, 1u);
+}
+
 TEST(RenderLoopTest, RefusesACalibrationOfAnotherSize) {
   KeptFrames projector(cv::Size(640, 400));
   Expected<std::unique_ptr<RenderLoop>> loop = RenderLoop::Start(&projector, nullptr, {});
