@@ -159,9 +159,9 @@ class RenderLoop {
   uint64_t shown_generation_ = 0;  // the generation of the last shown frame
   ShowInputs inputs_;
   uint64_t inputs_version_ = 0;
-  // Bumped by every change of the inputs but the overlay's (strokes, cursor): what a frame re-warped
-  // under a new mask may not leave out (a pattern, the sun, the timeline); new strokes follow in
-  // the next whole frame.
+  // Bumped by every change of the inputs but the overlay's (strokes, cursor): what a frame
+  // re-warped under a new mask may not leave out (a pattern, the sun, the timeline); new strokes
+  // follow in the next whole frame.
   uint64_t frame_inputs_version_ = 0;
   TimelineView timeline_;
   std::optional<ProjectorView> pending_view_;

@@ -978,9 +978,9 @@ Status Renderer::DrawScene(const RenderContent& content, unsigned int target, bo
   // hides of the table then fails the depth test before it is shaded.
   std::vector<std::pair<double, int>> order;
   for (int i = 0; i < static_cast<int>(groups_.size()); ++i) {
-    const Eigen::Vector3d centre = view_.projector_from_table.rotation *
-                                       groups_[i].bounds.center() +
-                                   view_.projector_from_table.translation;
+    const Eigen::Vector3d centre =
+        view_.projector_from_table.rotation * groups_[i].bounds.center() +
+        view_.projector_from_table.translation;
     order.emplace_back(groups_[i].bounds.isEmpty() ? 0.0 : centre.z(), i);
   }
   std::stable_sort(order.begin(), order.end(),

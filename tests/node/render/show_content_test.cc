@@ -228,10 +228,11 @@ TEST(RenderLoopTest, NewStrokesDoNotHoldBackANewMask) {
   ASSERT_TRUE((*loop)->ShowCalibration(calibration).ok());
   // Where a table point shows on the projector (the test scene leaves both in view).
   auto pixel_of = [&](const Eigen::Vector3d& x_in_table_m) {
-    const std::optional<Eigen::Vector2d> p = calibration.projector.Project(
-        testing::RenderTestProjectorFromTable() * x_in_table_m);
+    const std::optional<Eigen::Vector2d> p =
+        calibration.projector.Project(testing::RenderTestProjectorFromTable() * x_in_table_m);
     EXPECT_TRUE(p.has_value());
-    return p ? cv::Point(static_cast<int>(std::lround(p->x())), static_cast<int>(std::lround(p->y())))
+    return p ? cv::Point(static_cast<int>(std::lround(p->x())),
+                         static_cast<int>(std::lround(p->y())))
              : cv::Point(0, 0);
   };
   const Eigen::Vector3d a_in_table_m(-0.4, -0.3, 0.0), b_in_table_m(0.4, -0.3, 0.0);
