@@ -286,30 +286,11 @@ TEST(RendererTest, StrokesAreHiddenBehindBuildingsAndShownOnSurfaces) {
   EXPECT_FALSE(stats.overlay_rebuilt);
 }
 
-TEST(RendererTest, MaskMultipliesInLinearLight) {
-  std::unique_ptr<GlContext> context = MakeContext();
-  ASSERT_TRUE(context);
-  std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), /*distortion=*/false);
-  ASSERT_TRUE(renderer);
-  cv::Mat mask(kH, kW, CV_32FC1, cv::Scalar(1.0));
-  mask.colRange(0, kW / 2).setTo(0.5);
-  ASSERT_TRUE(renderer->SetMask(mask).ok());
-  RenderContent content;
-  content.pattern = TestPattern::kWhite;
-  const cv::Mat image = RenderToImage(context.get(), renderer.get(), content);
-  // A table pixel in each half: 255 where the mask is 1, 0.5 encoded with the display's 2.2 power
-  // law (255 x 0.5^(1 / 2.2) = 186.1) where 0.5.
-  const cv::Point left = PixelOf({-0.4, -0.3, 0.0}, false);
-  const cv::Point right = PixelOf({0.4, -0.3, 0.0}, false);
-  ASSERT_LT(left.x, kW / 2);
-  ASSERT_GE(right.x, kW / 2);
-  EXPECT_EQ(image.at<cv::Vec3b>(right), cv::Vec3b(255, 255, 255));
-  EXPECT_NEAR(image.at<cv::Vec3b>(left)[0], 186, 1);
-}
-
-// The mask lives in the warp's packed texture with a pre-warp and in its own without one: it
-// follows the renderer through views with and without distortion, and an empty mask drops it.
-TEST(RendererTest, MaskFollowsViewsWithAndWithoutPrewarp) {
+// The mask multiplies in linear light: 255 where it is 1, 0.5 encoded with the display's 2.2
+// power law (255 x 0.5^(1 / 2.2) = 186.1) where it is 0.5. It lives in the warp's packed texture
+// with a pre-warp and in its own without one: it follows the renderer through views with and
+// without distortion, and an empty mask drops it.
+TEST(RendererTest, MaskMultipliesInLinearLightWithAndWithoutPrewarp) {
   std::unique_ptr<GlContext> context = MakeContext();
   ASSERT_TRUE(context);
   std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), /*distortion=*/false);
@@ -324,7 +305,7 @@ TEST(RendererTest, MaskFollowsViewsWithAndWithoutPrewarp) {
                                 testing::RenderTestProjectorFromTable(),
                                 testing::RenderTestScene().Bounds());
   };
-  // 255 x 0.5^(1 / 2.2) = 186.1 where the mask is 0.5 (see MaskMultipliesInLinearLight).
+  // A table pixel in each half of the output.
   auto expect_halves = [&](bool distortion, uint8_t left_value, const char* step) {
     SCOPED_TRACE(step);
     const cv::Mat image = RenderToImage(context.get(), renderer.get(), content);
