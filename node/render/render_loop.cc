@@ -104,13 +104,10 @@ RenderLoop::~RenderLoop() {
 void RenderLoop::SetInputs(ShowInputs inputs) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    const bool overlay_only =
-        inputs.pattern == inputs_.pattern && inputs.projector_id == inputs_.projector_id &&
-        inputs.tracks == inputs_.tracks && inputs.sun.enabled == inputs_.sun.enabled &&
-        inputs.sun.start_hour == inputs_.sun.start_hour &&
-        inputs.sun.hours_per_media_s == inputs_.sun.hours_per_media_s &&
-        inputs.sun.max_elevation_deg == inputs_.sun.max_elevation_deg &&
-        inputs.timeline_known == inputs_.timeline_known;
+    const bool overlay_only = inputs.pattern == inputs_.pattern &&
+                              inputs.projector_id == inputs_.projector_id &&
+                              inputs.tracks == inputs_.tracks && inputs.sun == inputs_.sun &&
+                              inputs.timeline_known == inputs_.timeline_known;
     inputs_ = std::move(inputs);
     ++inputs_version_;
     if (!overlay_only) ++frame_inputs_version_;

@@ -314,6 +314,15 @@ Status Renderer::Init(const Scene& scene) {
   glGenVertexArrays(1, &shadow_vao_);
   glGenBuffers(1, &shadow_vbo_);
   ST_RETURN_IF_ERROR(UploadGeometry(shadow_vao_, shadow_vbo_, /*edge_px=*/0.0, &shadow_groups_));
+  // A group flat at the bottom of the scene (a table, a ground plane) shadows nothing under a sun
+  // above the horizon (the only sun the shadow pass draws for): everything else is at or above
+  // it. Left out of the sun's depth map, its texels keep the cleared far depth and the table is
+  // lit there as it would be; on llvmpipe it was most of the pass's fill.
+  constexpr double kFlatM = 1e-6;
+  std::erase_if(shadow_groups_, [&](const Group& g) {
+    return !g.bounds.isEmpty() && g.bounds.sizes().z() < kFlatM &&
+           g.bounds.min().z() < scene_bounds_.min().z() + kFlatM;
+  });
   ST_RETURN_IF_ERROR(UploadGeometry(scene_vao_, scene_vbo_, /*edge_px=*/0.0, &groups_));
 
   glGenVertexArrays(1, &overlay_vao_);
@@ -583,7 +592,19 @@ Status Renderer::SetView(const ProjectorView& view) {
     geometry_tessellated_ = false;
     tessellation_px_ = 0.0;
   }
-  if (view.needs_prewarp() && !options_.fold_prewarp) {
+  // Nearest groups first (by their bounds' centres along the projector's axis): what a building
+  // hides of the table then fails the depth test before it is shaded.
+  std::vector<std::pair<double, int>> order;
+  for (int i = 0; i < static_cast<int>(groups_.size()); ++i) {
+    const Eigen::Vector3d centre = view.projector_from_table.rotation * groups_[i].bounds.center() +
+                                   view.projector_from_table.translation;
+    order.emplace_back(groups_[i].bounds.isEmpty() ? 0.0 : centre.z(), i);
+  }
+  std::stable_sort(order.begin(), order.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  draw_order_.clear();
+  for (const auto& [depth, index] : order) draw_order_.push_back(index);
+  if (packed) {
     // OpenCV ideal pixel -> GL texture coordinates of the ideal image; rows in GL order.
     cv::Mat coords(view.source_px.size(), CV_32FC2);
     for (int v = 0; v < coords.rows; ++v) {
@@ -870,18 +891,7 @@ Status Renderer::DrawShadow(const Eigen::Vector3d& sun) {
   glUniformMatrix4fv(glGetUniformLocation(shadow_program_, "u_sun_clip_from_table"), 1, GL_FALSE,
                      glm::value_ptr(m));
   glBindVertexArray(shadow_vao_);
-  // A group flat at the bottom of the scene (a table, a ground plane) shadows nothing under a sun
-  // above the horizon: everything else is at or above it. Left out, its texels keep the cleared
-  // far depth, and the table is lit there as it would be; on llvmpipe it was most of the pass's
-  // fill (a table covers the whole map).
-  constexpr double kFlatM = 1e-6;
-  for (const Group& g : shadow_groups_) {
-    if (!g.bounds.isEmpty() && g.bounds.sizes().z() < kFlatM &&
-        g.bounds.min().z() < scene_bounds_.min().z() + kFlatM) {
-      continue;
-    }
-    glDrawArrays(GL_TRIANGLES, g.first_vertex, g.vertex_count);
-  }
+  for (const Group& g : shadow_groups_) glDrawArrays(GL_TRIANGLES, g.first_vertex, g.vertex_count);
   glDisable(GL_POLYGON_OFFSET_FILL);
   return CheckGl("drawing the shadow map");
 }
@@ -974,18 +984,7 @@ Status Renderer::DrawScene(const RenderContent& content, unsigned int target, bo
   glActiveTexture(GL_TEXTURE0);
   glBindVertexArray(scene_vao_);
   GLuint current = 0;
-  // Nearest groups first (by their bounds' centres along the projector's axis): what a building
-  // hides of the table then fails the depth test before it is shaded.
-  std::vector<std::pair<double, int>> order;
-  for (int i = 0; i < static_cast<int>(groups_.size()); ++i) {
-    const Eigen::Vector3d centre =
-        view_.projector_from_table.rotation * groups_[i].bounds.center() +
-        view_.projector_from_table.translation;
-    order.emplace_back(groups_[i].bounds.isEmpty() ? 0.0 : centre.z(), i);
-  }
-  std::stable_sort(order.begin(), order.end(),
-                   [](const auto& a, const auto& b) { return a.first < b.first; });
-  for (const auto& [depth, index] : order) {
+  for (int index : draw_order_) {
     const Group& g = groups_[index];
     if (OutsideFrustum(view_.clip_from_table, g.bounds)) {
       ++stats->groups_culled;

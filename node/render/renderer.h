@@ -142,7 +142,8 @@ class Renderer {
   cv::Size size_;
   Eigen::AlignedBox3d scene_bounds_;
   std::vector<Group> groups_;         // the scene pass's (tessellated for a folded pre-warp)
-  std::vector<Group> shadow_groups_;  // the model as given
+  std::vector<Group> shadow_groups_;  // the model as given, less a flat bottom (Create)
+  std::vector<int> draw_order_;       // groups_ nearest first for the current view (SetView)
   double tessellation_px_ = 0.0;
   std::vector<Eigen::Vector4d> material_colours_;
   std::vector<int> material_textures_;

@@ -29,6 +29,7 @@ struct SunOptions {
   double hours_per_media_s = 0.05;  // time of day advanced per media second (3 h a minute)
   double max_elevation_deg = 60.0;
   Status Check() const;
+  bool operator==(const SunOptions&) const = default;
 };
 
 struct DrapedTrack {
