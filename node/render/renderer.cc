@@ -146,14 +146,23 @@ constexpr const char* kShadowFragment = R"(#version 330 core
 void main() {}
 )";
 
+// MODE 1 (a deferred frame): depth-tested against the surface cache in the fragment shader (no
+// depth buffer is written by the light pass): hidden where the surface is nearer the projector.
 const std::string kOverlayVertex = std::string(R"(
 layout(location = 0) in vec3 a_position;
 layout(location = 1) in vec4 a_colour;
 uniform mat4 u_clip_from_table;
 out vec4 v_colour;
+#if MODE == 1
+uniform mat4 u_view_from_table;
+out float v_depth;
+#endif
 )") + kProject + R"(
 void main() {
   v_colour = a_colour;
+#if MODE == 1
+  v_depth = (u_view_from_table * vec4(a_position, 1.0)).z;
+#endif
   gl_Position = Project(a_position, u_clip_from_table);
 }
 )";
@@ -162,10 +171,23 @@ uniform sampler2D u_mask;
 uniform float u_lift_gamma;
 in vec4 v_colour;
 out vec4 o_colour;
+#if MODE == 1
+uniform usampler2D u_cache;
+uniform float u_depth_tolerance_m;
+in float v_depth;
+#endif
 void main() {
+#if MODE == 1
+  uvec4 q = texelFetch(u_cache, ivec2(gl_FragCoord.xy), 0);
+  if (q.w != 0u && v_depth > uintBitsToFloat(q.x) + u_depth_tolerance_m) discard;
+#endif
   o_colour = v_colour;
 #if MASKED
+#if PACKED
+  vec2 m = texelFetch(u_mask, ivec2(gl_FragCoord.xy), 0).ba;
+#else
   vec2 m = texelFetch(u_mask, ivec2(gl_FragCoord.xy), 0).rg;
+#endif
   o_colour.rgb *= m.r;
 #if LIFTED
   o_colour.rgb = pow(pow(o_colour.rgb, vec3(u_lift_gamma)) + m.g, vec3(1.0 / u_lift_gamma));
@@ -196,6 +218,131 @@ void main() {
 #if MASKED
 #if DISTORT
   vec2 m = w.zw;
+#else
+  vec2 m = texelFetch(u_mask, p, 0).rg;
+#endif
+  c *= m.r;
+#if LIFTED
+  c = pow(pow(c, vec3(u_lift_gamma)) + m.g, vec3(1.0 / u_lift_gamma));
+#endif
+#endif
+  o_colour = vec4(c, 1.0);
+}
+)";
+
+// The deferred path (renderer.h). The surface cache is one RGBA32UI texel per output pixel
+// (one lookup a pixel in the light pass: on llvmpipe each full-screen lookup costs 3-5 ms at
+// 1280x800, more than its bytes): x the camera-space depth of the surface (float bits), y its
+// ideal pixel (u | v << 16, OpenCV), z its encoded base colour x texture (8 bits a channel), w its
+// face (index + 1; 0: no surface). The scene pass draws the ideal cache (the geometry as such,
+// the colour in a filterable RGBA8); depth is interpolated perspective-correctly: exact at the
+// pixel's centre.
+constexpr const char* kSurfaceVertex = R"(
+layout(location = 0) in vec3 a_position;
+layout(location = 2) in vec2 a_uv;
+uniform mat4 u_clip_from_table;
+uniform mat4 u_camera_from_table;
+out float v_depth;
+out vec2 v_uv;
+void main() {
+  v_depth = (u_camera_from_table * vec4(a_position, 1.0)).z;
+  v_uv = a_uv;
+  gl_Position = u_clip_from_table * vec4(a_position, 1.0);
+}
+)";
+constexpr const char* kSurfaceFragment = R"(
+uniform vec4 u_base_colour;
+uniform sampler2D u_texture;
+uniform int u_first_face;
+uniform float u_height_px;
+in float v_depth;
+in vec2 v_uv;
+layout(location = 0) out uvec4 o_geometry;
+layout(location = 1) out vec4 o_colour;
+void main() {
+  vec3 c = u_base_colour.rgb;
+#if TEXTURED
+  c *= texture(u_texture, v_uv).rgb;
+#endif
+  uvec2 ideal = uvec2(gl_FragCoord.x, u_height_px - gl_FragCoord.y);  // OpenCV row
+  o_geometry = uvec4(floatBitsToUint(v_depth), ideal.x | (ideal.y << 16), 0u,
+                     uint(u_first_face + gl_PrimitiveID + 1));
+  o_colour = vec4(c, 1.0);
+}
+)";
+// The ideal cache into output pixels (DISTORT: through the pre-warp, else pixel for pixel),
+// packed: the geometry of the nearest ideal pixel (depths are not to be blended across an
+// outline; the light pass rebuilds the point on that pixel's ray), the colour filtered as the
+// warp pass filters the ideal image; none where the nearest pixel has no surface.
+constexpr const char* kSurfaceWarpFragment = R"(
+uniform sampler2D u_warp;
+uniform usampler2D u_geometry;
+uniform sampler2D u_colour;
+out uvec4 o_cache;
+void main() {
+  o_cache = uvec4(0u);
+#if DISTORT
+  vec2 t = texelFetch(u_warp, ivec2(gl_FragCoord.xy), 0).xy;
+  if (t.x <= 0.0 || t.y <= 0.0 || t.x >= 1.0 || t.y >= 1.0) return;
+  ivec2 size = textureSize(u_geometry, 0);
+  uvec4 g = texelFetch(u_geometry, clamp(ivec2(t * vec2(size)), ivec2(0), size - 1), 0);
+  vec3 c = texture(u_colour, t).rgb;
+#else
+  uvec4 g = texelFetch(u_geometry, ivec2(gl_FragCoord.xy), 0);
+  vec3 c = texelFetch(u_colour, ivec2(gl_FragCoord.xy), 0).rgb;
+#endif
+  if (g.w == 0u) return;
+  uvec3 q = uvec3(round(clamp(c, 0.0, 1.0) * 255.0));
+  o_cache = uvec4(g.x, g.y, q.r | (q.g << 8) | (q.b << 16), g.w);
+}
+)";
+// The sun's light on each face, encoded (ambient + Lambert, as the scene pass lights a vertex):
+// one texel a face, drawn when the sun moves.
+constexpr const char* kFaceLightFragment = R"(
+uniform sampler2D u_normals;
+uniform vec3 u_sun_direction;
+uniform float u_ambient;
+uniform float u_inverse_gamma;
+out vec4 o_light;
+void main() {
+  vec3 n = texelFetch(u_normals, ivec2(gl_FragCoord.xy), 0).xyz;
+  float lambert = max(dot(n, u_sun_direction), 0.0);
+  o_light = vec4(pow(u_ambient + (1.0 - u_ambient) * lambert, u_inverse_gamma));
+}
+)";
+// A deferred frame, per output pixel: the cached colour lit by the sun (its face's light x the
+// shadow lookup at the surface's point, rebuilt on its ideal pixel's ray, as the scene pass lights
+// it; times u_light without a sun), times the mask, plus the lift. No branch on the surface:
+// where there is none the colour is black. PACKED: the mask is in the warp's texture (zw).
+constexpr const char* kLightFragment = R"(
+uniform usampler2D u_cache;
+uniform sampler2D u_face_light;
+uniform sampler2DShadow u_shadow;
+uniform sampler2D u_mask;
+uniform mat4 u_sun_clip_from_camera;
+uniform vec4 u_inverse_intrinsics;  // 1 / fx, 1 / fy, cx, cy (px)
+uniform float u_ambient_encoded;
+uniform float u_light;
+uniform float u_lift_gamma;
+out vec4 o_colour;
+void main() {
+  ivec2 p = ivec2(gl_FragCoord.xy);
+  uvec4 q = texelFetch(u_cache, p, 0);
+  vec3 c = vec3(uvec3(q.z, q.z >> 8, q.z >> 16) & 255u) * (1.0 / 255.0);
+#if SUN
+  float depth = uintBitsToFloat(q.x);
+  vec2 ideal = vec2(uvec2(q.y, q.y >> 16) & 65535u);
+  vec4 x = vec4(depth * (ideal - u_inverse_intrinsics.zw) * u_inverse_intrinsics.xy, depth, 1.0);
+  int face = max(int(q.w) - 1, 0);
+  float lit = texelFetch(u_face_light, ivec2(face & 4095, face >> 12), 0).r;
+  vec3 s = (u_sun_clip_from_camera * x).xyz * 0.5 + 0.5;
+  c *= mix(u_ambient_encoded, lit, texture(u_shadow, s));
+#else
+  c *= u_light;
+#endif
+#if MASKED
+#if PACKED
+  vec2 m = texelFetch(u_mask, p, 0).ba;
 #else
   vec2 m = texelFetch(u_mask, p, 0).rg;
 #endif
@@ -267,6 +414,8 @@ const char* PassName(Pass pass) {
       return "warp";
     case Pass::kPattern:
       return "pattern";
+    case Pass::kLight:
+      return "light";
   }
   return "?";
 }
@@ -323,7 +472,24 @@ Status Renderer::Init(const Scene& scene) {
     return !g.bounds.isEmpty() && g.bounds.sizes().z() < kFlatM &&
            g.bounds.min().z() < scene_bounds_.min().z() + kFlatM;
   });
-  ST_RETURN_IF_ERROR(UploadGeometry(scene_vao_, scene_vbo_, /*edge_px=*/0.0, &groups_));
+  std::vector<float> normals;
+  ST_RETURN_IF_ERROR(UploadGeometry(scene_vao_, scene_vbo_, /*edge_px=*/0.0, &groups_, &normals));
+  // The deferred path's face tables (renderer.h): the normals, and the light drawn from them.
+  const int faces = std::max<int>(1, static_cast<int>(normals.size() / 3));
+  face_table_size_ =
+      cv::Size(std::min(faces, kFaceRowTexels), (faces + kFaceRowTexels - 1) / kFaceRowTexels);
+  normals.resize(static_cast<size_t>(face_table_size_.area()) * 3, 0.0f);
+  face_normals_ = MakeTexture2D(GL_RGB32F, face_table_size_.width, face_table_size_.height, GL_RGB,
+                                GL_FLOAT, normals.data(), GL_NEAREST);
+  face_light_ = MakeTexture2D(GL_R32F, face_table_size_.width, face_table_size_.height, GL_RED,
+                              GL_FLOAT, nullptr, GL_NEAREST);
+  glGenFramebuffers(1, &face_light_fbo_);
+  glBindFramebuffer(GL_FRAMEBUFFER, face_light_fbo_);
+  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, face_light_, 0);
+  if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+    return InternalError("OpenGL: the face light's framebuffer is incomplete");
+  }
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
 
   glGenVertexArrays(1, &overlay_vao_);
   glBindVertexArray(overlay_vao_);
@@ -424,7 +590,7 @@ Status Renderer::Init(const Scene& scene) {
 // longest edge until no edge spans more than edge_px on the projector's (pinhole) image: the
 // folded pre-warp bends edges only at vertices.
 Status Renderer::UploadGeometry(unsigned int vao, unsigned int vbo, double edge_px,
-                                std::vector<Group>* groups) {
+                                std::vector<Group>* groups, std::vector<float>* face_normals) {
   const bool tessellate = edge_px > 0.0;
   const Scene& scene = scene_;
   std::vector<std::vector<int>> by_material(std::max<size_t>(scene.materials.size(), 1));
@@ -515,6 +681,12 @@ Status Renderer::UploadGeometry(unsigned int vao, unsigned int vbo, double edge_
     group.vertex_count = static_cast<int>(vertices.size()) - group.first_vertex;
     groups->push_back(group);
   }
+  if (face_normals) {
+    face_normals->clear();
+    for (size_t v = 0; v + 2 < vertices.size(); v += 3) {
+      face_normals->insert(face_normals->end(), vertices[v].normal, vertices[v].normal + 3);
+    }
+  }
   glBindVertexArray(vao);
   glBindBuffer(GL_ARRAY_BUFFER, vbo);
   glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(vertices.size() * sizeof(SceneVertex)),
@@ -540,14 +712,21 @@ Renderer::~Renderer() {
   for (const auto& [key, p] : variants_) glDeleteProgram(p);
   std::vector<GLuint> textures = textures_;
   for (GLuint t : {shadow_texture_, ideal_colour_, warp_texture_, mask_texture_, pattern_texture_,
-                   floor_texture_}) {
+                   floor_texture_, face_normals_, face_light_}) {
     if (t) textures.push_back(t);
+  }
+  for (const SurfaceTarget* t : {&surface_, &ideal_surface_}) {
+    for (GLuint id : {t->geometry, t->colour}) {
+      if (id) textures.push_back(id);
+    }
+    if (t->depth) glDeleteRenderbuffers(1, &t->depth);
+    if (t->fbo) glDeleteFramebuffers(1, &t->fbo);
   }
   if (!textures.empty()) glDeleteTextures(static_cast<GLsizei>(textures.size()), textures.data());
   for (GLuint rb : {ideal_depth_, output_depth_}) {
     if (rb) glDeleteRenderbuffers(1, &rb);
   }
-  for (GLuint fb : {shadow_fbo_, ideal_fbo_}) {
+  for (GLuint fb : {shadow_fbo_, ideal_fbo_, face_light_fbo_}) {
     if (fb) glDeleteFramebuffers(1, &fb);
   }
   for (GLuint b : {scene_vbo_, shadow_vbo_, overlay_vbo_}) {
@@ -569,6 +748,7 @@ Status Renderer::SetView(const ProjectorView& view) {
   view_ = view;
   has_view_ = true;
   last_warped_ = false;
+  surface_valid_ = false;
   overlay_view_dirty_ = true;
   const bool packed = view.needs_prewarp() && !options_.fold_prewarp;
   if (!packed && mask_in_warp_texels_) {
@@ -775,12 +955,13 @@ Expected<FrameStats> Renderer::Render(const RenderContent& content) {
     Status s = draw();
     if (options_.time_passes) {
       glFinish();
-      stats.pass_ms[static_cast<int>(pass)] = MsSince(t0);
+      stats.pass_ms[static_cast<int>(pass)] += MsSince(t0);
     }
     stats.ran[static_cast<int>(pass)] = true;
     return s;
   };
   const GLuint output = context_->output_framebuffer();
+  last_deferred_ = false;
   const bool raw = content.pattern == TestPattern::kProjectorId ||
                    content.pattern == TestPattern::kColourBars ||
                    content.pattern == TestPattern::kRawWhite;
@@ -806,6 +987,59 @@ Expected<FrameStats> Renderer::Render(const RenderContent& content) {
           timed(Pass::kShadow, [&] { return DrawShadow(*content.sun_direction_in_table); }));
     }
     const bool fold = options_.fold_prewarp;
+    const bool deferred = options_.deferred && !fold && show && !context_->float_output();
+    const Eigen::Vector3d sun_unit =
+        sun ? content.sun_direction_in_table->normalized() : Eigen::Vector3d::UnitZ();
+    if (deferred && sun && (!face_light_sun_ || !face_light_sun_->isApprox(sun_unit, 1e-12))) {
+      // Counted with the shadow pass: both are drawn when the sun moves.
+      ST_RETURN_IF_ERROR(timed(Pass::kShadow, [&] { return DrawFaceLight(sun_unit); }));
+    }
+    if (deferred) {
+      // Deferred (renderer.h): the surface cache once per view, then light and overlay.
+      if (!surface_valid_) {
+        ST_RETURN_IF_ERROR(timed(Pass::kScene, [&] { return DrawSurfaceScene(&stats); }));
+        // Packed into output pixels: through the pre-warp (the warp pass), or pixel for pixel
+        // (counted with the scene pass).
+        const bool prewarp = view_.needs_prewarp();
+        ST_RETURN_IF_ERROR(
+            timed(prewarp ? Pass::kWarp : Pass::kScene, [&] { return DrawSurfaceWarp(); }));
+        stats.ran[static_cast<int>(Pass::kScene)] = surface_groups_drawn_ > 0;
+        stats.ran[static_cast<int>(Pass::kWarp)] = prewarp;
+      }
+      stats.groups_drawn = surface_groups_drawn_;
+      stats.groups_culled = surface_groups_culled_;
+      stats.scene_triangles = surface_triangles_;
+      stats.prewarp = view_.needs_prewarp();
+      stats.masked = has_mask_;
+      // A sun below the horizon lights with the sky alone (as DrawScene); no sun: unlit.
+      const float light =
+          !content.sun_direction_in_table
+              ? 1.0f
+              : static_cast<float>(std::pow(options_.ambient, 1.0 / options_.display_gamma));
+      const bool overlay = content.has_overlay();
+      if (surface_groups_drawn_ == 0 && !has_mask_) {
+        // Nothing of the model in the frustum, nothing to lift: black.
+        glBindFramebuffer(GL_FRAMEBUFFER, output);
+        glViewport(0, 0, size_.width, size_.height);
+        glClearColor(0, 0, 0, 1);
+        glClear(GL_COLOR_BUFFER_BIT);
+      } else {
+        ST_RETURN_IF_ERROR(timed(Pass::kLight, [&] { return DrawLight(sun, light); }));
+      }
+      if (overlay) {
+        ST_RETURN_IF_ERROR(timed(Pass::kOverlay, [&] {
+          return DrawOverlay(content, /*fold=*/true, &stats, /*against_cache=*/true);
+        }));
+      }
+      last_deferred_ = last_warped_ = true;
+      last_sun_ = sun;
+      last_light_ = light;
+      last_overlay_ = overlay;
+      glFinish();
+      ST_RETURN_IF_ERROR(CheckGl("rendering a frame"));
+      stats.frame_ms = MsSince(start);
+      return stats;
+    }
     const bool warp = !fold && (view_.needs_prewarp() || has_mask_);
     const GLuint target = warp ? ideal_fbo_ : output;
     ST_RETURN_IF_ERROR(
@@ -837,12 +1071,25 @@ Expected<FrameStats> Renderer::Rewarp() {
   const Clock::time_point start = Clock::now();
   ST_RETURN_IF_ERROR(context_->MakeCurrent());
   FrameStats stats;
+  stats.prewarp = view_.needs_prewarp();
+  stats.masked = has_mask_;
+  if (last_deferred_) {
+    ST_RETURN_IF_ERROR(DrawLight(last_sun_, last_light_));
+    stats.ran[static_cast<int>(Pass::kLight)] = true;
+    if (last_overlay_) {
+      ST_RETURN_IF_ERROR(DrawOverlayBuffer(/*fold=*/true, /*against_cache=*/true));
+      stats.ran[static_cast<int>(Pass::kOverlay)] = true;
+      stats.overlay_triangles = overlay_vertices_ / 3;
+    }
+    glFinish();
+    ST_RETURN_IF_ERROR(CheckGl("lighting the last frame again"));
+    stats.frame_ms = stats.pass_ms[static_cast<int>(Pass::kLight)] = MsSince(start);
+    return stats;
+  }
   ST_RETURN_IF_ERROR(DrawWarp());
   glFinish();
   ST_RETURN_IF_ERROR(CheckGl("warping the last frame again"));
   stats.ran[static_cast<int>(Pass::kWarp)] = true;
-  stats.prewarp = view_.needs_prewarp();
-  stats.masked = has_mask_;
   stats.frame_ms = stats.pass_ms[static_cast<int>(Pass::kWarp)] = MsSince(start);
   return stats;
 }
@@ -916,37 +1163,59 @@ void Renderer::SetDistortionUniforms(unsigned int program, bool distort) {
 }
 
 Expected<unsigned int> Renderer::Variant(ProgramKind kind, int mode, bool textured, bool sun,
-                                         bool masked, bool distort) {
+                                         bool masked, bool distort, bool packed) {
   const bool lifted = masked && has_lift_;
-  const int key = static_cast<int>(kind) | mode << 2 | textured << 5 | sun << 6 | masked << 7 |
-                  distort << 8 | lifted << 9;
+  const int key = static_cast<int>(kind) | mode << 3 | textured << 6 | sun << 7 | masked << 8 |
+                  distort << 9 | lifted << 10 | packed << 11;
   if (auto it = variants_.find(key); it != variants_.end()) return it->second;
   const std::string defines = "#version 330 core\n#define MODE " + std::to_string(mode) +
                               "\n#define TEXTURED " + std::to_string(textured) + "\n#define SUN " +
                               std::to_string(sun) + "\n#define MASKED " + std::to_string(masked) +
                               "\n#define DISTORT " + std::to_string(distort) + "\n#define LIFTED " +
-                              std::to_string(lifted) + "\n";
+                              std::to_string(lifted) + "\n#define PACKED " +
+                              std::to_string(packed) + "\n";
   std::string vertex, fragment;
+  const char* name = "?";
   switch (kind) {
     case ProgramKind::kScene:
       vertex = defines + kSceneVertex;
       fragment = defines + kSceneFragment;
+      name = "scene";
       break;
     case ProgramKind::kOverlay:
       vertex = defines + kOverlayVertex;
       fragment = defines + kOverlayFragment;
+      name = "overlay";
       break;
     case ProgramKind::kWarp:
       vertex = kFullScreenQuadVertexShader;
       fragment = defines + kWarpFragment;
+      name = "warp";
+      break;
+    case ProgramKind::kSurface:
+      vertex = defines + kSurfaceVertex;
+      fragment = defines + kSurfaceFragment;
+      name = "surface";
+      break;
+    case ProgramKind::kSurfaceWarp:
+      vertex = kFullScreenQuadVertexShader;
+      fragment = defines + kSurfaceWarpFragment;
+      name = "surface warp";
+      break;
+    case ProgramKind::kLight:
+      vertex = kFullScreenQuadVertexShader;
+      fragment = defines + kLightFragment;
+      name = "light";
+      break;
+    case ProgramKind::kFaceLight:
+      vertex = kFullScreenQuadVertexShader;
+      fragment = defines + kFaceLightFragment;
+      name = "face light";
       break;
   }
-  Expected<unsigned int> program = LinkProgram("variant " + std::to_string(key) + " of the " +
-                                                   (kind == ProgramKind::kScene     ? "scene"
-                                                    : kind == ProgramKind::kOverlay ? "overlay"
-                                                                                    : "warp") +
-                                                   " program",
-                                               vertex.c_str(), fragment.c_str());
+  Expected<unsigned int> program =
+      LinkProgram("variant " + std::to_string(key) + " of the " + name + " program", vertex.c_str(),
+                  fragment.c_str());
   if (!program.ok()) return program.status();
   variants_[key] = *program;
   return *program;
@@ -1026,7 +1295,8 @@ Status Renderer::DrawScene(const RenderContent& content, unsigned int target, bo
   return CheckGl("drawing the scene");
 }
 
-Status Renderer::DrawOverlay(const RenderContent& content, bool fold, FrameStats* stats) {
+Status Renderer::DrawOverlay(const RenderContent& content, bool fold, FrameStats* stats,
+                             bool against_cache) {
   if (content.overlay_version != overlay_version_ || overlay_view_dirty_) {
     const std::vector<OverlayVertex> vertices =
         BuildOverlay(content, view_.centre_in_table_m, options_.overlay);
@@ -1039,15 +1309,40 @@ Status Renderer::DrawOverlay(const RenderContent& content, bool fold, FrameStats
     stats->overlay_rebuilt = true;
   }
   stats->overlay_triangles = overlay_vertices_ / 3;
-  // Same target as the scene (its depth buffer is still bound): tested, not written.
-  glEnable(GL_DEPTH_TEST);
-  glDepthFunc(GL_LEQUAL);
-  glDepthMask(GL_FALSE);
+  return DrawOverlayBuffer(fold, against_cache);
+}
+
+Status Renderer::DrawOverlayBuffer(bool fold, bool against_cache) {
+  if (against_cache) {
+    glDisable(GL_DEPTH_TEST);  // tested against the surface cache in the shader
+  } else {
+    // Same target as the scene (its depth buffer is still bound): tested, not written.
+    glEnable(GL_DEPTH_TEST);
+    glDepthFunc(GL_LEQUAL);
+    glDepthMask(GL_FALSE);
+  }
   const bool distort = fold && view_.needs_prewarp();
-  Expected<unsigned int> program =
-      Variant(ProgramKind::kOverlay, 0, false, false, fold && has_mask_, distort);
+  // Folded with a pre-warp pass in use (a deferred frame): the mask is in the warp's texture.
+  const bool packed = fold && packed_warp_;
+  Expected<unsigned int> program = Variant(ProgramKind::kOverlay, against_cache ? 1 : 0, false,
+                                           false, fold && has_mask_, distort, packed);
   if (!program.ok()) return program.status();
   glUseProgram(*program);
+  if (against_cache) {
+    Eigen::Matrix4d camera_from_table = Eigen::Matrix4d::Identity();
+    camera_from_table.topLeftCorner<3, 3>() =
+        view_.projector_from_table.rotation.toRotationMatrix();
+    camera_from_table.topRightCorner<3, 1>() = view_.projector_from_table.translation;
+    const glm::mat4 m = ToGlm(camera_from_table);
+    glUniformMatrix4fv(glGetUniformLocation(*program, "u_view_from_table"), 1, GL_FALSE,
+                       glm::value_ptr(m));
+    // A stroke is lifted towards the projector (OverlayOptions::lift_m); what is behind a surface
+    // by more than a tenth of a millimetre is hidden.
+    glUniform1f(glGetUniformLocation(*program, "u_depth_tolerance_m"), 1e-4f);
+    glUniform1i(glGetUniformLocation(*program, "u_cache"), 3);
+    glActiveTexture(GL_TEXTURE3);
+    glBindTexture(GL_TEXTURE_2D, surface_.geometry);
+  }
   const glm::mat4 clip = ToGlm(view_.clip_from_table);
   glUniformMatrix4fv(glGetUniformLocation(*program, "u_clip_from_table"), 1, GL_FALSE,
                      glm::value_ptr(clip));
@@ -1055,12 +1350,195 @@ Status Renderer::DrawOverlay(const RenderContent& content, bool fold, FrameStats
   glUniform1i(glGetUniformLocation(*program, "u_mask"), 2);
   glUniform1f(glGetUniformLocation(*program, "u_lift_gamma"), LiftGamma());
   glActiveTexture(GL_TEXTURE2);
-  glBindTexture(GL_TEXTURE_2D, mask_texture_);
+  glBindTexture(GL_TEXTURE_2D, packed ? warp_texture_ : mask_texture_);
   glActiveTexture(GL_TEXTURE0);
   glBindVertexArray(overlay_vao_);
   glDrawArrays(GL_TRIANGLES, 0, overlay_vertices_);
   glDepthMask(GL_TRUE);
   return CheckGl("drawing the overlay");
+}
+
+Status Renderer::EnsureSurfaceTargets() {
+  if (surface_.fbo) return OkStatus();
+  auto attach = [&](SurfaceTarget* t, GLuint colour) -> Status {
+    glGenFramebuffers(1, &t->fbo);
+    glBindFramebuffer(GL_FRAMEBUFFER, t->fbo);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, t->geometry, 0);
+    if (colour) {
+      glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D, colour, 0);
+      glGenRenderbuffers(1, &t->depth);
+      glBindRenderbuffer(GL_RENDERBUFFER, t->depth);
+      glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, size_.width, size_.height);
+      glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, t->depth);
+    }
+    const GLenum buffers[2] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
+    glDrawBuffers(colour ? 2 : 1, buffers);
+    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+      return InternalError("OpenGL: the surface cache's framebuffer is incomplete");
+    }
+    return OkStatus();
+  };
+  // The ideal cache: geometry, filterable colour, depth. The output cache: the packed texel.
+  ideal_surface_.geometry = MakeTexture2D(GL_RGBA32UI, size_.width, size_.height, GL_RGBA_INTEGER,
+                                          GL_UNSIGNED_INT, nullptr, GL_NEAREST);
+  ideal_surface_.colour = MakeTexture2D(GL_RGBA8, size_.width, size_.height, GL_RGBA,
+                                        GL_UNSIGNED_BYTE, nullptr, GL_LINEAR);
+  ST_RETURN_IF_ERROR(attach(&ideal_surface_, ideal_surface_.colour));
+  surface_.geometry = MakeTexture2D(GL_RGBA32UI, size_.width, size_.height, GL_RGBA_INTEGER,
+                                    GL_UNSIGNED_INT, nullptr, GL_NEAREST);
+  ST_RETURN_IF_ERROR(attach(&surface_, 0));
+  return CheckGl("creating the surface cache");
+}
+
+// The model into the ideal surface cache (DrawSurfaceWarp packs it into output pixels). Groups
+// culled and drawn nearest first as in DrawScene.
+Status Renderer::DrawSurfaceScene(FrameStats* stats) {
+  ST_RETURN_IF_ERROR(EnsureSurfaceTargets());
+  glBindFramebuffer(GL_FRAMEBUFFER, ideal_surface_.fbo);
+  glViewport(0, 0, size_.width, size_.height);
+  const GLuint no_surface[4] = {0, 0, 0, 0};  // face 0: no surface
+  const GLfloat black[4] = {0, 0, 0, 0};
+  glClearBufferuiv(GL_COLOR, 0, no_surface);
+  glClearBufferfv(GL_COLOR, 1, black);
+  glClearDepth(1.0);
+  glDepthMask(GL_TRUE);
+  glClear(GL_DEPTH_BUFFER_BIT);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  glDisable(GL_CULL_FACE);
+  const glm::mat4 clip = ToGlm(view_.clip_from_table);
+  Eigen::Matrix4d camera_from_table = Eigen::Matrix4d::Identity();
+  camera_from_table.topLeftCorner<3, 3>() = view_.projector_from_table.rotation.toRotationMatrix();
+  camera_from_table.topRightCorner<3, 1>() = view_.projector_from_table.translation;
+  const glm::mat4 camera = ToGlm(camera_from_table);
+  glActiveTexture(GL_TEXTURE0);
+  glBindVertexArray(scene_vao_);
+  surface_groups_drawn_ = surface_groups_culled_ = surface_triangles_ = 0;
+  GLuint current = 0;
+  for (int index : draw_order_) {
+    const Group& g = groups_[index];
+    if (OutsideFrustum(view_.clip_from_table, g.bounds)) {
+      ++surface_groups_culled_;
+      continue;
+    }
+    ++surface_groups_drawn_;
+    const bool has_material = g.material < static_cast<int>(material_colours_.size());
+    const Eigen::Vector4d colour =
+        has_material ? material_colours_[g.material] : Eigen::Vector4d(1, 1, 1, 1);
+    const int texture = has_material ? material_textures_[g.material] : -1;
+    const bool textured = texture >= 0 && texture < static_cast<int>(textures_.size());
+    Expected<unsigned int> program =
+        Variant(ProgramKind::kSurface, 0, textured, false, false, false);
+    if (!program.ok()) return program.status();
+    auto loc = [&](const char* name) { return glGetUniformLocation(*program, name); };
+    if (*program != current) {
+      current = *program;
+      glUseProgram(current);
+      glUniformMatrix4fv(loc("u_clip_from_table"), 1, GL_FALSE, glm::value_ptr(clip));
+      glUniformMatrix4fv(loc("u_camera_from_table"), 1, GL_FALSE, glm::value_ptr(camera));
+      glUniform1f(loc("u_height_px"), static_cast<float>(size_.height));
+      glUniform1i(loc("u_texture"), 0);
+    }
+    glUniform1i(loc("u_first_face"), g.first_vertex / 3);
+    glUniform4f(loc("u_base_colour"), static_cast<float>(colour[0]), static_cast<float>(colour[1]),
+                static_cast<float>(colour[2]), static_cast<float>(colour[3]));
+    if (textured) glBindTexture(GL_TEXTURE_2D, textures_[texture]);
+    glDrawArrays(GL_TRIANGLES, g.first_vertex, g.vertex_count);
+    surface_triangles_ += g.vertex_count / 3;
+  }
+  stats->groups_drawn = surface_groups_drawn_;
+  stats->groups_culled = surface_groups_culled_;
+  stats->scene_triangles = surface_triangles_;
+  return CheckGl("drawing the surface cache");
+}
+
+Status Renderer::DrawSurfaceWarp() {
+  glBindFramebuffer(GL_FRAMEBUFFER, surface_.fbo);
+  glViewport(0, 0, size_.width, size_.height);
+  glDisable(GL_DEPTH_TEST);
+  Expected<unsigned int> program =
+      Variant(ProgramKind::kSurfaceWarp, 0, false, false, false, view_.needs_prewarp());
+  if (!program.ok()) return program.status();
+  glUseProgram(*program);
+  glUniform1i(glGetUniformLocation(*program, "u_colour"), 0);
+  glUniform1i(glGetUniformLocation(*program, "u_warp"), 1);
+  glUniform1i(glGetUniformLocation(*program, "u_geometry"), 3);
+  glActiveTexture(GL_TEXTURE1);
+  glBindTexture(GL_TEXTURE_2D, warp_texture_);
+  glActiveTexture(GL_TEXTURE3);
+  glBindTexture(GL_TEXTURE_2D, ideal_surface_.geometry);
+  glActiveTexture(GL_TEXTURE0);
+  glBindTexture(GL_TEXTURE_2D, ideal_surface_.colour);
+  glBindVertexArray(empty_vao_);
+  glDrawArrays(GL_TRIANGLE_STRIP, 0, 4);
+  surface_valid_ = true;
+  return CheckGl("packing the surface cache");
+}
+
+// The sun's light on each face (kFaceLightFragment), for a unit direction above the horizon.
+Status Renderer::DrawFaceLight(const Eigen::Vector3d& sun) {
+  glBindFramebuffer(GL_FRAMEBUFFER, face_light_fbo_);
+  glViewport(0, 0, face_table_size_.width, face_table_size_.height);
+  glDisable(GL_DEPTH_TEST);
+  Expected<unsigned int> program = Variant(ProgramKind::kFaceLight, 0, false, false, false, false);
+  if (!program.ok()) return program.status();
+  glUseProgram(*program);
+  auto loc = [&](const char* name) { return glGetUniformLocation(*program, name); };
+  const glm::vec3 d = ToGlm(sun);
+  glUniform3f(loc("u_sun_direction"), d.x, d.y, d.z);
+  glUniform1f(loc("u_ambient"), static_cast<float>(options_.ambient));
+  glUniform1f(loc("u_inverse_gamma"), static_cast<float>(1.0 / options_.display_gamma));
+  glUniform1i(loc("u_normals"), 0);
+  glActiveTexture(GL_TEXTURE0);
+  glBindTexture(GL_TEXTURE_2D, face_normals_);
+  glBindVertexArray(empty_vao_);
+  glDrawArrays(GL_TRIANGLE_STRIP, 0, 4);
+  face_light_sun_ = sun;
+  return CheckGl("drawing the faces' light");
+}
+
+// One full-screen pass into the output. `sun`: lit by the sun (face light x shadow; both drawn
+// for the current sun), otherwise times `light`.
+Status Renderer::DrawLight(bool sun, float light) {
+  glBindFramebuffer(GL_FRAMEBUFFER, context_->output_framebuffer());
+  glViewport(0, 0, size_.width, size_.height);
+  glDisable(GL_DEPTH_TEST);
+  Expected<unsigned int> program =
+      Variant(ProgramKind::kLight, 0, false, sun, has_mask_, false, packed_warp_);
+  if (!program.ok()) return program.status();
+  glUseProgram(*program);
+  auto loc = [&](const char* name) { return glGetUniformLocation(*program, name); };
+  Eigen::Matrix4d table_from_camera = Eigen::Matrix4d::Identity();
+  const Eigen::Matrix3d r = view_.projector_from_table.rotation.toRotationMatrix();
+  table_from_camera.topLeftCorner<3, 3>() = r.transpose();
+  table_from_camera.topRightCorner<3, 1>() =
+      -r.transpose() * view_.projector_from_table.translation;
+  const glm::mat4 sun_clip = ToGlm(Eigen::Matrix4d(sun_clip_from_table_ * table_from_camera));
+  glUniformMatrix4fv(loc("u_sun_clip_from_camera"), 1, GL_FALSE, glm::value_ptr(sun_clip));
+  const CameraModel& p = view_.projector;
+  glUniform4f(loc("u_inverse_intrinsics"), static_cast<float>(1.0 / p.fx_px),
+              static_cast<float>(1.0 / p.fy_px), static_cast<float>(p.cx_px),
+              static_cast<float>(p.cy_px));
+  glUniform1f(loc("u_ambient_encoded"),
+              static_cast<float>(std::pow(options_.ambient, 1.0 / options_.display_gamma)));
+  glUniform1f(loc("u_light"), light);
+  glUniform1f(loc("u_lift_gamma"), LiftGamma());
+  glUniform1i(loc("u_shadow"), 1);
+  glUniform1i(loc("u_mask"), 2);
+  glUniform1i(loc("u_cache"), 3);
+  glUniform1i(loc("u_face_light"), 4);
+  glActiveTexture(GL_TEXTURE1);
+  glBindTexture(GL_TEXTURE_2D, shadow_texture_);
+  glActiveTexture(GL_TEXTURE2);
+  glBindTexture(GL_TEXTURE_2D, packed_warp_ ? warp_texture_ : mask_texture_);
+  glActiveTexture(GL_TEXTURE3);
+  glBindTexture(GL_TEXTURE_2D, surface_.geometry);
+  glActiveTexture(GL_TEXTURE4);
+  glBindTexture(GL_TEXTURE_2D, face_light_);
+  glActiveTexture(GL_TEXTURE0);
+  glBindVertexArray(empty_vao_);
+  glDrawArrays(GL_TRIANGLE_STRIP, 0, 4);
+  return CheckGl("drawing the light pass");
 }
 
 Status Renderer::DrawWarp() {

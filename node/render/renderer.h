@@ -16,6 +16,17 @@
 // image. Unfolded, the scene is drawn with the pinhole matrix into an ideal image and a full-screen
 // warp pass looks each output pixel up in it. A pass a frame does not need is skipped and counted
 // in FrameStats.
+// Deferred (RendererOptions::deferred, on by default; the show only, 8-bit targets, unfolded): the
+// projector does not move between calibrations and the model is static, so what the scene pass
+// and the pre-warp compute of the model at every output pixel (the surface's depth along its
+// ideal pixel's ray, its face, its base colour x texture) is drawn once per view into a surface
+// cache, one RGBA32UI texel a pixel (the scene pass into an ideal cache, the warp pass resampling
+// and packing it into output pixels: nearest for the geometry, bilinear for the colour), and
+// kept. Every frame then runs only what changes with time: when the sun moved, the shadow map and
+// the sun's light on each face (one texel a face); one full-screen light pass (the face's light x
+// the shadow lookup at the point rebuilt from the cache, the mask, the lift); the overlay, drawn
+// straight into output pixels through the lens model in its vertex shader and depth-tested
+// against the cache. FrameStats counts the cached passes as skipped (docs/render.md).
 //
 // Colour: every value is display-encoded (what the projector is sent). Products of linear
 // quantities (albedo x light x mask) are taken on encoded values with the display's power law
@@ -48,6 +59,7 @@ namespace sandtable::node {
 struct RendererOptions {
   int shadow_map_px = 1024;            // 1.5 mm per texel over a 1.5 m table
   bool fold_prewarp = false;           // see above
+  bool deferred = true;                // the show lit from a surface cache (see above)
   double prewarp_tolerance_px = 0.02;  // folded pre-warp: chord error of a triangle edge
   double min_tessellation_px = 8.0;    // ... edges never shorter than this
   double max_tessellation_px = 256.0;  // ... nor left longer
@@ -60,8 +72,8 @@ struct RendererOptions {
   Status Check() const;
 };
 
-enum class Pass { kShadow = 0, kScene, kOverlay, kWarp, kPattern };
-inline constexpr int kPassCount = 5;
+enum class Pass { kShadow = 0, kScene, kOverlay, kWarp, kPattern, kLight };
+inline constexpr int kPassCount = 6;
 const char* PassName(Pass pass);
 
 struct FrameStats {
@@ -100,10 +112,12 @@ class Renderer {
   // Draws one frame into the context's output framebuffer (not presented: GlContext::Present).
   Expected<FrameStats> Render(const RenderContent& content);
   // The last frame again under the current mask: the warp pass alone over the ideal image the
-  // last Render left (a mask swap, a re-blend, needs nothing else; FrameStats has only kWarp).
+  // last Render left, or for a deferred frame the light pass and the overlay over the surface
+  // cache with the last frame's sun (a mask swap, a re-blend, needs nothing else).
   // UNAVAILABLE unless CanRewarp().
   Expected<FrameStats> Rewarp();
-  // The last Render went through the warp pass (unfolded) and no view was set since.
+  // The last Render went through the warp pass (unfolded) or was deferred, and no view was set
+  // since.
   bool CanRewarp() const { return last_warped_; }
   // The floor: one full-screen textured pass at the output size, GL work finished; ms.
   Expected<double> RenderFloor();
@@ -114,16 +128,38 @@ class Renderer {
   Status Init(const Scene& scene);
   Status DrawScene(const RenderContent& content, unsigned int target, bool fold, FrameStats* stats);
   struct Group;
+  // `face_normals`: each triangle's normal in the buffer's order (3 floats a triangle), if given.
   Status UploadGeometry(unsigned int vao, unsigned int vbo, double edge_px,
-                        std::vector<Group>* groups);
+                        std::vector<Group>* groups, std::vector<float>* face_normals = nullptr);
   void SetDistortionUniforms(unsigned int program, bool distort);
-  enum class ProgramKind { kScene = 0, kOverlay = 1, kWarp = 2 };
-  // The program specialised for these features (compiled on first use, then cached).
+  enum class ProgramKind {
+    kScene = 0,
+    kOverlay = 1,
+    kWarp = 2,
+    kSurface = 3,      // the model into the surface cache
+    kSurfaceWarp = 4,  // the ideal surface cache resampled into output pixels
+    kLight = 5,        // the deferred frame's full-screen pass
+    kFaceLight = 6,    // the sun's light on each face
+  };
+  // The program specialised for these features (compiled on first use, then cached). `packed`:
+  // the mask is read from the warp's packed texture (its zw).
   float LiftGamma() const;  // the exponent the shaders add the lift under
   Expected<unsigned int> Variant(ProgramKind kind, int mode, bool textured, bool sun, bool masked,
-                                 bool distort);
+                                 bool distort, bool packed = false);
   Status DrawShadow(const Eigen::Vector3d& sun);
-  Status DrawOverlay(const RenderContent& content, bool fold, FrameStats* stats);
+  // The overlay: rebuilt when the content's changed, then drawn. `fold`: into output pixels
+  // (through the lens model, masked) rather than into the ideal image.
+  // `against_cache`: depth-tested against the surface cache (a deferred frame) rather than the
+  // bound depth buffer.
+  Status DrawOverlay(const RenderContent& content, bool fold, FrameStats* stats,
+                     bool against_cache = false);
+  Status DrawOverlayBuffer(bool fold, bool against_cache);
+  // The deferred path (see above).
+  Status EnsureSurfaceTargets();
+  Status DrawSurfaceScene(FrameStats* stats);
+  Status DrawSurfaceWarp();
+  Status DrawFaceLight(const Eigen::Vector3d& sun);
+  Status DrawLight(bool sun, float light);
   Status DrawWarp();
   Status DrawPattern(const RenderContent& content);
   Status EnsureIdealTarget();
@@ -156,6 +192,25 @@ class Renderer {
   unsigned int shadow_fbo_ = 0, shadow_texture_ = 0;
   unsigned int ideal_fbo_ = 0, ideal_colour_ = 0, ideal_depth_ = 0;
   unsigned int output_depth_ = 0;
+  // The surface cache (the layout is at kSurfaceFragment in renderer.cc): the ideal one (geometry
+  // RGBA32UI, colour RGBA8, depth) drawn by the scene pass, the output one (geometry: the packed
+  // texel) by the warp pass.
+  struct SurfaceTarget {
+    unsigned int fbo = 0, geometry = 0, colour = 0, depth = 0;
+  };
+  SurfaceTarget surface_, ideal_surface_;
+  bool surface_valid_ = false;  // surface_ holds the model for view_
+  int surface_groups_drawn_ = 0, surface_groups_culled_ = 0, surface_triangles_ = 0;
+  // The sun's light on each face (R32F, kFaceRowTexels a row; face f at (f % ..., f / ...)),
+  // drawn from the faces' normals (RGB32F, same layout) when the sun moves.
+  static constexpr int kFaceRowTexels = 4096;
+  unsigned int face_normals_ = 0, face_light_ = 0, face_light_fbo_ = 0;
+  cv::Size face_table_size_;
+  std::optional<Eigen::Vector3d> face_light_sun_;  // the sun of face_light_
+  bool last_deferred_ = false;  // the last frame was deferred (Rewarp re-lights it)
+  bool last_sun_ = false;       // ... lit by the sun (face light x shadow)
+  float last_light_ = 1.0f;     // ... or by this factor
+  bool last_overlay_ = false;   // ... with an overlay
   // The warp pass's inputs: with an unfolded pre-warp (packed_warp_) one RGBA texture of
   // (source x, y, mask factor, lift) per output pixel, one fetch a pixel; otherwise the mask alone
   // (RG). Texels are 16-bit normalized (32-bit floats for a float target) in GL row order, kept
