@@ -474,22 +474,29 @@ Status Renderer::Init(const Scene& scene) {
   });
   std::vector<float> normals;
   ST_RETURN_IF_ERROR(UploadGeometry(scene_vao_, scene_vbo_, /*edge_px=*/0.0, &groups_, &normals));
-  // The deferred path's face tables (renderer.h): the normals, and the light drawn from them.
+  // The deferred path's face tables (renderer.h): the normals, and the light drawn from them. A
+  // model with more faces than a table can hold (4096 x the largest texture's rows) is drawn
+  // with the forward passes.
   const int faces = std::max<int>(1, static_cast<int>(normals.size() / 3));
   face_table_size_ =
       cv::Size(std::min(faces, kFaceRowTexels), (faces + kFaceRowTexels - 1) / kFaceRowTexels);
-  normals.resize(static_cast<size_t>(face_table_size_.area()) * 3, 0.0f);
-  face_normals_ = MakeTexture2D(GL_RGB32F, face_table_size_.width, face_table_size_.height, GL_RGB,
-                                GL_FLOAT, normals.data(), GL_NEAREST);
-  face_light_ = MakeTexture2D(GL_R32F, face_table_size_.width, face_table_size_.height, GL_RED,
-                              GL_FLOAT, nullptr, GL_NEAREST);
-  glGenFramebuffers(1, &face_light_fbo_);
-  glBindFramebuffer(GL_FRAMEBUFFER, face_light_fbo_);
-  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, face_light_, 0);
-  if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
-    return InternalError("OpenGL: the face light's framebuffer is incomplete");
+  GLint max_texture_px = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_texture_px);
+  deferred_ = options_.deferred && face_table_size_.height <= max_texture_px;
+  if (deferred_) {
+    normals.resize(static_cast<size_t>(face_table_size_.area()) * 3, 0.0f);
+    face_normals_ = MakeTexture2D(GL_RGB32F, face_table_size_.width, face_table_size_.height,
+                                  GL_RGB, GL_FLOAT, normals.data(), GL_NEAREST);
+    face_light_ = MakeTexture2D(GL_R32F, face_table_size_.width, face_table_size_.height, GL_RED,
+                                GL_FLOAT, nullptr, GL_NEAREST);
+    glGenFramebuffers(1, &face_light_fbo_);
+    glBindFramebuffer(GL_FRAMEBUFFER, face_light_fbo_);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, face_light_, 0);
+    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+      return InternalError("OpenGL: the face light's framebuffer is incomplete");
+    }
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
   }
-  glBindFramebuffer(GL_FRAMEBUFFER, 0);
 
   glGenVertexArrays(1, &overlay_vao_);
   glBindVertexArray(overlay_vao_);
@@ -987,7 +994,7 @@ Expected<FrameStats> Renderer::Render(const RenderContent& content) {
           timed(Pass::kShadow, [&] { return DrawShadow(*content.sun_direction_in_table); }));
     }
     const bool fold = options_.fold_prewarp;
-    const bool deferred = options_.deferred && !fold && show && !context_->float_output();
+    const bool deferred = deferred_ && !fold && show && !context_->float_output();
     const Eigen::Vector3d sun_unit =
         sun ? content.sun_direction_in_table->normalized() : Eigen::Vector3d::UnitZ();
     if (deferred && sun && (!face_light_sun_ || !face_light_sun_->isApprox(sun_unit, 1e-12))) {

@@ -204,6 +204,7 @@ class Renderer {
   // The sun's light on each face (R32F, kFaceRowTexels a row; face f at (f % ..., f / ...)),
   // drawn from the faces' normals (RGB32F, same layout) when the sun moves.
   static constexpr int kFaceRowTexels = 4096;
+  bool deferred_ = false;  // options_.deferred, and the model's faces fit the tables
   unsigned int face_normals_ = 0, face_light_ = 0, face_light_fbo_ = 0;
   cv::Size face_table_size_;
   std::optional<Eigen::Vector3d> face_light_sun_;  // the sun of face_light_
