@@ -231,7 +231,7 @@ void main() {
 )";
 
 // The deferred path (renderer.h). The surface cache is one RGBA32UI texel per output pixel
-// (one lookup a pixel in the light pass: on llvmpipe each full-screen lookup costs 3-5 ms at
+// (one lookup a pixel in the light pass: on llvmpipe each full-screen lookup costs 2-5 ms at
 // 1280x800, more than its bytes): x the camera-space depth of the surface (float bits), y its
 // ideal pixel (u | v << 16, OpenCV), z its encoded base colour x texture (8 bits a channel), w its
 // face (index + 1; 0: no surface). The scene pass draws the ideal cache (the geometry as such,
@@ -1181,45 +1181,27 @@ Expected<unsigned int> Renderer::Variant(ProgramKind kind, int mode, bool textur
                               "\n#define DISTORT " + std::to_string(distort) + "\n#define LIFTED " +
                               std::to_string(lifted) + "\n#define PACKED " +
                               std::to_string(packed) + "\n";
-  std::string vertex, fragment;
-  const char* name = "?";
-  switch (kind) {
-    case ProgramKind::kScene:
-      vertex = defines + kSceneVertex;
-      fragment = defines + kSceneFragment;
-      name = "scene";
-      break;
-    case ProgramKind::kOverlay:
-      vertex = defines + kOverlayVertex;
-      fragment = defines + kOverlayFragment;
-      name = "overlay";
-      break;
-    case ProgramKind::kWarp:
-      vertex = kFullScreenQuadVertexShader;
-      fragment = defines + kWarpFragment;
-      name = "warp";
-      break;
-    case ProgramKind::kSurface:
-      vertex = defines + kSurfaceVertex;
-      fragment = defines + kSurfaceFragment;
-      name = "surface";
-      break;
-    case ProgramKind::kSurfaceWarp:
-      vertex = kFullScreenQuadVertexShader;
-      fragment = defines + kSurfaceWarpFragment;
-      name = "surface warp";
-      break;
-    case ProgramKind::kLight:
-      vertex = kFullScreenQuadVertexShader;
-      fragment = defines + kLightFragment;
-      name = "light";
-      break;
-    case ProgramKind::kFaceLight:
-      vertex = kFullScreenQuadVertexShader;
-      fragment = defines + kFaceLightFragment;
-      name = "face light";
-      break;
-  }
+  // Each kind's shaders (a null vertex shader: the full-screen quad's) and name, in ProgramKind's
+  // order.
+  struct Source {
+    const char* vertex;
+    const char* fragment;
+    const char* name;
+  };
+  static const Source kSources[7] = {
+      {kSceneVertex.c_str(), kSceneFragment, "scene"},
+      {kOverlayVertex.c_str(), kOverlayFragment, "overlay"},
+      {nullptr, kWarpFragment, "warp"},
+      {kSurfaceVertex, kSurfaceFragment, "surface"},
+      {nullptr, kSurfaceWarpFragment, "surface warp"},
+      {nullptr, kLightFragment, "light"},
+      {nullptr, kFaceLightFragment, "face light"},
+  };
+  const Source& source = kSources[static_cast<int>(kind)];
+  const std::string vertex =
+      source.vertex ? defines + source.vertex : std::string(kFullScreenQuadVertexShader);
+  const std::string fragment = defines + source.fragment;
+  const char* name = source.name;
   Expected<unsigned int> program =
       LinkProgram("variant " + std::to_string(key) + " of the " + name + " program", vertex.c_str(),
                   fragment.c_str());

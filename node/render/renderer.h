@@ -139,7 +139,7 @@ class Renderer {
     kSurface = 3,      // the model into the surface cache
     kSurfaceWarp = 4,  // the ideal surface cache resampled into output pixels
     kLight = 5,        // the deferred frame's full-screen pass
-    kFaceLight = 6,    // the sun's light on each face
+    kFaceLight = 6,    // the sun's light on each face (Variant's table has one row a kind)
   };
   // The program specialised for these features (compiled on first use, then cached). `packed`:
   // the mask is read from the warp's packed texture (its zw).
