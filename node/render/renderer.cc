@@ -85,6 +85,19 @@ void main() {
 }
 )";
 
+// Every fragment shader of a variant starts with this (after its #defines): the mask (factor,
+// lift) applied to an encoded colour, the lift added in linear light (LiftGamma).
+constexpr const char* kFragmentCommon = R"(
+uniform float u_lift_gamma;
+vec3 ApplyMask(vec3 c, vec2 m) {
+  c *= m.r;
+#if LIFTED
+  c = pow(pow(c, vec3(u_lift_gamma)) + m.g, vec3(1.0 / u_lift_gamma));
+#endif
+  return c;
+}
+)";
+
 // MODE: 0 the show, 1 white, 2 the table grid, 3 table positions (float targets), 4 black.
 // Colours are display-encoded; u_base_colour is encoded, the light is raised to 1 / gamma in the
 // vertex shader (in shadow and in the sun; the shadow lookup mixes the two) and the mask on
@@ -96,7 +109,6 @@ uniform sampler2DShadow u_shadow;
 uniform float u_grid_spacing_m;
 uniform float u_grid_half_line_m;
 uniform sampler2D u_mask;
-uniform float u_lift_gamma;
 in vec3 v_position;
 in vec2 v_uv;
 in vec3 v_sun;
@@ -127,10 +139,7 @@ void main() {
 #endif
 #if MASKED
   vec2 m = texelFetch(u_mask, ivec2(gl_FragCoord.xy), 0).rg;
-  c *= m.r;
-#if LIFTED
-  c = pow(pow(c, vec3(u_lift_gamma)) + m.g, vec3(1.0 / u_lift_gamma));
-#endif
+  c = ApplyMask(c, m);
 #endif
   o_colour = vec4(c, 1.0);
 }
@@ -168,7 +177,6 @@ void main() {
 )";
 constexpr const char* kOverlayFragment = R"(
 uniform sampler2D u_mask;
-uniform float u_lift_gamma;
 in vec4 v_colour;
 out vec4 o_colour;
 #if MODE == 1
@@ -188,10 +196,7 @@ void main() {
 #else
   vec2 m = texelFetch(u_mask, ivec2(gl_FragCoord.xy), 0).rg;
 #endif
-  o_colour.rgb *= m.r;
-#if LIFTED
-  o_colour.rgb = pow(pow(o_colour.rgb, vec3(u_lift_gamma)) + m.g, vec3(1.0 / u_lift_gamma));
-#endif
+  o_colour.rgb = ApplyMask(o_colour.rgb, m);
 #endif
 }
 )";
@@ -203,7 +208,6 @@ constexpr const char* kWarpFragment = R"(
 uniform sampler2D u_image;
 uniform sampler2D u_warp;
 uniform sampler2D u_mask;
-uniform float u_lift_gamma;
 out vec4 o_colour;
 void main() {
   ivec2 p = ivec2(gl_FragCoord.xy);
@@ -221,10 +225,7 @@ void main() {
 #else
   vec2 m = texelFetch(u_mask, p, 0).rg;
 #endif
-  c *= m.r;
-#if LIFTED
-  c = pow(pow(c, vec3(u_lift_gamma)) + m.g, vec3(1.0 / u_lift_gamma));
-#endif
+  c = ApplyMask(c, m);
 #endif
   o_colour = vec4(c, 1.0);
 }
@@ -323,7 +324,6 @@ uniform mat4 u_sun_clip_from_camera;
 uniform vec4 u_inverse_intrinsics;  // 1 / fx, 1 / fy, cx, cy (px)
 uniform float u_ambient_encoded;
 uniform float u_light;
-uniform float u_lift_gamma;
 out vec4 o_colour;
 void main() {
   ivec2 p = ivec2(gl_FragCoord.xy);
@@ -346,10 +346,7 @@ void main() {
 #else
   vec2 m = texelFetch(u_mask, p, 0).rg;
 #endif
-  c *= m.r;
-#if LIFTED
-  c = pow(pow(c, vec3(u_lift_gamma)) + m.g, vec3(1.0 / u_lift_gamma));
-#endif
+  c = ApplyMask(c, m);
 #endif
   o_colour = vec4(c, 1.0);
 }
@@ -1200,7 +1197,7 @@ Expected<unsigned int> Renderer::Variant(ProgramKind kind, int mode, bool textur
   const Source& source = kSources[static_cast<int>(kind)];
   const std::string vertex =
       source.vertex ? defines + source.vertex : std::string(kFullScreenQuadVertexShader);
-  const std::string fragment = defines + source.fragment;
+  const std::string fragment = defines + kFragmentCommon + source.fragment;
   const char* name = source.name;
   Expected<unsigned int> program =
       LinkProgram("variant " + std::to_string(key) + " of the " + name + " program", vertex.c_str(),
