@@ -397,6 +397,14 @@ bool OutsideFrustum(const Eigen::Matrix4d& clip_from_table, const Eigen::Aligned
   return std::any_of(std::begin(outside), std::end(outside), [](int n) { return n == 8; });
 }
 
+// The projector's rigid transform as a 4x4 matrix (camera <- table, metres).
+Eigen::Matrix4d Matrix(const Rigid3d& transform) {
+  Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+  m.topLeftCorner<3, 3>() = transform.rotation.toRotationMatrix();
+  m.topRightCorner<3, 1>() = transform.translation;
+  return m;
+}
+
 }  // namespace
 
 const char* PassName(Pass pass) {
@@ -1151,10 +1159,7 @@ void Renderer::SetDistortionUniforms(unsigned int program, bool distort) {
   auto loc = [&](const char* name) { return glGetUniformLocation(program, name); };
   if (!distort) return;
   const CameraModel& p = view_.projector;
-  Eigen::Matrix4d camera_from_table = Eigen::Matrix4d::Identity();
-  camera_from_table.topLeftCorner<3, 3>() = view_.projector_from_table.rotation.toRotationMatrix();
-  camera_from_table.topRightCorner<3, 1>() = view_.projector_from_table.translation;
-  const glm::mat4 m = ToGlm(camera_from_table);
+  const glm::mat4 m = ToGlm(Matrix(view_.projector_from_table));
   glUniformMatrix4fv(loc("u_camera_from_table"), 1, GL_FALSE, glm::value_ptr(m));
   glUniform4f(loc("u_intrinsics"), static_cast<float>(p.fx_px), static_cast<float>(p.fy_px),
               static_cast<float>(p.cx_px), static_cast<float>(p.cy_px));
@@ -1207,6 +1212,15 @@ Expected<unsigned int> Renderer::Variant(ProgramKind kind, int mode, bool textur
   return *program;
 }
 
+std::pair<Eigen::Vector4d, int> Renderer::GroupMaterial(const Group& g) const {
+  if (g.material < 0 || g.material >= static_cast<int>(material_colours_.size())) {
+    return {Eigen::Vector4d(1, 1, 1, 1), -1};
+  }
+  const int texture = material_textures_[g.material];
+  return {material_colours_[g.material],
+          texture >= 0 && texture < static_cast<int>(textures_.size()) ? texture : -1};
+}
+
 Status Renderer::DrawScene(const RenderContent& content, unsigned int target, bool fold,
                            FrameStats* stats) {
   glBindFramebuffer(GL_FRAMEBUFFER, target);
@@ -1246,11 +1260,8 @@ Status Renderer::DrawScene(const RenderContent& content, unsigned int target, bo
       continue;
     }
     ++stats->groups_drawn;
-    const bool has_material = g.material < static_cast<int>(material_colours_.size());
-    const Eigen::Vector4d colour =
-        has_material ? material_colours_[g.material] : Eigen::Vector4d(1, 1, 1, 1);
-    const int texture = has_material ? material_textures_[g.material] : -1;
-    const bool textured = mode == 0 && texture >= 0 && texture < static_cast<int>(textures_.size());
+    const auto [colour, texture] = GroupMaterial(g);
+    const bool textured = mode == 0 && texture >= 0;
     Expected<unsigned int> program =
         Variant(ProgramKind::kScene, mode, textured, sun, masked, distort);
     if (!program.ok()) return program.status();
@@ -1315,11 +1326,7 @@ Status Renderer::DrawOverlayBuffer(bool fold, bool against_cache) {
   if (!program.ok()) return program.status();
   glUseProgram(*program);
   if (against_cache) {
-    Eigen::Matrix4d camera_from_table = Eigen::Matrix4d::Identity();
-    camera_from_table.topLeftCorner<3, 3>() =
-        view_.projector_from_table.rotation.toRotationMatrix();
-    camera_from_table.topRightCorner<3, 1>() = view_.projector_from_table.translation;
-    const glm::mat4 m = ToGlm(camera_from_table);
+    const glm::mat4 m = ToGlm(Matrix(view_.projector_from_table));
     glUniformMatrix4fv(glGetUniformLocation(*program, "u_view_from_table"), 1, GL_FALSE,
                        glm::value_ptr(m));
     // A stroke is lifted towards the projector (OverlayOptions::lift_m); what is behind a surface
@@ -1393,10 +1400,7 @@ Status Renderer::DrawSurfaceScene(FrameStats* stats) {
   glDepthFunc(GL_LESS);
   glDisable(GL_CULL_FACE);
   const glm::mat4 clip = ToGlm(view_.clip_from_table);
-  Eigen::Matrix4d camera_from_table = Eigen::Matrix4d::Identity();
-  camera_from_table.topLeftCorner<3, 3>() = view_.projector_from_table.rotation.toRotationMatrix();
-  camera_from_table.topRightCorner<3, 1>() = view_.projector_from_table.translation;
-  const glm::mat4 camera = ToGlm(camera_from_table);
+  const glm::mat4 camera = ToGlm(Matrix(view_.projector_from_table));
   glActiveTexture(GL_TEXTURE0);
   glBindVertexArray(scene_vao_);
   surface_groups_drawn_ = surface_groups_culled_ = surface_triangles_ = 0;
@@ -1408,11 +1412,8 @@ Status Renderer::DrawSurfaceScene(FrameStats* stats) {
       continue;
     }
     ++surface_groups_drawn_;
-    const bool has_material = g.material < static_cast<int>(material_colours_.size());
-    const Eigen::Vector4d colour =
-        has_material ? material_colours_[g.material] : Eigen::Vector4d(1, 1, 1, 1);
-    const int texture = has_material ? material_textures_[g.material] : -1;
-    const bool textured = texture >= 0 && texture < static_cast<int>(textures_.size());
+    const auto [colour, texture] = GroupMaterial(g);
+    const bool textured = texture >= 0;
     Expected<unsigned int> program =
         Variant(ProgramKind::kSurface, 0, textured, false, false, false);
     if (!program.ok()) return program.status();
@@ -1494,11 +1495,7 @@ Status Renderer::DrawLight(bool sun, float light) {
   if (!program.ok()) return program.status();
   glUseProgram(*program);
   auto loc = [&](const char* name) { return glGetUniformLocation(*program, name); };
-  Eigen::Matrix4d table_from_camera = Eigen::Matrix4d::Identity();
-  const Eigen::Matrix3d r = view_.projector_from_table.rotation.toRotationMatrix();
-  table_from_camera.topLeftCorner<3, 3>() = r.transpose();
-  table_from_camera.topRightCorner<3, 1>() =
-      -r.transpose() * view_.projector_from_table.translation;
+  const Eigen::Matrix4d table_from_camera = Matrix(view_.projector_from_table.Inverse());
   const glm::mat4 sun_clip = ToGlm(Eigen::Matrix4d(sun_clip_from_table_ * table_from_camera));
   glUniformMatrix4fv(loc("u_sun_clip_from_camera"), 1, GL_FALSE, glm::value_ptr(sun_clip));
   const CameraModel& p = view_.projector;

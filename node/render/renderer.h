@@ -43,6 +43,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -146,6 +147,9 @@ class Renderer {
   float LiftGamma() const;  // the exponent the shaders add the lift under
   Expected<unsigned int> Variant(ProgramKind kind, int mode, bool textured, bool sun, bool masked,
                                  bool distort, bool packed = false);
+  // A group's encoded base colour and texture (an index into textures_, -1: none); white
+  // without a material.
+  std::pair<Eigen::Vector4d, int> GroupMaterial(const Group& g) const;
   Status DrawShadow(const Eigen::Vector3d& sun);
   // The overlay: rebuilt when the content's changed, then drawn. `fold`: into output pixels
   // (through the lens model, masked) rather than into the ideal image.
