@@ -1009,7 +1009,7 @@ Expected<FrameStats> Renderer::Render(const RenderContent& content) {
     if (deferred) {
       // Deferred (renderer.h): the surface cache once per view, then light and overlay.
       if (!surface_valid_) {
-        ST_RETURN_IF_ERROR(timed(Pass::kScene, [&] { return DrawSurfaceScene(&stats); }));
+        ST_RETURN_IF_ERROR(timed(Pass::kScene, [&] { return DrawSurfaceScene(); }));
         // Packed into output pixels: through the pre-warp (the warp pass), or pixel for pixel
         // (counted with the scene pass).
         const bool prewarp = view_.needs_prewarp();
@@ -1385,7 +1385,7 @@ Status Renderer::EnsureSurfaceTargets() {
 
 // The model into the ideal surface cache (DrawSurfaceWarp packs it into output pixels). Groups
 // culled and drawn nearest first as in DrawScene.
-Status Renderer::DrawSurfaceScene(FrameStats* stats) {
+Status Renderer::DrawSurfaceScene() {
   ST_RETURN_IF_ERROR(EnsureSurfaceTargets());
   glBindFramebuffer(GL_FRAMEBUFFER, ideal_surface_.fbo);
   glViewport(0, 0, size_.width, size_.height);
@@ -1433,9 +1433,6 @@ Status Renderer::DrawSurfaceScene(FrameStats* stats) {
     glDrawArrays(GL_TRIANGLES, g.first_vertex, g.vertex_count);
     surface_triangles_ += g.vertex_count / 3;
   }
-  stats->groups_drawn = surface_groups_drawn_;
-  stats->groups_culled = surface_groups_culled_;
-  stats->scene_triangles = surface_triangles_;
   return CheckGl("drawing the surface cache");
 }
 

@@ -160,7 +160,7 @@ class Renderer {
   Status DrawOverlayBuffer(bool fold, bool against_cache);
   // The deferred path (see above).
   Status EnsureSurfaceTargets();
-  Status DrawSurfaceScene(FrameStats* stats);
+  Status DrawSurfaceScene();  // counts into surface_groups_*_, which every frame reports
   Status DrawSurfaceWarp();
   Status DrawFaceLight(const Eigen::Vector3d& sun);
   Status DrawLight(bool sun, float light);
