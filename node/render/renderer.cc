@@ -157,19 +157,20 @@ void main() {}
 
 // MODE 1 (a deferred frame): depth-tested against the surface cache in the fragment shader (no
 // depth buffer is written by the light pass): hidden where the surface is nearer the projector.
+// MODE 2: the same, the colour before the mask also kept (second target, Renderer::Rewarp).
 const std::string kOverlayVertex = std::string(R"(
 layout(location = 0) in vec3 a_position;
 layout(location = 1) in vec4 a_colour;
 uniform mat4 u_clip_from_table;
 out vec4 v_colour;
-#if MODE == 1
+#if MODE >= 1
 uniform mat4 u_view_from_table;
 out float v_depth;
 #endif
 )") + kProject + R"(
 void main() {
   v_colour = a_colour;
-#if MODE == 1
+#if MODE >= 1
   v_depth = (u_view_from_table * vec4(a_position, 1.0)).z;
 #endif
   gl_Position = Project(a_position, u_clip_from_table);
@@ -178,18 +179,24 @@ void main() {
 constexpr const char* kOverlayFragment = R"(
 uniform sampler2D u_mask;
 in vec4 v_colour;
-out vec4 o_colour;
-#if MODE == 1
+layout(location = 0) out vec4 o_colour;
+#if MODE >= 1
 uniform usampler2D u_cache;
 uniform float u_depth_tolerance_m;
 in float v_depth;
 #endif
+#if MODE == 2
+layout(location = 1) out vec4 o_lit;  // the colour before the mask (Renderer::Rewarp)
+#endif
 void main() {
-#if MODE == 1
+#if MODE >= 1
   uvec4 q = texelFetch(u_cache, ivec2(gl_FragCoord.xy), 0);
   if (q.w != 0u && v_depth > uintBitsToFloat(q.x) + u_depth_tolerance_m) discard;
 #endif
   o_colour = v_colour;
+#if MODE == 2
+  o_lit = v_colour;
+#endif
 #if MASKED
 #if PACKED
   vec2 m = texelFetch(u_mask, ivec2(gl_FragCoord.xy), 0).ba;
@@ -222,6 +229,8 @@ void main() {
 #if MASKED
 #if DISTORT
   vec2 m = w.zw;
+#elif PACKED
+  vec2 m = texelFetch(u_mask, p, 0).ba;
 #else
   vec2 m = texelFetch(u_mask, p, 0).rg;
 #endif
@@ -314,7 +323,9 @@ void main() {
 // A deferred frame, per output pixel: the cached colour lit by the sun (its face's light x the
 // shadow lookup at the surface's point, rebuilt on its ideal pixel's ray, as the scene pass lights
 // it; times u_light without a sun), times the mask, plus the lift. No branch on the surface:
-// where there is none the colour is black. PACKED: the mask is in the warp's texture (zw).
+// where there is none the colour is black. PACKED: the mask is in the warp's texture (zw). MODE 1:
+// the colour before the mask also goes to a second target (lit_texture_): a new mask is then one
+// full-screen pass over it (Renderer::Rewarp), not the light pass again.
 constexpr const char* kLightFragment = R"(
 uniform usampler2D u_cache;
 uniform sampler2D u_face_light;
@@ -324,7 +335,10 @@ uniform mat4 u_sun_clip_from_camera;
 uniform vec4 u_inverse_intrinsics;  // 1 / fx, 1 / fy, cx, cy (px)
 uniform float u_ambient_encoded;
 uniform float u_light;
-out vec4 o_colour;
+layout(location = 0) out vec4 o_colour;
+#if MODE == 1
+layout(location = 1) out vec4 o_lit;  // the colour before the mask (Renderer::Rewarp)
+#endif
 void main() {
   ivec2 p = ivec2(gl_FragCoord.xy);
   uvec4 q = texelFetch(u_cache, p, 0);
@@ -339,6 +353,9 @@ void main() {
   c *= mix(u_ambient_encoded, lit, texture(u_shadow, s));
 #else
   c *= u_light;
+#endif
+#if MODE == 1
+  o_lit = vec4(c, 1.0);
 #endif
 #if MASKED
 #if PACKED
@@ -724,7 +741,7 @@ Renderer::~Renderer() {
   for (const auto& [key, p] : variants_) glDeleteProgram(p);
   std::vector<GLuint> textures = textures_;
   for (GLuint t : {shadow_texture_, ideal_colour_, warp_texture_, mask_texture_, pattern_texture_,
-                   floor_texture_, face_normals_, face_light_}) {
+                   floor_texture_, face_normals_, face_light_, lit_texture_}) {
     if (t) textures.push_back(t);
   }
   for (const SurfaceTarget* t : {&surface_, &ideal_surface_}) {
@@ -973,7 +990,7 @@ Expected<FrameStats> Renderer::Render(const RenderContent& content) {
     return s;
   };
   const GLuint output = context_->output_framebuffer();
-  last_deferred_ = false;
+  last_deferred_ = last_lit_kept_ = false;
   const bool raw = content.pattern == TestPattern::kProjectorId ||
                    content.pattern == TestPattern::kColourBars ||
                    content.pattern == TestPattern::kRawWhite;
@@ -1029,6 +1046,10 @@ Expected<FrameStats> Renderer::Render(const RenderContent& content) {
               ? 1.0f
               : static_cast<float>(std::pow(options_.ambient, 1.0 / options_.display_gamma));
       const bool overlay = content.has_overlay();
+      // The frame before the mask is kept for Rewarp in a second target of the output
+      // framebuffer, where the context's output is a framebuffer object (headless); a window's
+      // default framebuffer takes no second target (Rewarp re-lights there).
+      ST_RETURN_IF_ERROR(AttachLitTarget(output != 0));
       if (surface_groups_drawn_ == 0 && !has_mask_) {
         // Nothing of the model in the frustum, nothing to lift: black.
         glBindFramebuffer(GL_FRAMEBUFFER, output);
@@ -1043,6 +1064,8 @@ Expected<FrameStats> Renderer::Render(const RenderContent& content) {
           return DrawOverlay(content, /*fold=*/true, &stats, /*against_cache=*/true);
         }));
       }
+      ST_RETURN_IF_ERROR(AttachLitTarget(false));
+      last_lit_kept_ = output != 0;
       last_deferred_ = last_warped_ = true;
       last_sun_ = sun;
       last_light_ = light;
@@ -1085,6 +1108,30 @@ Expected<FrameStats> Renderer::Rewarp() {
   FrameStats stats;
   stats.prewarp = view_.needs_prewarp();
   stats.masked = has_mask_;
+  if (last_lit_kept_) {
+    // The frame before the mask was kept: the new mask over it, one full-screen pass.
+    glBindFramebuffer(GL_FRAMEBUFFER, context_->output_framebuffer());
+    glViewport(0, 0, size_.width, size_.height);
+    glDisable(GL_DEPTH_TEST);
+    Expected<unsigned int> program =
+        Variant(ProgramKind::kWarp, 0, false, false, has_mask_, false, packed_warp_);
+    if (!program.ok()) return program.status();
+    glUseProgram(*program);
+    glUniform1i(glGetUniformLocation(*program, "u_image"), 0);
+    glUniform1i(glGetUniformLocation(*program, "u_mask"), 2);
+    glUniform1f(glGetUniformLocation(*program, "u_lift_gamma"), LiftGamma());
+    glActiveTexture(GL_TEXTURE2);
+    glBindTexture(GL_TEXTURE_2D, packed_warp_ ? warp_texture_ : mask_texture_);
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_2D, lit_texture_);
+    glBindVertexArray(empty_vao_);
+    glDrawArrays(GL_TRIANGLE_STRIP, 0, 4);
+    glFinish();
+    ST_RETURN_IF_ERROR(CheckGl("masking the last frame again"));
+    stats.ran[static_cast<int>(Pass::kWarp)] = true;
+    stats.frame_ms = stats.pass_ms[static_cast<int>(Pass::kWarp)] = MsSince(start);
+    return stats;
+  }
   if (last_deferred_) {
     ST_RETURN_IF_ERROR(DrawLight(last_sun_, last_light_));
     stats.ran[static_cast<int>(Pass::kLight)] = true;
@@ -1321,8 +1368,9 @@ Status Renderer::DrawOverlayBuffer(bool fold, bool against_cache) {
   const bool distort = fold && view_.needs_prewarp();
   // Folded with a pre-warp pass in use (a deferred frame): the mask is in the warp's texture.
   const bool packed = fold && packed_warp_;
-  Expected<unsigned int> program = Variant(ProgramKind::kOverlay, against_cache ? 1 : 0, false,
-                                           false, fold && has_mask_, distort, packed);
+  const int mode = !against_cache ? 0 : lit_attached_ ? 2 : 1;
+  Expected<unsigned int> program =
+      Variant(ProgramKind::kOverlay, mode, false, false, fold && has_mask_, distort, packed);
   if (!program.ok()) return program.status();
   glUseProgram(*program);
   if (against_cache) {
@@ -1481,14 +1529,33 @@ Status Renderer::DrawFaceLight(const Eigen::Vector3d& sun) {
   return CheckGl("drawing the faces' light");
 }
 
+Status Renderer::AttachLitTarget(bool attach) {
+  if (attach == lit_attached_) return OkStatus();
+  if (attach && !lit_texture_) {
+    lit_texture_ = MakeTexture2D(GL_RGBA8, size_.width, size_.height, GL_RGBA, GL_UNSIGNED_BYTE,
+                                 nullptr, GL_NEAREST);
+  }
+  glBindFramebuffer(GL_FRAMEBUFFER, context_->output_framebuffer());
+  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D,
+                         attach ? lit_texture_ : 0, 0);
+  const GLenum buffers[2] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
+  glDrawBuffers(attach ? 2 : 1, buffers);
+  lit_attached_ = attach;
+  if (attach && glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+    (void)AttachLitTarget(false);
+    return InternalError("OpenGL: the output framebuffer takes no second target");
+  }
+  return CheckGl(attach ? "attaching the lit frame's target" : "detaching the lit frame's target");
+}
+
 // One full-screen pass into the output. `sun`: lit by the sun (face light x shadow; both drawn
 // for the current sun), otherwise times `light`.
 Status Renderer::DrawLight(bool sun, float light) {
   glBindFramebuffer(GL_FRAMEBUFFER, context_->output_framebuffer());
   glViewport(0, 0, size_.width, size_.height);
   glDisable(GL_DEPTH_TEST);
-  Expected<unsigned int> program =
-      Variant(ProgramKind::kLight, 0, false, sun, has_mask_, false, packed_warp_);
+  Expected<unsigned int> program = Variant(ProgramKind::kLight, lit_attached_ ? 1 : 0, false, sun,
+                                           has_mask_, false, packed_warp_);
   if (!program.ok()) return program.status();
   glUseProgram(*program);
   auto loc = [&](const char* name) { return glGetUniformLocation(*program, name); };

@@ -113,8 +113,10 @@ class Renderer {
   // Draws one frame into the context's output framebuffer (not presented: GlContext::Present).
   Expected<FrameStats> Render(const RenderContent& content);
   // The last frame again under the current mask: the warp pass alone over the ideal image the
-  // last Render left, or for a deferred frame the light pass and the overlay over the surface
-  // cache with the last frame's sun (a mask swap, a re-blend, needs nothing else).
+  // last Render left; for a deferred frame the mask alone over the frame before the mask, which
+  // the light pass and the overlay keep in a second target (headless contexts), or in a window
+  // the light pass and the overlay again over the surface cache with the last frame's sun (a
+  // mask swap, a re-blend, needs nothing else).
   // UNAVAILABLE unless CanRewarp().
   Expected<FrameStats> Rewarp();
   // The last Render went through the warp pass (unfolded) or was deferred, and no view was set
@@ -128,6 +130,8 @@ class Renderer {
       : context_(context), options_(options) {}
   Status Init(const Scene& scene);
   Status DrawScene(const RenderContent& content, unsigned int target, bool fold, FrameStats* stats);
+  // Adds lit_texture_ to the output framebuffer as a second draw buffer, or takes it away.
+  Status AttachLitTarget(bool attach);
   struct Group;
   // `face_normals`: each triangle's normal in the buffer's order (3 floats a triangle), if given.
   Status UploadGeometry(unsigned int vao, unsigned int vbo, double edge_px,
@@ -216,6 +220,11 @@ class Renderer {
   bool last_sun_ = false;       // ... lit by the sun (face light x shadow)
   float last_light_ = 1.0f;     // ... or by this factor
   bool last_overlay_ = false;   // ... with an overlay
+  // The last deferred frame before the mask (RGBA8, output pixels), written by the light pass and
+  // the overlay as a second target while lit_attached_: Rewarp masks it again in one pass.
+  unsigned int lit_texture_ = 0;
+  bool lit_attached_ = false;
+  bool last_lit_kept_ = false;  // lit_texture_ holds the last frame
   // The warp pass's inputs: with an unfolded pre-warp (packed_warp_) one RGBA texture of
   // (source x, y, mask factor, lift) per output pixel, one fetch a pixel; otherwise the mask alone
   // (RG). Texels are 16-bit normalized (32-bit floats for a float target) in GL row order, kept

@@ -211,6 +211,20 @@ int main(int argc, char** argv) {
           }
         }
       }
+      if (!timed_passes && config != Config::kFolded) {
+        // A new mask over the last frame (a re-blend's first frame): Renderer::Rewarp.
+        std::vector<double> rewarp_ms;
+        for (int f = 0; f < std::min(frames, 100); ++f) {
+          if (!(*renderer)->SetMask(mask).ok()) return 1;
+          Expected<FrameStats> stats = (*renderer)->Rewarp();
+          if (!stats.ok()) {
+            std::cerr << stats.status().ToString() << "\n";
+            return 1;
+          }
+          rewarp_ms.push_back(stats->frame_ms);
+        }
+        run["rewarp_ms_p50"] = Percentile(rewarp_ms, 0.5);
+      }
       if (!timed_passes && config == Config::kDeferred) {
         std::vector<double> floor_ms;
         for (int f = 0; f < frames; ++f) {

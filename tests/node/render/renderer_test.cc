@@ -356,8 +356,8 @@ TEST(RendererTest, MaskMultipliesInLinearLightWithAndWithoutPrewarp) {
 }
 
 // A mask swapped in after a frame: the warp pass alone over the last frame (or, for a deferred
-// frame, the light pass and the overlay over the surface cache) shows what a whole new frame with
-// that mask shows; nothing to warp before a frame or after a new view.
+// frame, the mask over the frame the light pass and the overlay kept before their mask) shows what
+// a whole new frame with that mask shows; nothing to warp before a frame or after a new view.
 TEST(RendererTest, RewarpShowsTheLastFrameUnderANewMask) {
   std::unique_ptr<GlContext> context = MakeContext();
   ASSERT_TRUE(context);
@@ -384,15 +384,21 @@ TEST(RendererTest, RewarpShowsTheLastFrameUnderANewMask) {
     ASSERT_TRUE(renderer->SetMask(mask).ok());
     Expected<FrameStats> rewarped = renderer->Rewarp();
     ASSERT_TRUE(rewarped.ok()) << rewarped.status().ToString();
-    EXPECT_EQ(rewarped->ran[static_cast<int>(Pass::kWarp)], !deferred);
-    EXPECT_EQ(rewarped->ran[static_cast<int>(Pass::kLight)], deferred);
-    EXPECT_EQ(rewarped->ran[static_cast<int>(Pass::kOverlay)], deferred)
-        << "deferred: the stroke is drawn again over the re-lit frame";
+    EXPECT_TRUE(rewarped->ran[static_cast<int>(Pass::kWarp)])
+        << "one full-screen pass: the warp pass, or for a deferred frame the mask over the frame "
+           "the light pass kept before its mask";
+    EXPECT_FALSE(rewarped->ran[static_cast<int>(Pass::kLight)]);
+    EXPECT_FALSE(rewarped->ran[static_cast<int>(Pass::kOverlay)])
+        << "the stroke is in the kept frame";
     EXPECT_FALSE(rewarped->ran[static_cast<int>(Pass::kScene)]);
     Expected<cv::Mat> fast = context->ReadOutput();
     ASSERT_TRUE(fast.ok());
     const cv::Mat full = RenderToImage(context.get(), renderer.get(), content);
-    EXPECT_EQ(cv::norm(*fast, full, cv::NORM_INF), 0.0) << "the same frame under the same mask";
+    // Deferred, the kept frame is 8-bit before the mask (the whole frame masks the light pass's
+    // float colour): half a level before a factor <= 1, at most one level after rounding.
+    const double tolerance_levels = deferred ? 1.0 : 0.0;
+    EXPECT_LE(cv::norm(*fast, full, cv::NORM_INF), tolerance_levels)
+        << "the same frame under the same mask";
     EXPECT_GT(cv::norm(before, full, cv::NORM_INF), 50.0) << "the mask changed the frame";
   }
   std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), /*distortion=*/true);
