@@ -1,5 +1,6 @@
 #include "node/devices/world_link.h"
 
+#include <limits>
 #include <map>
 #include <random>
 #include <utility>
@@ -86,8 +87,12 @@ Status WorldLink::OpenSocket() {
                                 "tcp://127.0.0.1:5555): " +
                                 connected.message());
   }
+  proto::CodecLimits limits = options_.limits;
+  if (!options_.compress_requests) {
+    limits.compress_threshold_bytes = std::numeric_limits<size_t>::max();
+  }
   channel_ = std::make_unique<net::Channel>(std::move(*socket), options_.node_id, NewIncarnation(),
-                                            &counters_, options_.limits);
+                                            &counters_, limits);
   return OkStatus();
 }
 
@@ -108,6 +113,11 @@ void WorldLink::DiscardStale() {
     if (in.ok() && !in->has_value()) return;
     ST_LOG(kDebug) << "world " << options_.endpoint << ": discarded a stale message";
   }
+}
+
+net::ChannelStats WorldLink::stats() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return channel_ ? channel_->stats() : net::ChannelStats{};
 }
 
 Expected<wire::Envelope> WorldLink::Ask(wire::Envelope request,

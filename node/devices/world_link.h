@@ -48,6 +48,11 @@ struct WorldLinkOptions {
   std::chrono::milliseconds connect_timeout{2000};
   std::chrono::milliseconds reply_timeout{60000};
   proto::CodecLimits limits;
+  // Deflate large requests (limits.compress_threshold_bytes). Off: what the node sends the world
+  // that is large is its projector frames (3 MB at 1280x800), to a world on the same machine; zlib
+  // at level 1 cost ~15-20 ms a frame between the node's deflate and the world's inflate on this
+  // 2-core machine, most of a frame's show time (docs/render.md).
+  bool compress_requests = false;
   std::optional<net::CurveKeyPair> curve;  // site keys: connect with CURVE
 
   Status Check() const;
@@ -70,6 +75,8 @@ class WorldLink {
   // UNAVAILABLE when the world is not reachable, goes away, or does not answer in time;
   // INTERNAL when it answers Rejected (the reason is in the message).
   Expected<wire::Envelope> Ask(wire::Envelope request, wire::Envelope::BodyCase reply_case);
+  // Bytes and messages sent on the current connection (reset when a deadline reopens it).
+  net::ChannelStats stats();
 
   const std::string& endpoint() const { return options_.endpoint; }
   NodeId node_id() const { return options_.node_id; }
