@@ -533,10 +533,13 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
         line["compose_ms"] = shown.compose_ms;
         line["cast_ms"] = cast_ms_;
         line["shown_ns"] = shown.shown_ns;
-        line["frame"] = {
-            {"wait_ms", shown.frame.wait_ms},     {"set_mask_ms", shown.frame.set_mask_ms},
-            {"render_ms", shown.frame.render_ms}, {"read_ms", shown.frame.read_ms},
-            {"show_ms", shown.frame.show_ms},     {"rewarped", shown.frame.rewarped}};
+        line["frame"] = {{"wait_ms", shown.frame.wait_ms},
+                         {"set_mask_ms", shown.frame.set_mask_ms},
+                         {"render_ms", shown.frame.render_ms},
+                         {"read_ms", shown.frame.read_ms},
+                         {"show_ms", shown.frame.show_ms},
+                         {"rewarped", shown.frame.rewarped},
+                         {"late", shown.frame.late}};
         line["bytes_sent"] = bytes_sent_;
         line["bytes_received"] = bytes_received_;
         print_(line);

@@ -232,6 +232,11 @@ Expected<int64_t> RenderLoop::ShowBlend(const cv::Mat& factor, const cv::Mat& li
   return last_shown_ns_;
 }
 
+bool RenderLoop::MaskPending() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return pending_mask_.has_value();
+}
+
 MaskFrameTimes RenderLoop::LastMaskFrame() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return last_mask_frame_;
@@ -403,6 +408,42 @@ void RenderLoop::Run(std::promise<Status>* started) {
                                  : rewarp     ? renderer->Rewarp()
                                           : renderer->Render(BuildContent(inputs, media_time_s));
     if (stats.ok()) drawn_media_time_s = media_time_s;
+    // A new mask that came while this whole frame was drawn (a re-blend after a neighbour left):
+    // the frame does not go out under the old mask first (its read back and show, 10-20 ms
+    // on a loaded machine); the new mask goes over it at once, as a rewarp.
+    std::optional<FrameStats> late_stats;
+    if (!rewarp && stats.ok()) {
+      if (options_.after_render_for_test) options_.after_render_for_test();
+      std::optional<cv::Mat> late;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (pending_mask_ && !pending_view_ && !pending_scene_ && renderer->CanRewarp()) {
+          late = std::move(pending_mask_);
+          pending_mask_.reset();
+          generation = generation_;
+          mask_frame = MaskFrameTimes{};
+          mask_frame.wait_ms = MsBetween(mask_posted_, Clock::now());
+        }
+      }
+      if (late) {
+        const Clock::time_point t0 = Clock::now();
+        status = renderer->SetMask(*late);
+        mask_frame.set_mask_ms = MsBetween(t0, Clock::now());
+        {
+          std::lock_guard<std::mutex> lock(mutex_);
+          current_mask_ = *late;
+        }
+        Expected<FrameStats> again =
+            status.ok() ? renderer->Rewarp() : Expected<FrameStats>(status);
+        if (again.ok()) {
+          late_stats = *again;
+        } else {
+          stats = again.status();
+        }
+        mask = std::move(late);
+        mask_frame.late = true;
+      }
+    }
     const Clock::time_point read_start = Clock::now();
     Expected<cv::Mat> frame =
         stats.ok() ? (*context)->ReadOutput() : Expected<cv::Mat>(stats.status());
@@ -452,19 +493,16 @@ void RenderLoop::Run(std::promise<Status>* started) {
       if (shown && !unchanged) {
         ++summary_.frames_shown;
         // A re-warped frame is one pass, not a frame's work: kept out of the frame times.
-        if (rewarp) {
-          ++summary_.frames_rewarped;
-        } else {
-          Keep(&frame_ms_, stats->frame_ms);
-        }
+        if (rewarp || late_stats) ++summary_.frames_rewarped;
+        if (!rewarp) Keep(&frame_ms_, stats->frame_ms);
         Keep(&show_ms_, show_ms);
         for (int p = 0; p < kPassCount; ++p) summary_.pass_runs[p] += stats->ran[p] ? 1 : 0;
         summary_.groups_culled += static_cast<uint64_t>(stats->groups_culled);
       }
       if (shown && mask) {
         mask_frame.generation = generation;
-        mask_frame.render_ms = stats->frame_ms;
-        mask_frame.rewarped = rewarp;
+        mask_frame.render_ms = late_stats ? late_stats->frame_ms : stats->frame_ms;
+        mask_frame.rewarped = rewarp || late_stats.has_value();
         mask_frame.show_ms = show_ms;
         last_mask_frame_ = mask_frame;
       }

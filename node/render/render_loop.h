@@ -26,6 +26,7 @@
 #include <cstdint>
 #include <deque>
 #include <fstream>
+#include <functional>
 #include <future>
 #include <memory>
 #include <mutex>
@@ -46,6 +47,9 @@ struct RenderLoopOptions {
   RendererOptions renderer;
   std::string frame_log_path;  // CSV of shown frames (empty: none)
   int floor_samples = 30;      // full-screen passes timed once at start (the floor)
+  // Tests: called on the render thread after each whole frame is drawn, before the loop looks
+  // for a mask that came meanwhile (may block: a slow frame).
+  std::function<void()> after_render_for_test;
   Status Check() const;
 };
 
@@ -85,6 +89,9 @@ struct MaskFrameTimes {
   uint64_t generation = 0;  // 0: no mask frame shown yet
   double wait_ms = 0.0, set_mask_ms = 0.0, render_ms = 0.0, read_ms = 0.0, show_ms = 0.0;
   bool rewarped = false;  // the last frame under the new mask (the warp pass alone)
+  // The mask came while a whole frame was being drawn: that frame went out under it (rewarped)
+  // instead of first under the old mask.
+  bool late = false;
 };
 
 class RenderLoop {
@@ -124,6 +131,8 @@ class RenderLoop {
                               std::chrono::milliseconds timeout = std::chrono::seconds(10));
   // The times of the last frame shown with a new mask (ShowMask, ShowBlend).
   MaskFrameTimes LastMaskFrame() const;
+  // A mask (ShowBlend, ShowMask) waits for the render thread to take it.
+  bool MaskPending() const;
   void Suspend();
   void Resume();
 

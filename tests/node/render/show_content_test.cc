@@ -2,6 +2,9 @@
 // loop driving a projector (node/render/render_loop.h) on llvmpipe.
 #include "node/render/show_content.h"
 
+#include <atomic>
+#include <thread>
+
 #include <gtest/gtest.h>
 
 #include "common/scene/procedural_scene.h"
@@ -278,6 +281,51 @@ TEST(RenderLoopTest, NewStrokesDoNotHoldBackANewMask) {
   EXPECT_TRUE(green(next, b)) << "the new stroke in the next whole frame";
   EXPECT_FALSE(green(next, a));
   EXPECT_EQ((*loop)->Summary().frames_rewarped, 1u);
+}
+
+// A mask that comes while a whole frame is being drawn (a neighbour left mid-frame): that frame
+// goes out once, under the new mask, not first under the old one and then again.
+TEST(RenderLoopTest, AMaskThatComesMidFrameGoesOutWithThatFrame) {
+  KeptFrames projector(cv::Size(320, 200));
+  auto model = std::make_shared<const Scene>(testing::RenderTestScene());
+  RenderLoopOptions options;
+  options.max_fps = 200.0;
+  options.floor_samples = 0;
+  std::atomic<RenderLoop*> running{nullptr};
+  std::atomic<bool> armed{false}, drawn{false};
+  // The armed frame, drawn, waits on the render thread until the mask has been posted.
+  options.after_render_for_test = [&] {
+    if (!armed.exchange(false)) return;
+    drawn = true;
+    for (int i = 0; i < 1000 && !(running.load() && running.load()->MaskPending()); ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+  };
+  Expected<std::unique_ptr<RenderLoop>> loop = RenderLoop::Start(&projector, model, options);
+  ASSERT_TRUE(loop.ok()) << loop.status().ToString();
+  running = loop->get();
+  ASSERT_TRUE((*loop)->ShowCalibration(TestCalibration()).ok());
+  ShowInputs inputs;
+  inputs.sun.enabled = false;
+  inputs.pattern = TestPattern::kNone;
+  armed = true;
+  (*loop)->SetInputs(inputs);  // a new whole frame
+  for (int i = 0; i < 1000 && !drawn; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_TRUE(drawn) << "the armed frame was drawn";
+  const uint64_t before = projector.count();
+  const cv::Mat half(200, 320, CV_32FC1, cv::Scalar(0.5));
+  ASSERT_TRUE((*loop)->ShowBlend(half).ok());
+  const MaskFrameTimes times = (*loop)->LastMaskFrame();
+  EXPECT_TRUE(times.late);
+  EXPECT_TRUE(times.rewarped);
+  EXPECT_EQ(projector.count(), before + 1) << "the frame drawn went out once, under the mask";
+  // Under the mask: nothing brighter than 255 x 0.5^(1 / 2.2) = 186 (+ rounding).
+  double hi = 0;
+  cv::minMaxLoc(projector.last().reshape(1), nullptr, &hi);
+  EXPECT_LE(hi, 188.0);
+  EXPECT_GT(hi, 20.0) << "the scene is there";
 }
 
 TEST(RenderLoopTest, RefusesACalibrationOfAnotherSize) {
