@@ -484,6 +484,18 @@ void SelfCalibrationService::RunnerDone(NodeId from, const wire::CalibrationStep
   auto it = r.awaiting.find(done.step());
   if (it == r.awaiting.end() || it->second.to != from) return;
   const Runner::Command command = it->second;
+  if (done.ok() && command.step.action() == wire::CALIBRATION_ACTION_LOCAL &&
+      !r.inputs.count(from) && !r.left_out.count(from)) {
+    // A unit sends its CalibrationInput before the done, on the same connection: a done without
+    // it means the input was lost on the way (a lossy link drops or corrupts it). The step stays
+    // awaited and goes again at its retry; the unit answers a repeated step with the same input
+    // and done. Taken as done, the round went on without the unit ("sent no calibration input":
+    // the chaos run's newcomer on a link dropping 4.7 %, CI at 841516a).
+    ST_LOG(kInfo) << "self-calibration: unit " << from << " finished step " << done.step()
+                  << " but its calibration input did not come; asking again";
+    r.unsent.insert(done.step());  // sent again at the runner's next turn, not after step_retry
+    return;
+  }
   r.awaiting.erase(it);
   r.stage_progress = std::chrono::steady_clock::now();
   r.compute_s[from] += done.compute_s();
