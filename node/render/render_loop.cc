@@ -385,16 +385,18 @@ void RenderLoop::Run(std::promise<Status>* started) {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!current_mask_.empty()) mask = current_mask_;
     }
-    if (view) status = renderer->SetView(*view);
-    if (status.ok() && mask) {
-      const Clock::time_point t0 = Clock::now();
-      status = renderer->SetMask(*mask);
-      mask_frame.set_mask_ms = MsBetween(t0, Clock::now());
-    }
-    if (mask) {
+    // A new mask into the renderer (timed) and kept as the current one.
+    auto set_mask = [&](const cv::Mat& m) {
+      if (status.ok()) {
+        const Clock::time_point t0 = Clock::now();
+        status = renderer->SetMask(m);
+        mask_frame.set_mask_ms = MsBetween(t0, Clock::now());
+      }
       std::lock_guard<std::mutex> lock(mutex_);
-      current_mask_ = *mask;
-    }
+      current_mask_ = m;
+    };
+    if (view) status = renderer->SetView(*view);
+    if (mask) set_mask(*mask);
     // Only the mask changed (a re-blend, a join's blanking), or the overlay besides (strokes
     // being painted): the frame already drawn goes out again under it, the warp pass alone,
     // instead of waiting for a whole frame; the new strokes follow in the next frame, drawn as
@@ -426,13 +428,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
         }
       }
       if (late) {
-        const Clock::time_point t0 = Clock::now();
-        status = renderer->SetMask(*late);
-        mask_frame.set_mask_ms = MsBetween(t0, Clock::now());
-        {
-          std::lock_guard<std::mutex> lock(mutex_);
-          current_mask_ = *late;
-        }
+        set_mask(*late);
         Expected<FrameStats> again =
             status.ok() ? renderer->Rewarp() : Expected<FrameStats>(status);
         if (again.ok()) {

@@ -1064,8 +1064,8 @@ Expected<FrameStats> Renderer::Render(const RenderContent& content) {
           return DrawOverlay(content, /*fold=*/true, &stats, /*against_cache=*/true);
         }));
       }
+      last_lit_kept_ = lit_attached_;
       ST_RETURN_IF_ERROR(AttachLitTarget(false));
-      last_lit_kept_ = output != 0;
       last_deferred_ = last_warped_ = true;
       last_sun_ = sun;
       last_light_ = light;
@@ -1087,7 +1087,8 @@ Expected<FrameStats> Renderer::Render(const RenderContent& content) {
       ST_RETURN_IF_ERROR(timed(Pass::kOverlay, [&] { return DrawOverlay(content, fold, &stats); }));
     }
     if (warp) {
-      ST_RETURN_IF_ERROR(timed(Pass::kWarp, [&] { return DrawWarp(); }));
+      ST_RETURN_IF_ERROR(
+          timed(Pass::kWarp, [&] { return DrawWarp(ideal_colour_, view_.needs_prewarp()); }));
       last_warped_ = true;
     }
   }
@@ -1110,22 +1111,7 @@ Expected<FrameStats> Renderer::Rewarp() {
   stats.masked = has_mask_;
   if (last_lit_kept_) {
     // The frame before the mask was kept: the new mask over it, one full-screen pass.
-    glBindFramebuffer(GL_FRAMEBUFFER, context_->output_framebuffer());
-    glViewport(0, 0, size_.width, size_.height);
-    glDisable(GL_DEPTH_TEST);
-    Expected<unsigned int> program =
-        Variant(ProgramKind::kWarp, 0, false, false, has_mask_, false, packed_warp_);
-    if (!program.ok()) return program.status();
-    glUseProgram(*program);
-    glUniform1i(glGetUniformLocation(*program, "u_image"), 0);
-    glUniform1i(glGetUniformLocation(*program, "u_mask"), 2);
-    glUniform1f(glGetUniformLocation(*program, "u_lift_gamma"), LiftGamma());
-    glActiveTexture(GL_TEXTURE2);
-    glBindTexture(GL_TEXTURE_2D, packed_warp_ ? warp_texture_ : mask_texture_);
-    glActiveTexture(GL_TEXTURE0);
-    glBindTexture(GL_TEXTURE_2D, lit_texture_);
-    glBindVertexArray(empty_vao_);
-    glDrawArrays(GL_TRIANGLE_STRIP, 0, 4);
+    ST_RETURN_IF_ERROR(DrawWarp(lit_texture_, /*distort=*/false));
     glFinish();
     ST_RETURN_IF_ERROR(CheckGl("masking the last frame again"));
     stats.ran[static_cast<int>(Pass::kWarp)] = true;
@@ -1145,7 +1131,7 @@ Expected<FrameStats> Renderer::Rewarp() {
     stats.frame_ms = stats.pass_ms[static_cast<int>(Pass::kLight)] = MsSince(start);
     return stats;
   }
-  ST_RETURN_IF_ERROR(DrawWarp());
+  ST_RETURN_IF_ERROR(DrawWarp(ideal_colour_, view_.needs_prewarp()));
   glFinish();
   ST_RETURN_IF_ERROR(CheckGl("warping the last frame again"));
   stats.ran[static_cast<int>(Pass::kWarp)] = true;
@@ -1588,12 +1574,14 @@ Status Renderer::DrawLight(bool sun, float light) {
   return CheckGl("drawing the light pass");
 }
 
-Status Renderer::DrawWarp() {
+// The warp pass: output pixel p shows `image` (the ideal image through the pre-warp when
+// `distort`, else pixel for pixel) times the mask.
+Status Renderer::DrawWarp(unsigned int image, bool distort) {
   glBindFramebuffer(GL_FRAMEBUFFER, context_->output_framebuffer());
   glViewport(0, 0, size_.width, size_.height);
   glDisable(GL_DEPTH_TEST);
   Expected<unsigned int> program =
-      Variant(ProgramKind::kWarp, 0, false, false, has_mask_, view_.needs_prewarp());
+      Variant(ProgramKind::kWarp, 0, false, false, has_mask_, distort, packed_warp_);
   if (!program.ok()) return program.status();
   glUseProgram(*program);
   auto loc = [&](const char* name) { return glGetUniformLocation(*program, name); };
@@ -1604,12 +1592,12 @@ Status Renderer::DrawWarp() {
   glActiveTexture(GL_TEXTURE1);
   glBindTexture(GL_TEXTURE_2D, warp_texture_);
   glActiveTexture(GL_TEXTURE2);
-  glBindTexture(GL_TEXTURE_2D, mask_texture_);
+  glBindTexture(GL_TEXTURE_2D, packed_warp_ ? warp_texture_ : mask_texture_);
   glActiveTexture(GL_TEXTURE0);
-  glBindTexture(GL_TEXTURE_2D, ideal_colour_);
+  glBindTexture(GL_TEXTURE_2D, image);
   glBindVertexArray(empty_vao_);
   glDrawArrays(GL_TRIANGLE_STRIP, 0, 4);
-  return CheckGl("drawing the pre-warp");
+  return CheckGl("drawing the warp pass");
 }
 
 Status Renderer::DrawPattern(const RenderContent& content) {

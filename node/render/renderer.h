@@ -168,7 +168,8 @@ class Renderer {
   Status DrawSurfaceWarp();
   Status DrawFaceLight(const Eigen::Vector3d& sun);
   Status DrawLight(bool sun, float light);
-  Status DrawWarp();
+  // The warp pass over `image` (the ideal image; distort: through the pre-warp) into the output.
+  Status DrawWarp(unsigned int image, bool distort);
   Status DrawPattern(const RenderContent& content);
   Status EnsureIdealTarget();
   void UploadTexels(unsigned int* texture, const cv::Mat& texels);
