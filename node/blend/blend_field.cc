@@ -511,14 +511,16 @@ std::vector<NodeId> Blender::neighbours() const {
   return out;
 }
 
-cv::Mat Blender::Alpha() const {
+cv::Mat Blender::Alpha(NodeId without) const {
   cv::Mat alpha(surface_.height_px, surface_.width_px, CV_32FC1, cv::Scalar(0));
   float* a = alpha.ptr<float>();
   const size_t n = own_d_.size();
   for (size_t i = 0; i < n; ++i) {
     if (surface_.range_m[i] <= 0) continue;
     float sum = own_w_[i];
-    for (const auto& [unit, w] : neighbour_w_) sum += w[i];
+    for (const auto& [unit, w] : neighbour_w_) {
+      if (unit != without) sum += w[i];
+    }
     a[i] = own_w_[i] / sum;
   }
   return alpha;
@@ -546,7 +548,7 @@ double Blender::LevelBound() const {
 
 cv::Mat Blender::Factor(double level) const { return Factor(level, options_.fill_limit); }
 
-cv::Mat Blender::Factor(double level, double fill_limit) const {
+cv::Mat Blender::Factor(double level, double fill_limit, NodeId without) const {
   // A_i T / (E'_i R), R = sum_j A_j r_j: the share of the intended light the projectors lighting
   // the point deliver together (a projector past the correction limit delivers r < 1 of it);
   // dividing by R restores the level where one that faces the surface better can make it up.
@@ -570,6 +572,7 @@ cv::Mat Blender::Factor(double level, double fill_limit) const {
   };
   std::vector<Other> others;
   for (const auto& [unit, wr] : neighbour_reach_) {
+    if (unit == without) continue;
     others.push_back({wr.data(), neighbour_gain_.at(unit).data()});
   }
   struct Term {
@@ -638,8 +641,8 @@ cv::Mat Blender::Factor(double level, double fill_limit) const {
   return factor;
 }
 
-std::vector<double> Blender::BlackLight(double own_black,
-                                        const std::map<NodeId, double>& black) const {
+std::vector<double> Blender::BlackLight(double own_black, const std::map<NodeId, double>& black,
+                                        NodeId without) const {
   const size_t n = own_d_.size();
   std::vector<double> light(n, 0.0);
   for (size_t i = 0; i < n; ++i) {
@@ -647,6 +650,7 @@ std::vector<double> Blender::BlackLight(double own_black,
     if (r > 0) light[i] = own_black * surface_.cos_incidence[i] / (r * r);
   }
   for (const auto& [unit, gain] : neighbour_gain_) {
+    if (unit == without) continue;
     auto it = black.find(unit);
     const double b = it == black.end() ? own_black : it->second;
     for (size_t i = 0; i < n; ++i) light[i] += b * gain[i];
@@ -654,8 +658,9 @@ std::vector<double> Blender::BlackLight(double own_black,
   return light;
 }
 
-double Blender::BlackPeak(double own_black, const std::map<NodeId, double>& black) const {
-  const std::vector<double> light = BlackLight(own_black, black);
+double Blender::BlackPeak(double own_black, const std::map<NodeId, double>& black,
+                          NodeId without) const {
+  const std::vector<double> light = BlackLight(own_black, black, without);
   double peak = 0.0;
   for (size_t i = 0; i < light.size(); ++i) {
     if (own_w_[i] > 0) peak = std::max(peak, light[i]);
@@ -664,11 +669,11 @@ double Blender::BlackPeak(double own_black, const std::map<NodeId, double>& blac
 }
 
 cv::Mat Blender::Lift(double target, double own_black, const std::map<NodeId, double>& black,
-                      double max_lift) const {
+                      double max_lift, NodeId without) const {
   cv::Mat lift(surface_.height_px, surface_.width_px, CV_32FC1, cv::Scalar(0));
   float* out = lift.ptr<float>();
-  const std::vector<double> light = BlackLight(own_black, black);
-  const cv::Mat alpha = Alpha();
+  const std::vector<double> light = BlackLight(own_black, black, without);
+  const cv::Mat alpha = Alpha(without);
   const float* a = alpha.ptr<float>();
   const double range = 1.0 - own_black;  // emission per unit of frame value above black
   for (size_t i = 0; i < light.size(); ++i) {

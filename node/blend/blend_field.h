@@ -159,24 +159,29 @@ class Blender {
   // Alpha (CV_32FC1, 0 where the projector lights nothing) and the mask factor
   // min(A T / (E' R), 1) (CV_32FC1, linear emission; R the share of the intended light the
   // projectors lighting the point deliver, < 1 only past the correction limit).
-  cv::Mat Alpha() const;
+  cv::Mat Alpha(NodeId without = kInvalidNodeId) const;
   cv::Mat Factor(double level) const;
   // The same with another fill limit than the options' (BlendOptions::fill_limit).
-  cv::Mat Factor(double level, double fill_limit) const;
+  // `without` (Alpha, Factor, BlackPeak, Lift): as if that neighbour had been removed
+  // (RemoveNeighbour), the blender unchanged: a node prepares the mask it would show if a
+  // neighbour left, so that a re-blend needs no compose (docs/blend.md, "Prepared masks").
+  cv::Mat Factor(double level, double fill_limit, NodeId without = kInvalidNodeId) const;
 
   // Black-level matching. A projector showing black still emits its black level b; where
   // footprints overlap those add up. Black light at a lit pixel's point: sum over the
   // projectors lighting it of b_k cos_k / d_k^2 (1 / m^2; the albedo multiplies all alike).
   // `black`: each neighbour's b (one missing counts as `own_black`).
   // BlackPeak: the largest black light over this projector's lit pixels.
-  double BlackPeak(double own_black, const std::map<NodeId, double>& black) const;
+  double BlackPeak(double own_black, const std::map<NodeId, double>& black,
+                   NodeId without = kInvalidNodeId) const;
   // The lift (CV_32FC1, linear emission as a fraction of the projector's range above black,
   // added to every frame) that raises the black light to `target` everywhere this projector
   // lights, shared with the neighbours by alpha: A_i (target - black light) / (cos_i / d_i^2),
   // at most `max_lift` (a grazing surface is left short rather than washed out).
   cv::Mat Lift(double target, double own_black, const std::map<NodeId, double>& black,
-               double max_lift) const;
+               double max_lift, NodeId without = kInvalidNodeId) const;
 
+  const BlendOptions& options() const { return options_; }
   const ProjectorSurface& surface() const { return surface_; }
   const DistanceField& own_field() const { return own_; }
   const std::vector<float>& own_distance() const { return own_d_; }
@@ -199,7 +204,8 @@ class Blender {
   std::map<NodeId, std::vector<float>> neighbour_reach_;  // per pixel w r
   std::map<NodeId, std::vector<float>> neighbour_gain_;   // per pixel cos / d^2 (0: not lit)
   // Black light at each lit pixel's point (BlackPeak, Lift).
-  std::vector<double> BlackLight(double own_black, const std::map<NodeId, double>& black) const;
+  std::vector<double> BlackLight(double own_black, const std::map<NodeId, double>& black,
+                                 NodeId without) const;
 };
 
 }  // namespace sandtable::node

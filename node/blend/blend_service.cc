@@ -392,7 +392,12 @@ Status BlendService::OnStep(NodeRuntime& node) {
     fields_.erase(peer);
     sent_to_.erase(peer);
     dropped_[peer] = now;
-    ST_LOG(kInfo) << "blend: node " << peer << " left; re-blending without it";
+    // The mask prepared for this (docs/blend.md, "Prepared masks") goes out at once; the
+    // composition below makes the same mask (shown already: nothing more to show) and the
+    // masks for the next neighbour to leave.
+    const bool prepared = loop_ && loop_->ShowPreparedBlend(peer);
+    ST_LOG(kInfo) << "blend: node " << peer << " left; re-blending without it"
+                  << (prepared ? " (its prepared mask shown)" : "");
     const uint64_t generation = generation_;
     node.workers().Run<bool>(
         [core = core_, peer, generation] {
@@ -484,13 +489,33 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           }
         }
         if (!loop) return out;
-        Expected<int64_t> shown = loop->ShowBlend(factor, lift);
+        uint64_t blend_generation = 0;
+        Expected<int64_t> shown =
+            loop->ShowBlend(factor, lift, std::chrono::seconds(10), &blend_generation);
         if (!shown.ok()) {
           out.status = shown.status();
-        } else {
-          out.shown_ns = *shown;
-          out.frame = loop->LastMaskFrame();
+          return out;
         }
+        out.shown_ns = *shown;
+        out.frame = loop->LastMaskFrame();
+        // The masks for a neighbour leaving: the same composition without it (the level and the
+        // black target as now), prepared in the renderer ahead of time.
+        std::map<NodeId, std::pair<cv::Mat, cv::Mat>> standby;
+        {
+          std::lock_guard<std::mutex> lock(core->mutex);
+          if (!core->blender || core->generation != generation) return out;
+          const Blender& blender = *core->blender;
+          for (NodeId left : blender.neighbours()) {
+            std::pair<cv::Mat, cv::Mat>& masks = standby[left];
+            masks.first = blender.Factor(level, blender.options().fill_limit, left);
+            if (match) {
+              const double target =
+                  std::max(black_target, blender.BlackPeak(own_black, blacks, left));
+              masks.second = blender.Lift(target, own_black, blacks, max_lift, left);
+            }
+          }
+        }
+        loop->PrepareBlends(blend_generation, std::move(standby));
         return out;
       },
       [this, cause, peer, detected, level, &node](Shown shown) {
@@ -533,13 +558,11 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
         line["compose_ms"] = shown.compose_ms;
         line["cast_ms"] = cast_ms_;
         line["shown_ns"] = shown.shown_ns;
-        line["frame"] = {{"wait_ms", shown.frame.wait_ms},
-                         {"set_mask_ms", shown.frame.set_mask_ms},
-                         {"render_ms", shown.frame.render_ms},
-                         {"read_ms", shown.frame.read_ms},
-                         {"show_ms", shown.frame.show_ms},
-                         {"rewarped", shown.frame.rewarped},
-                         {"late", shown.frame.late}};
+        line["frame"] = {
+            {"wait_ms", shown.frame.wait_ms},     {"set_mask_ms", shown.frame.set_mask_ms},
+            {"render_ms", shown.frame.render_ms}, {"read_ms", shown.frame.read_ms},
+            {"show_ms", shown.frame.show_ms},     {"rewarped", shown.frame.rewarped},
+            {"late", shown.frame.late},           {"prepared", shown.frame.prepared}};
         line["bytes_sent"] = bytes_sent_;
         line["bytes_received"] = bytes_received_;
         print_(line);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <set>
 #include <vector>
 
 #include "common/base/bytes_hash.h"
@@ -51,6 +52,9 @@ Status RenderLoopOptions::Check() const {
     return InvalidArgumentError("render loop: max_fps must be in (0, 1000]");
   }
   if (floor_samples < 0) return InvalidArgumentError("render loop: floor_samples must be >= 0");
+  if (max_prepared_masks < 0) {
+    return InvalidArgumentError("render loop: max_prepared_masks must be >= 0");
+  }
   return renderer.Check();
 }
 
@@ -160,10 +164,12 @@ Status RenderLoop::ShowCalibration(const UnitCalibration& calibration,
                                                     : options_.renderer.display_gamma;
     suspended_ = false;
     // The blend belongs to the calibration it was computed with.
+    DropStandby();
     if (!blend_factor_.empty()) {
       blend_factor_.release();
       blend_lift_.release();
       pending_mask_ = ComposedMask();
+      pending_prepared_.reset();
       mask_posted_ = Clock::now();
     }
     generation = ++generation_;
@@ -173,21 +179,31 @@ Status RenderLoop::ShowCalibration(const UnitCalibration& calibration,
   return WaitForShown(generation, timeout);
 }
 
-cv::Mat RenderLoop::ComposedMask() const {
+namespace {
+
+// A join's blanking times the blend (factor, lift): the mask the renderer takes.
+cv::Mat ComposeMask(const cv::Mat& blank_factor, const cv::Mat& blend_factor,
+                    const cv::Mat& blend_lift) {
   cv::Mat factor, lift;
-  if (blank_factor_.empty()) {
-    factor = blend_factor_.clone();
-    lift = blend_lift_.clone();
-  } else if (blend_factor_.empty() || blend_factor_.size() != blank_factor_.size()) {
-    return blank_factor_.clone();
+  if (blank_factor.empty()) {
+    factor = blend_factor.clone();
+    lift = blend_lift.clone();
+  } else if (blend_factor.empty() || blend_factor.size() != blank_factor.size()) {
+    return blank_factor.clone();
   } else {
-    factor = blank_factor_.mul(blend_factor_);
-    if (!blend_lift_.empty()) lift = blank_factor_.mul(blend_lift_);  // blanked: no light at all
+    factor = blank_factor.mul(blend_factor);
+    if (!blend_lift.empty()) lift = blank_factor.mul(blend_lift);  // blanked: no light at all
   }
   if (factor.empty() || lift.empty()) return factor;
   cv::Mat both;
   cv::merge(std::vector<cv::Mat>{factor, lift}, both);
   return both;
+}
+
+}  // namespace
+
+cv::Mat RenderLoop::ComposedMask() const {
+  return ComposeMask(blank_factor_, blend_factor_, blend_lift_);
 }
 
 Status RenderLoop::ShowMask(const cv::Mat& mask, std::chrono::milliseconds timeout) {
@@ -201,34 +217,107 @@ Status RenderLoop::ShowMask(const cv::Mat& mask, std::chrono::milliseconds timeo
     } else {
       blank_factor_ = mask.clone();
     }
-    pending_mask_ = ComposedMask();
-    mask_posted_ = Clock::now();
-    generation = ++generation_;
+    DropStandby();  // composed with the blanking before
+    PostMask();
+    generation = generation_;
   }
   changed_.notify_all();
   return WaitForShown(generation, timeout);
 }
 
+void RenderLoop::DropStandby() {
+  if (standby_.empty()) return;
+  standby_.clear();
+  ++standby_version_;
+}
+
+void RenderLoop::PostMask() {
+  pending_mask_ = ComposedMask();
+  pending_prepared_.reset();
+  mask_posted_ = Clock::now();
+  ++generation_;
+}
+
+namespace {
+
+// Byte for byte (both empty: equal).
+bool SameMat(const cv::Mat& a, const cv::Mat& b) {
+  if (a.empty() || b.empty()) return a.empty() && b.empty();
+  if (a.size() != b.size() || a.type() != b.type() || !a.isContinuous() || !b.isContinuous()) {
+    return false;
+  }
+  return std::memcmp(a.data, b.data, a.total() * a.elemSize()) == 0;
+}
+
+}  // namespace
+
+void RenderLoop::PrepareBlends(uint64_t generation,
+                               std::map<NodeId, std::pair<cv::Mat, cv::Mat>> masks) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (generation != blend_generation_ || blend_factor_.empty()) return;  // a newer blend
+    standby_ = std::move(masks);
+    ++standby_version_;
+  }
+  changed_.notify_all();
+}
+
+bool RenderLoop::ShowPreparedBlend(NodeId left, uint64_t* generation) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto it = standby_.find(left);
+    if (it == standby_.end()) return false;
+    blend_factor_ = it->second.first;
+    blend_lift_ = it->second.second;
+    const uint64_t version = standby_version_;
+    DropStandby();  // made for the blend before this one
+    PostMask();
+    pending_prepared_ = PreparedKey{left, version};
+    blend_generation_ = generation_;
+    if (generation) *generation = generation_;
+  }
+  changed_.notify_all();
+  return true;
+}
+
 Expected<int64_t> RenderLoop::ShowBlend(const cv::Mat& factor, const cv::Mat& lift,
-                                        std::chrono::milliseconds timeout) {
+                                        std::chrono::milliseconds timeout,
+                                        uint64_t* generation_out) {
   if (!factor.empty() && factor.type() != CV_32FC1) {
     return InvalidArgumentError("render: a blend factor must be CV_32FC1");
   }
   if (!lift.empty() && (lift.type() != CV_32FC1 || lift.size() != factor.size())) {
     return InvalidArgumentError("render: a black-level lift must be CV_32FC1 of the factor's size");
   }
+  // The blend already shown (a re-blend whose prepared mask went first): nothing to post. The
+  // comparison runs outside the lock on the shown blend's buffers (never written in place).
+  cv::Mat shown_factor, shown_lift;
+  uint64_t shown_generation = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    shown_factor = blend_factor_;
+    shown_lift = blend_lift_;
+    shown_generation = blend_generation_;
+  }
+  const bool same = !factor.empty() && SameMat(factor, shown_factor) && SameMat(lift, shown_lift);
   uint64_t generation = 0;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    blend_factor_ = factor.clone();
-    blend_lift_ = lift.clone();
-    pending_mask_ = ComposedMask();
-    mask_posted_ = Clock::now();
-    generation = ++generation_;
+    if (same && blend_generation_ == shown_generation && !blend_factor_.empty()) {
+      generation = shown_generation;
+    } else {
+      blend_factor_ = factor.clone();
+      blend_lift_ = lift.clone();
+      DropStandby();
+      PostMask();
+      generation = blend_generation_ = generation_;
+    }
   }
+  if (generation_out) *generation_out = generation;
   changed_.notify_all();
   ST_RETURN_IF_ERROR(WaitForShown(generation, timeout));
   std::lock_guard<std::mutex> lock(mutex_);
+  if (last_mask_frame_.generation == generation) return last_mask_frame_.shown_ns;
   return last_shown_ns_;
 }
 
@@ -307,6 +396,58 @@ void RenderLoop::Run(std::promise<Status>* started) {
   Clock::time_point last_frame{};
   Clock::time_point last_flush = Clock::now();
   const auto period = std::chrono::duration<double>(1.0 / options_.max_fps);
+  // Prepared masks (PrepareBlends) in the renderer: of standby set `prepared_version`, these
+  // neighbours'; `prepared_complete` once every one the set holds (up to the limit) is.
+  uint64_t prepared_version = ~uint64_t{0};
+  std::set<NodeId> prepared_keys;
+  bool prepared_complete = true;
+  auto publish_prepared = [&] {
+    std::lock_guard<std::mutex> lock(mutex_);
+    summary_.masks_prepared = static_cast<int>(prepared_keys.size());
+  };
+  auto forget_prepared = [&] {  // the renderer dropped them (a mask set or used, a new view)
+    prepared_keys.clear();
+    prepared_version = ~uint64_t{0};
+    prepared_complete = false;
+    publish_prepared();
+  };
+  // One mask a call is prepared, so a mask that comes meanwhile waits for one upload at most.
+  auto prepare_standby = [&] {
+    if (!renderer || !renderer->has_view()) return;
+    std::pair<cv::Mat, cv::Mat> next;
+    NodeId key = kInvalidNodeId;
+    cv::Mat blank;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (pending_mask_ || pending_view_ || stop_) return;
+      if (standby_version_ != prepared_version) {
+        renderer->ClearPreparedMasks();
+        prepared_keys.clear();
+        prepared_version = standby_version_;
+        summary_.masks_prepared = 0;
+      }
+      prepared_complete = true;
+      if (static_cast<int>(prepared_keys.size()) >= options_.max_prepared_masks) return;
+      for (const auto& [left, masks] : standby_) {
+        if (prepared_keys.count(left)) continue;
+        key = left;
+        next = masks;
+        break;
+      }
+      if (key == kInvalidNodeId) return;
+      blank = blank_factor_;
+      prepared_complete = false;
+    }
+    const cv::Mat mask = ComposeMask(blank, next.first, next.second);
+    if (Status done = renderer->PrepareMask(key, mask); !done.ok()) {
+      ST_LOG(kWarning) << "render: " << done.ToString();
+      std::lock_guard<std::mutex> lock(mutex_);
+      prepared_complete = true;  // not tried again for this set
+      return;
+    }
+    prepared_keys.insert(key);
+    publish_prepared();
+  };
   while (true) {
     ShowInputs inputs;
     TimelineView timeline;
@@ -314,13 +455,18 @@ void RenderLoop::Run(std::promise<Status>* started) {
     std::optional<ProjectorView> view;
     std::optional<Scene> scene;
     std::optional<cv::Mat> mask;
+    std::optional<PreparedKey> prepared;  // mask is the one prepared for this neighbour
     MaskFrameTimes mask_frame;
+    bool idle = false;
     {
       std::unique_lock<std::mutex> lock(mutex_);
       changed_.wait_for(lock, std::chrono::milliseconds(20), [&] {
-        return stop_ || (!suspended_ &&
-                         (pending_view_ || pending_mask_ ||
-                          (renderer && (inputs_version_ != drawn_version || timeline_.playing))));
+        return stop_ ||
+               (!suspended_ &&
+                (pending_view_ || pending_mask_ ||
+                 (renderer && (inputs_version_ != drawn_version || timeline_.playing ||
+                               (renderer->has_view() &&
+                                (standby_version_ != prepared_version || !prepared_complete))))));
       });
       if (stop_) break;
       if (suspended_ || (!pending_view_ && !renderer)) continue;
@@ -328,17 +474,23 @@ void RenderLoop::Run(std::promise<Status>* started) {
       view = std::move(pending_view_);
       scene = std::move(pending_scene_);
       mask = std::move(pending_mask_);
+      prepared = pending_prepared_;
       pending_view_.reset();
       pending_scene_.reset();
       pending_mask_.reset();
+      pending_prepared_.reset();
       inputs = inputs_;
       if (draped_tracks_) inputs.tracks = draped_tracks_;
       timeline = timeline_;
       version = inputs_version_;
       frame_version = frame_inputs_version_;
       generation = generation_;
-      if (!view && !mask && version == drawn_version && !timeline.playing) continue;
+      idle = !view && !mask && version == drawn_version && !timeline.playing;
       if (mask) mask_frame.wait_ms = MsBetween(mask_posted_, Clock::now());
+    }
+    if (idle) {
+      prepare_standby();
+      continue;
     }
     // At most max_fps; a new mask (a re-blend after a neighbour left) is not held back.
     const Clock::time_point next = last_frame + std::chrono::duration_cast<Clock::duration>(period);
@@ -348,7 +500,9 @@ void RenderLoop::Run(std::promise<Status>* started) {
       if (changed_.wait_until(lock, next, [&] { return stop_ || pending_mask_.has_value(); })) {
         if (stop_) break;
         mask = std::move(pending_mask_);
+        prepared = pending_prepared_;
         pending_mask_.reset();
+        pending_prepared_.reset();
         generation = generation_;
         mask_frame.wait_ms = MsBetween(mask_posted_, Clock::now());
       }
@@ -370,6 +524,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
         continue;
       }
       renderer = std::move(*made);
+      forget_prepared();
       if (options_.floor_samples > 0) {
         std::vector<double> floor;
         for (int i = 0; i < options_.floor_samples; ++i) {
@@ -385,18 +540,26 @@ void RenderLoop::Run(std::promise<Status>* started) {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!current_mask_.empty()) mask = current_mask_;
     }
-    // A new mask into the renderer (timed) and kept as the current one.
-    auto set_mask = [&](const cv::Mat& m) {
+    // A new mask into the renderer (timed) and kept as the current one: the one prepared for it
+    // swapped in when the renderer holds it, else encoded and uploaded.
+    auto set_mask = [&](const cv::Mat& m, const std::optional<PreparedKey>& key) {
       if (status.ok()) {
         const Clock::time_point t0 = Clock::now();
-        status = renderer->SetMask(m);
+        const bool ready =
+            key && key->version == prepared_version && prepared_keys.count(key->left) > 0;
+        mask_frame.prepared = ready && renderer->UseMask(key->left).ok();
+        if (!mask_frame.prepared) status = renderer->SetMask(m);
         mask_frame.set_mask_ms = MsBetween(t0, Clock::now());
+        forget_prepared();
       }
       std::lock_guard<std::mutex> lock(mutex_);
       current_mask_ = m;
     };
-    if (view) status = renderer->SetView(*view);
-    if (mask) set_mask(*mask);
+    if (view) {
+      status = renderer->SetView(*view);
+      forget_prepared();
+    }
+    if (mask) set_mask(*mask, prepared);
     // Only the mask changed (a re-blend, a join's blanking), or the overlay besides (strokes
     // being painted): the frame already drawn goes out again under it, the warp pass alone,
     // instead of waiting for a whole frame; the new strokes follow in the next frame, drawn as
@@ -421,14 +584,16 @@ void RenderLoop::Run(std::promise<Status>* started) {
         std::lock_guard<std::mutex> lock(mutex_);
         if (pending_mask_ && !pending_view_ && !pending_scene_ && renderer->CanRewarp()) {
           late = std::move(pending_mask_);
+          prepared = pending_prepared_;
           pending_mask_.reset();
+          pending_prepared_.reset();
           generation = generation_;
           mask_frame = MaskFrameTimes{};
           mask_frame.wait_ms = MsBetween(mask_posted_, Clock::now());
         }
       }
       if (late) {
-        set_mask(*late);
+        set_mask(*late, prepared);
         Expected<FrameStats> again =
             status.ok() ? renderer->Rewarp() : Expected<FrameStats>(status);
         if (again.ok()) {
@@ -500,7 +665,6 @@ void RenderLoop::Run(std::promise<Status>* started) {
         mask_frame.render_ms = late_stats ? late_stats->frame_ms : stats->frame_ms;
         mask_frame.rewarped = rewarp || late_stats.has_value();
         mask_frame.show_ms = show_ms;
-        last_mask_frame_ = mask_frame;
       }
       if (shown) {
         summary_.pattern = TestPatternName(inputs.pattern);
@@ -508,8 +672,13 @@ void RenderLoop::Run(std::promise<Status>* started) {
         shown_generation_ = std::max(shown_generation_, drawn_generation);
         last_shown_ns_ = NowNs();
       }
+      if (shown && mask) {
+        mask_frame.shown_ns = last_shown_ns_;
+        last_mask_frame_ = mask_frame;
+      }
     }
     if (shown) shown_cv_.notify_all();
+    prepare_standby();  // while the timeline plays the loop is never idle
     if (shown && !unchanged) {
       if (log.is_open()) {
         log << draw_ns << "," << media_time_s << "," << (timeline.playing ? 1 : 0) << ","

@@ -28,12 +28,14 @@
 #include <fstream>
 #include <functional>
 #include <future>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
 #include <thread>
 
+#include "common/base/ids.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/scene.h"
 #include "node/devices/projector_output.h"
@@ -50,6 +52,8 @@ struct RenderLoopOptions {
   // Tests: called on the render thread after each whole frame is drawn, before the loop looks
   // for a mask that came meanwhile (may block: a slow frame).
   std::function<void()> after_render_for_test;
+  // Prepared masks kept in the renderer (PrepareBlends): one texture of the output's size each.
+  int max_prepared_masks = 8;
   Status Check() const;
 };
 
@@ -72,6 +76,7 @@ struct RenderSummary {
   uint64_t frames_failed = 0;     // render or show errors (logged)
   uint64_t frames_unchanged = 0;  // drawn, equal to what the projector shows: not sent again
   uint64_t frames_rewarped = 0;   // a new mask over the last frame (Renderer::Rewarp)
+  int masks_prepared = 0;         // prepared masks the renderer holds now (PrepareBlends)
   double frame_ms_p50 = 0.0, frame_ms_p99 = 0.0;  // rendering, GL work finished
   double show_ms_p50 = 0.0;                       // read back and projector's Show
   double floor_ms = 0.0;                          // one full-screen textured pass (median)
@@ -92,6 +97,9 @@ struct MaskFrameTimes {
   // The mask came while a whole frame was being drawn: that frame went out under it (rewarped)
   // instead of first under the old mask.
   bool late = false;
+  // The mask was one prepared ahead of time (PrepareBlends): swapped in, not uploaded.
+  bool prepared = false;
+  int64_t shown_ns = 0;  // steady time the frame was shown
 };
 
 class RenderLoop {
@@ -127,8 +135,21 @@ class RenderLoop {
   // max_fps) and returns that frame's steady time (ns). A new calibration drops it. `lift`
   // (CV_32FC1 of the same size, linear; empty: none): the black-level lift added after it
   // (renderer.h SetMask), blanked with it.
+  // A factor and lift equal to the blend already shown change nothing: it waits for the frame
+  // that showed them and returns that frame's time. `generation` (may be null): the blend's, for
+  // PrepareBlends.
   Expected<int64_t> ShowBlend(const cv::Mat& factor, const cv::Mat& lift = cv::Mat(),
-                              std::chrono::milliseconds timeout = std::chrono::seconds(10));
+                              std::chrono::milliseconds timeout = std::chrono::seconds(10),
+                              uint64_t* generation = nullptr);
+  // Prepared masks (docs/blend.md, "Prepared masks"): per neighbour, the factor and lift the
+  // blend shown (`generation`, from ShowBlend; an older one is dropped) becomes if that
+  // neighbour leaves. The render thread encodes and uploads them between frames
+  // (Renderer::PrepareMask, at most options.max_prepared_masks). ShowPreparedBlend(left) then
+  // posts the one for `left` without waiting and returns false when there is none: its frame
+  // swaps the mask in (no compose, no upload: MaskFrameTimes::prepared) and goes out as a rewarp.
+  // Any other new mask, blanking or calibration drops them.
+  void PrepareBlends(uint64_t generation, std::map<NodeId, std::pair<cv::Mat, cv::Mat>> masks);
+  bool ShowPreparedBlend(NodeId left, uint64_t* generation = nullptr);
   // The times of the last frame shown with a new mask (ShowMask, ShowBlend).
   MaskFrameTimes LastMaskFrame() const;
   // A mask (ShowBlend, ShowMask) waits for the render thread to take it.
@@ -180,7 +201,19 @@ class RenderLoop {
   double display_gamma_ = 0.0;
   std::shared_ptr<const std::vector<DrapedTrack>> pending_tracks_, draped_tracks_;
   std::optional<cv::Mat> pending_mask_;
+  // pending_mask_ is the one prepared for this neighbour in this set (standby_version_).
+  struct PreparedKey {
+    NodeId left = kInvalidNodeId;
+    uint64_t version = 0;
+  };
+  std::optional<PreparedKey> pending_prepared_;
   std::chrono::steady_clock::time_point mask_posted_;  // when pending_mask_ was set
+  uint64_t blend_generation_ = 0;  // the generation at which blend_factor_ was posted
+  // PrepareBlends' masks for the current blend, by the neighbour whose leaving they are for.
+  std::map<NodeId, std::pair<cv::Mat, cv::Mat>> standby_;
+  uint64_t standby_version_ = 0;  // bumped whenever standby_ is replaced or dropped
+  void DropStandby();             // under mutex_
+  void PostMask();                // under mutex_: pending_mask_ = ComposedMask(), a new generation
   MaskFrameTimes last_mask_frame_;
   cv::Mat blank_factor_, blend_factor_,
       blend_lift_;                           // CV_32FC1 or empty; their product is the mask

@@ -740,6 +740,10 @@ Renderer::~Renderer() {
   }
   for (const auto& [key, p] : variants_) glDeleteProgram(p);
   std::vector<GLuint> textures = textures_;
+  for (const auto& [key, slot] : prepared_) {
+    if (slot.texture) textures.push_back(slot.texture);
+  }
+  textures.insert(textures.end(), retired_textures_.begin(), retired_textures_.end());
   for (GLuint t : {shadow_texture_, ideal_colour_, warp_texture_, mask_texture_, pattern_texture_,
                    floor_texture_, face_normals_, face_light_, lit_texture_}) {
     if (t) textures.push_back(t);
@@ -774,6 +778,8 @@ Status Renderer::SetView(const ProjectorView& view) {
                                 std::to_string(size_.width) + "x" + std::to_string(size_.height));
   }
   ST_RETURN_IF_ERROR(context_->MakeCurrent());
+  SyncUsedMaskRows();
+  ClearPreparedMasks();  // made with the old view's pre-warp
   view_ = view;
   has_view_ = true;
   last_warped_ = false;
@@ -859,12 +865,7 @@ Status Renderer::SetView(const ProjectorView& view) {
   return CheckGl("setting the projector view");
 }
 
-Status Renderer::SetMask(const cv::Mat& mask) {
-  ST_RETURN_IF_ERROR(context_->MakeCurrent());
-  if (mask.empty()) {
-    has_mask_ = has_lift_ = false;
-    return OkStatus();
-  }
+Status Renderer::CheckMask(const cv::Mat& mask) const {
   if (mask.size() != size_ ||
       (mask.type() != CV_32FC1 && mask.type() != CV_8UC1 && mask.type() != CV_32FC2)) {
     return InvalidArgumentError(
@@ -872,26 +873,16 @@ Status Renderer::SetMask(const cv::Mat& mask) {
         "size " +
         std::to_string(size_.width) + "x" + std::to_string(size_.height));
   }
-  // One pass over the rows into a buffer kept between masks: clamped to [0, 1] (NaN: 0), the
-  // factor encoded once (the colour note in renderer.h), the lift linear (added in linear light
-  // in the shader); a float target holds linear values. 16-bit normalized for an 8-bit target,
-  // converted here: a float upload into a 16-bit texture goes through the driver's per-texel
-  // conversion, 2-3x slower on llvmpipe. A re-blend's first frame waits for this swap (the
-  // buffers made anew each time cost as much again in page faults; set_mask_ms of
-  // sandtable_render_bench).
-  // Written straight into the warp's packed texels (channels 2, 3) when there is a pre-warp,
-  // into the mask's own texels otherwise.
+  return OkStatus();
+}
+
+bool Renderer::EncodeMask(const cv::Mat& mask, cv::Mat* texels, int stride, int offset) const {
+  // One pass over the rows: clamped to [0, 1] (NaN: 0), the factor encoded once (the colour note
+  // in renderer.h), the lift linear (added in linear light in the shader); a float target holds
+  // linear values. 16-bit normalized for an 8-bit target, converted here: a float upload into a
+  // 16-bit texture goes through the driver's per-texel conversion, 2-3x slower on llvmpipe.
   const bool is_float = context_->float_output();
   const int cols = size_.width;
-  cv::Mat* texels = &mask_rows_;
-  int stride = 2, offset = 0;
-  if (packed_warp_) {
-    texels = &warp_texels_;
-    stride = 4;
-    offset = 2;
-  } else {
-    mask_rows_.create(size_, is_float ? CV_32FC2 : CV_16UC2);
-  }
   std::vector<float> factor(cols), lift(cols, 0.0f);
   cv::Mat factor_row(1, cols, CV_32F, factor.data());
   auto unit = [](float x) { return x > 0.0f ? (x < 1.0f ? x : 1.0f) : 0.0f; };
@@ -927,12 +918,104 @@ Status Renderer::SetMask(const cv::Mat& mask) {
       }
     }
   }
+  return lift_max > 0.0f;
+}
+
+Status Renderer::SetMask(const cv::Mat& mask) {
+  ST_RETURN_IF_ERROR(context_->MakeCurrent());
+  ClearPreparedMasks();  // made for the blend before
+  used_mask_rows_.release();
+  if (mask.empty()) {
+    has_mask_ = has_lift_ = false;
+    return OkStatus();
+  }
+  ST_RETURN_IF_ERROR(CheckMask(mask));
+  // Into a buffer kept between masks (a re-blend's first frame waits for this swap; the buffers
+  // made anew each time cost as much again in page faults; set_mask_ms of
+  // sandtable_render_bench): straight into the warp's packed texels (channels 2, 3) when there
+  // is a pre-warp, into the mask's own texels otherwise.
+  cv::Mat* texels = &mask_rows_;
+  int stride = 2, offset = 0;
+  if (packed_warp_) {
+    texels = &warp_texels_;
+    stride = 4;
+    offset = 2;
+  } else {
+    mask_rows_.create(size_, context_->float_output() ? CV_32FC2 : CV_16UC2);
+  }
+  has_lift_ = EncodeMask(mask, texels, stride, offset);
   has_mask_ = true;
-  has_lift_ = lift_max > 0.0f;
   mask_in_warp_texels_ = packed_warp_;
   if (!options_.fold_prewarp) ST_RETURN_IF_ERROR(EnsureIdealTarget());
   UploadTexels(packed_warp_ ? &warp_texture_ : &mask_texture_, *texels);
   return CheckGl("setting the mask");
+}
+
+Status Renderer::PrepareMask(uint64_t key, const cv::Mat& mask) {
+  if (mask.empty()) return InvalidArgumentError("renderer: a prepared mask cannot be empty");
+  ST_RETURN_IF_ERROR(CheckMask(mask));
+  ST_RETURN_IF_ERROR(context_->MakeCurrent());
+  for (unsigned int t : retired_textures_) glDeleteTextures(1, &t);
+  retired_textures_.clear();
+  PreparedMask& slot = prepared_[key];
+  slot.rows.create(size_, context_->float_output() ? CV_32FC2 : CV_16UC2);
+  slot.has_lift = EncodeMask(mask, &slot.rows, 2, 0);
+  slot.packed = packed_warp_;
+  if (!options_.fold_prewarp) ST_RETURN_IF_ERROR(EnsureIdealTarget());
+  if (packed_warp_) {
+    // The warp's source with this mask, in a packed texture of its own.
+    warp_texels_.copyTo(prepared_scratch_);
+    const int to_mask[] = {0, 2, 1, 3};
+    cv::mixChannels(&slot.rows, 1, &prepared_scratch_, 1, to_mask, 2);
+    UploadTexels(&slot.texture, prepared_scratch_);
+  } else {
+    UploadTexels(&slot.texture, slot.rows);
+  }
+  return CheckGl("preparing a mask");
+}
+
+Status Renderer::UseMask(uint64_t key) {
+  auto it = prepared_.find(key);
+  if (it == prepared_.end() || it->second.packed != packed_warp_) {
+    return NotFoundError("renderer: no mask prepared under " + std::to_string(key));
+  }
+  // The prepared texture becomes the current one; the current one and the other prepared
+  // masks (made for the blend before this one) are deleted later, off a re-blend's path.
+  unsigned int& current = packed_warp_ ? warp_texture_ : mask_texture_;
+  if (current) retired_textures_.push_back(current);
+  current = it->second.texture;
+  it->second.texture = 0;
+  used_mask_rows_ = std::move(it->second.rows);
+  has_mask_ = true;
+  has_lift_ = it->second.has_lift;
+  mask_in_warp_texels_ = packed_warp_;
+  for (auto& [k, slot] : prepared_) {
+    if (slot.texture) retired_textures_.push_back(slot.texture);
+  }
+  prepared_.clear();
+  return OkStatus();
+}
+
+void Renderer::ClearPreparedMasks() {
+  if (prepared_.empty() && retired_textures_.empty()) return;
+  if (!context_->MakeCurrent().ok()) return;
+  for (auto& [k, slot] : prepared_) {
+    if (slot.texture) retired_textures_.push_back(slot.texture);
+  }
+  prepared_.clear();
+  for (unsigned int t : retired_textures_) glDeleteTextures(1, &t);
+  retired_textures_.clear();
+}
+
+void Renderer::SyncUsedMaskRows() {
+  if (used_mask_rows_.empty()) return;
+  if (mask_in_warp_texels_) {
+    const int to_mask[] = {0, 2, 1, 3};
+    cv::mixChannels(&used_mask_rows_, 1, &warp_texels_, 1, to_mask, 2);
+  } else {
+    mask_rows_ = used_mask_rows_;
+  }
+  used_mask_rows_.release();
 }
 
 void Renderer::UploadTexels(unsigned int* texture, const cv::Mat& texels) {

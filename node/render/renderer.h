@@ -109,6 +109,17 @@ class Renderer {
   // lift): the lift, linear, is added after the factor (black-level matching, docs/blend.md:
   // out = encode(decode(c) factor + lift)).
   Status SetMask(const cv::Mat& mask);
+  // Prepared masks: a mask encoded and uploaded ahead of time under `key` (what SetMask does,
+  // into a texture of its own), so that UseMask(key) later makes it current without either: a
+  // re-blend after a neighbour left swaps the mask prepared for it in (docs/blend.md, "Prepared
+  // masks"). A new view, a new SetMask or a UseMask drops every prepared mask (they were made
+  // for the old view, or for the blend before). Memory: one texture of the output's size each
+  // (8 MB at 1280x800 with a pre-warp, 4 MB without).
+  Status PrepareMask(uint64_t key, const cv::Mat& mask);
+  bool HasPreparedMask(uint64_t key) const { return prepared_.count(key) > 0; }
+  // NOT_FOUND when no mask is prepared under `key`.
+  Status UseMask(uint64_t key);
+  void ClearPreparedMasks();
 
   // Draws one frame into the context's output framebuffer (not presented: GlContext::Present).
   Expected<FrameStats> Render(const RenderContent& content);
@@ -235,6 +246,23 @@ class Renderer {
   cv::Mat mask_rows_;    // factor (encoded; linear for a float target), lift (linear)
   bool packed_warp_ = false;
   bool mask_in_warp_texels_ = false;  // the current mask lives in warp_texels_, not mask_rows_
+  struct PreparedMask {
+    unsigned int texture = 0;  // packed (with the warp's source) when packed, else the mask alone
+    bool packed = false;
+    bool has_lift = false;
+    cv::Mat rows;  // the mask's texels (factor, lift), GL row order, as mask_rows_ holds them
+  };
+  std::map<uint64_t, PreparedMask> prepared_;
+  std::vector<unsigned int> retired_textures_;  // replaced by UseMask; deleted off its path
+  cv::Mat prepared_scratch_;                    // the packed texels of the mask being prepared
+  // After UseMask: the current mask's texels, not yet copied back into warp_texels_ or
+  // mask_rows_ (only SetView reads them; SetMask rewrites them whole).
+  cv::Mat used_mask_rows_;
+  Status CheckMask(const cv::Mat& mask) const;
+  // `mask` into `texels` (channels offset, offset + 1 of stride a texel): clamped, the factor
+  // encoded, GL row order. Returns whether it carries a lift.
+  bool EncodeMask(const cv::Mat& mask, cv::Mat* texels, int stride, int offset) const;
+  void SyncUsedMaskRows();
   unsigned int floor_texture_ = 0;
   bool has_view_ = false, has_mask_ = false;
   bool last_warped_ = false;  // the ideal image holds the last frame (see CanRewarp)

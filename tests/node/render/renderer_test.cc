@@ -417,6 +417,85 @@ TEST(RendererTest, RewarpShowsTheLastFrameUnderANewMask) {
   EXPECT_FALSE(renderer->CanRewarp()) << "a raw pattern does not go through the warp pass";
 }
 
+// Prepared masks (a re-blend's mask made ahead of time): UseMask shows exactly what SetMask of
+// the same mask shows, the other prepared masks go with it, a new view drops them, and the mask
+// used survives a view change (its texels are kept for the next view).
+TEST(RendererTest, APreparedMaskShowsWhatSetMaskShows) {
+  std::unique_ptr<GlContext> context = MakeContext();
+  ASSERT_TRUE(context);
+  cv::Mat left_half(kH, kW, CV_32FC1, cv::Scalar(1.0)), right_half(kH, kW, CV_32FC1);
+  left_half.colRange(0, kW / 2).setTo(0.25);
+  for (int u = 0; u < kW; ++u) right_half.col(u).setTo(u < kW / 2 ? 1.0 : 0.2 + 0.5 * u / kW);
+  cv::Mat lift(kH, kW, CV_32FC1, cv::Scalar(0.0)), with_lift;
+  lift.rowRange(0, kH / 2).setTo(0.02);
+  cv::merge(std::vector<cv::Mat>{right_half, lift}, with_lift);
+  for (const bool distortion : {false, true}) {
+    for (const bool deferred : {false, true}) {
+      SCOPED_TRACE(std::string(distortion ? "pre-warp" : "no pre-warp") +
+                   (deferred ? ", deferred" : ", forward"));
+      RendererOptions options;
+      options.deferred = deferred;
+      std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), distortion, options);
+      ASSERT_TRUE(renderer);
+      RenderContent content;
+      content.sun_direction_in_table = SunDirection(10.0);
+      ASSERT_TRUE(renderer->SetMask(left_half).ok());
+      RenderToImage(context.get(), renderer.get(), content);
+      EXPECT_EQ(renderer->UseMask(7).code(), StatusCode::kNotFound);
+      ASSERT_TRUE(renderer->PrepareMask(1, right_half).ok());
+      ASSERT_TRUE(renderer->PrepareMask(2, with_lift).ok());
+      EXPECT_TRUE(renderer->HasPreparedMask(1) && renderer->HasPreparedMask(2));
+      for (const bool use_lift : {false, true}) {
+        SCOPED_TRACE(use_lift ? "with a lift" : "factor alone");
+        const cv::Mat& mask = use_lift ? with_lift : right_half;
+        if (use_lift) {
+          ASSERT_TRUE(renderer->PrepareMask(2, with_lift).ok());
+        }
+        ASSERT_TRUE(renderer->UseMask(use_lift ? 2 : 1).ok());
+        EXPECT_FALSE(renderer->HasPreparedMask(1) || renderer->HasPreparedMask(2))
+            << "the others were made for the blend before";
+        ASSERT_TRUE(renderer->CanRewarp());
+        ASSERT_TRUE(renderer->Rewarp().ok());
+        Expected<cv::Mat> used = context->ReadOutput();
+        ASSERT_TRUE(used.ok());
+        const cv::Mat used_full = RenderToImage(context.get(), renderer.get(), content);
+        ASSERT_TRUE(renderer->SetMask(mask).ok());
+        ASSERT_TRUE(renderer->Rewarp().ok());
+        Expected<cv::Mat> set = context->ReadOutput();
+        ASSERT_TRUE(set.ok());
+        EXPECT_EQ(cv::norm(*used, *set, cv::NORM_INF), 0.0) << "the same mask, swapped in";
+        EXPECT_EQ(cv::norm(used_full, RenderToImage(context.get(), renderer.get(), content),
+                           cv::NORM_INF),
+                  0.0)
+            << "and in the next whole frame";
+        // Back to the first mask for the next round.
+        ASSERT_TRUE(renderer->SetMask(left_half).ok());
+        ASSERT_TRUE(renderer->PrepareMask(1, right_half).ok());
+      }
+      // A new view drops the prepared masks; the mask in use goes on under the new view.
+      ASSERT_TRUE(renderer->UseMask(1).ok());
+      ASSERT_TRUE(renderer->PrepareMask(3, left_half).ok());
+      Expected<ProjectorView> other = PrepareProjectorView(
+          testing::RenderTestProjector(kW, kH, !distortion),
+          testing::RenderTestProjectorFromTable(), testing::RenderTestScene().Bounds());
+      ASSERT_TRUE(other.ok());
+      ASSERT_TRUE(renderer->SetView(*other).ok());
+      EXPECT_FALSE(renderer->HasPreparedMask(3)) << "made for the old view";
+      const cv::Mat after_use = RenderToImage(context.get(), renderer.get(), content);
+      ASSERT_TRUE(renderer->SetMask(right_half).ok());
+      EXPECT_EQ(
+          cv::norm(after_use, RenderToImage(context.get(), renderer.get(), content), cv::NORM_INF),
+          0.0)
+          << "the mask used, carried into the new view";
+    }
+  }
+  std::unique_ptr<Renderer> renderer = MakeRenderer(context.get(), true);
+  ASSERT_TRUE(renderer);
+  EXPECT_EQ(renderer->PrepareMask(1, cv::Mat()).code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(renderer->PrepareMask(1, cv::Mat(kH, kW / 2, CV_32FC1)).code(),
+            StatusCode::kInvalidArgument);
+}
+
 // Black-level matching: a (factor, lift) mask adds the lift in linear light after the factor,
 // in the pre-warp pass and folded into the scene pass alike; "black" through the pipeline shows
 // the lift alone.

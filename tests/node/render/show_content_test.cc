@@ -3,7 +3,9 @@
 #include "node/render/show_content.h"
 
 #include <atomic>
+#include <map>
 #include <thread>
+#include <utility>
 
 #include <gtest/gtest.h>
 
@@ -326,6 +328,58 @@ TEST(RenderLoopTest, AMaskThatComesMidFrameGoesOutWithThatFrame) {
   cv::minMaxLoc(projector.last().reshape(1), nullptr, &hi);
   EXPECT_LE(hi, 188.0);
   EXPECT_GT(hi, 20.0) << "the scene is there";
+}
+
+// A re-blend after a neighbour left, prepared ahead of time (PrepareBlends): the prepared mask
+// goes out with the frame already drawn, swapped in (no upload), and the same blend shown again
+// by the full composition (ShowBlend) changes nothing: one frame, not two.
+TEST(RenderLoopTest, APreparedBlendGoesOutOnceWithoutAnUpload) {
+  KeptFrames projector(cv::Size(320, 200));
+  Expected<std::unique_ptr<RenderLoop>> loop = StartTestLoop(&projector, 0);
+  ASSERT_TRUE(loop.ok()) << loop.status().ToString();
+  ASSERT_TRUE((*loop)->ShowCalibration(TestCalibration()).ok());
+  ShowInputs inputs;
+  inputs.sun.enabled = false;
+  inputs.pattern = TestPattern::kNone;
+  (*loop)->SetInputs(inputs);
+  const cv::Mat half(200, 320, CV_32FC1, cv::Scalar(0.5));
+  const cv::Mat quarter(200, 320, CV_32FC1, cv::Scalar(0.25));
+  EXPECT_FALSE((*loop)->ShowPreparedBlend(5)) << "nothing prepared yet";
+  uint64_t blend = 0;
+  ASSERT_TRUE((*loop)->ShowBlend(half, cv::Mat(), std::chrono::seconds(10), &blend).ok());
+  EXPECT_GT(blend, 0u);
+  std::map<NodeId, std::pair<cv::Mat, cv::Mat>> standby;
+  standby[5] = {quarter, cv::Mat()};
+  standby[6] = {half, cv::Mat()};
+  (*loop)->PrepareBlends(blend - 1, standby);  // for an older blend: dropped
+  EXPECT_FALSE((*loop)->ShowPreparedBlend(5));
+  (*loop)->PrepareBlends(blend, standby);
+  for (int i = 0; i < 1000 && (*loop)->Summary().masks_prepared < 2; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_EQ((*loop)->Summary().masks_prepared, 2) << "the render thread prepared both";
+  const uint64_t before = projector.count();
+  uint64_t posted = 0;
+  ASSERT_TRUE((*loop)->ShowPreparedBlend(5, &posted));
+  uint64_t again = 0;
+  Expected<int64_t> shown =
+      (*loop)->ShowBlend(quarter, cv::Mat(), std::chrono::seconds(10), &again);
+  ASSERT_TRUE(shown.ok()) << shown.status().ToString();
+  EXPECT_EQ(again, posted) << "the blend already posted";
+  const MaskFrameTimes times = (*loop)->LastMaskFrame();
+  EXPECT_EQ(times.generation, posted);
+  EXPECT_TRUE(times.prepared) << "swapped in, not uploaded";
+  EXPECT_TRUE(times.rewarped);
+  EXPECT_EQ(times.shown_ns, *shown);
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  EXPECT_EQ(projector.count(), before + 1) << "one frame under the new blend";
+  // Under the quarter: nothing brighter than 255 x 0.25^(1 / 2.2) = 136 (+ rounding).
+  double hi = 0;
+  cv::minMaxLoc(projector.last().reshape(1), nullptr, &hi);
+  EXPECT_LE(hi, 138.0);
+  EXPECT_GT(hi, 20.0) << "the scene is there";
+  EXPECT_FALSE((*loop)->ShowPreparedBlend(6)) << "made for the blend before";
+  EXPECT_EQ((*loop)->Summary().masks_prepared, 0);
 }
 
 TEST(RenderLoopTest, RefusesACalibrationOfAnotherSize) {
