@@ -1,8 +1,10 @@
 #include "sim/lab/lab_painter.h"
 
 #include <algorithm>
+#include <cstring>
 #include <memory>
 #include <set>
+#include <string>
 #include <utility>
 
 #include <zmq.hpp>
@@ -42,10 +44,30 @@ Eigen::Vector3f LabPainterPoint(uint64_t stroke_id, uint32_t k) {
 
 namespace {
 
-// One connection to the coordinator: its own incarnation, its own request numbering.
+// One connection to the coordinator: its own incarnation, its own request numbering, and a
+// monitor of its connection (a coordinator that dies drops it at once: what was in flight is
+// lost, no need to wait out the ack timeout).
 struct Link {
   std::unique_ptr<net::Channel> channel;
+  std::unique_ptr<zmq::socket_t> monitor;  // PAIR of zmq_socket_monitor (null: none)
   uint64_t sent = 0;
+  // Whether the connection dropped since the last call (drains the monitor).
+  bool Dropped() {
+    bool dropped = false;
+    while (monitor) {
+      zmq::message_t event, address;
+      try {
+        if (!monitor->recv(event, zmq::recv_flags::dontwait)) break;
+        if (event.more()) (void)monitor->recv(address, zmq::recv_flags::dontwait);
+      } catch (const zmq::error_t&) {
+        break;
+      }
+      uint16_t code = 0;
+      if (event.size() >= sizeof(code)) std::memcpy(&code, event.data(), sizeof(code));
+      dropped = dropped || code == ZMQ_EVENT_DISCONNECTED;
+    }
+    return dropped;
+  }
 };
 
 Expected<Link> Connect(zmq::context_t* context, const LabPainterOptions& options,
@@ -58,6 +80,18 @@ Expected<Link> Connect(zmq::context_t* context, const LabPainterOptions& options
   if (!socket.ok()) return socket.status();
   ST_RETURN_IF_ERROR((*socket)->Connect(options.requests_endpoint));
   Link link;
+  const std::string monitor_endpoint =
+      "inproc://lab-painter-monitor-" + std::to_string(incarnation);
+  if (zmq_socket_monitor((*socket)->raw().handle(), monitor_endpoint.c_str(),
+                         ZMQ_EVENT_DISCONNECTED) == 0) {
+    try {
+      link.monitor = std::make_unique<zmq::socket_t>(*context, zmq::socket_type::pair);
+      link.monitor->set(zmq::sockopt::linger, 0);
+      link.monitor->connect(monitor_endpoint);
+    } catch (const zmq::error_t&) {
+      link.monitor.reset();  // the ack timeout alone then
+    }
+  }
   link.channel = std::make_unique<net::Channel>(std::move(*socket), kLabPainterSenderId,
                                                 incarnation, counters);
   return link;
@@ -194,8 +228,11 @@ void LabPainter::Run() {
         ++result_.points_acknowledged;
       }
     }
-    if (!in_flight.empty() && Clock::now() - last_progress > options_.ack_timeout) {
-      // No answer: the coordinator is gone or the requests were lost. Reconnect, new stroke.
+    const bool dropped = link->Dropped();
+    if ((!in_flight.empty() || dropped) &&
+        (dropped || Clock::now() - last_progress > options_.ack_timeout)) {
+      // The connection dropped (the coordinator died) or no answer came (the requests were
+      // lost): what is in flight is lost. Reconnect, new stroke.
       {
         std::lock_guard<std::mutex> lock(mutex_);
         if (!in_outage) {

@@ -3,8 +3,9 @@
 // On its own thread it paints strokes through the coordinator's annotation protocol, as a
 // console or a wand client would: a stroke_begin, then one stroke_points request per point at
 // `points_per_s`, up to `window` requests in flight, and records every accepted ack. When no
-// ack comes for `ack_timeout` while requests are in flight (the coordinator was killed, or the
-// link lost them), it counts an outage from the last ack, drops the requests in flight (an
+// ack comes for `ack_timeout` while requests are in flight (the link lost them), or its
+// connection drops (the coordinator was killed: a monitor of the socket says so at once), it
+// counts an outage from the last ack, drops the requests in flight (an
 // unacknowledged request may or may not have been stored: it is not counted either way),
 // reconnects with a new incarnation and, once the coordinator answers, begins a new stroke (the
 // old one cannot go on: its next point index may be missing). The outage ends at the first ack
