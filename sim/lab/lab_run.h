@@ -115,9 +115,10 @@ struct LabRunOptions {
   std::string blend = "on";
   // Black-level matching (docs/blend.md): "on" passes --black-match on to the nodes.
   std::string black_match = "off";
-  // "on": each node's heap on transparent huge pages (GLIBC_TUNABLES=glibc.malloc.hugetlb=1 in
-  // its environment). A killed node's sockets close once its memory is unmapped; with huge
-  // pages that is ~20 ms sooner on this machine, and its neighbours notice the death sooner
+  // "on": each node's heap on transparent huge pages (GLIBC_TUNABLES=glibc.malloc.hugetlb=1:
+  // glibc.malloc.arena_max=1 in its environment: every thread's allocations in the main heap,
+  // on huge pages). A killed node's sockets close once its memory is unmapped; with huge pages
+  // that is 30-50 ms sooner on this machine, and its neighbours notice the death sooner
   // (docs/blend.md, "A neighbour leaves").
   std::string node_huge_pages = "on";
   std::string command_line;  // for the report
