@@ -379,12 +379,19 @@ Status BlendService::OnStep(NodeRuntime& node) {
   for (auto it = holding_.begin(); it != holding_.end();) {
     const NodeId peer = *it;
     auto info = node.peers().find(peer);
-    const bool gone = info == node.peers().end() ||
-                      info->second.disconnected_at != Clock::time_point{} ||
-                      (info->second.last_heard != Clock::time_point{} &&
-                       now - info->second.last_heard >
-                           NodeRuntime::PeerSilence(info->second, options_.peer_silence));
-    if (!gone) {
+    // How it was noticed (the JSON line's "noticed_by"): a killed process closes its sockets
+    // once its memory is unmapped; the member list drops it after the coordinator's silence.
+    const char* noticed_by = nullptr;
+    if (info == node.peers().end()) {
+      noticed_by = "member list";
+    } else if (info->second.disconnected_at != Clock::time_point{}) {
+      noticed_by = "connection";
+    } else if (info->second.last_heard != Clock::time_point{} &&
+               now - info->second.last_heard >
+                   NodeRuntime::PeerSilence(info->second, options_.peer_silence)) {
+      noticed_by = "silence";
+    }
+    if (noticed_by == nullptr) {
       ++it;
       continue;
     }
@@ -396,8 +403,8 @@ Status BlendService::OnStep(NodeRuntime& node) {
     // composition below makes the same mask (shown already: nothing more to show) and the
     // masks for the next neighbour to leave.
     const bool prepared = loop_ && loop_->ShowPreparedBlend(peer);
-    ST_LOG(kInfo) << "blend: node " << peer << " left; re-blending without it"
-                  << (prepared ? " (its prepared mask shown)" : "");
+    ST_LOG(kInfo) << "blend: node " << peer << " left (noticed by its " << noticed_by
+                  << "); re-blending without it" << (prepared ? " (its prepared mask shown)" : "");
     const uint64_t generation = generation_;
     node.workers().Run<bool>(
         [core = core_, peer, generation] {
@@ -405,8 +412,8 @@ Status BlendService::OnStep(NodeRuntime& node) {
           if (!core->blender || core->generation != generation) return false;
           return core->blender->RemoveNeighbour(peer);
         },
-        [this, peer, now, &node](bool removed) {
-          if (removed) Compose(node, "left", peer, now);
+        [this, peer, now, noticed_by, &node](bool removed) {
+          if (removed) Compose(node, "left", peer, now, noticed_by);
         });
   }
   return OkStatus();
@@ -426,7 +433,7 @@ void BlendService::TellLevel(NodeRuntime& node) {
 }
 
 void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId peer,
-                           Clock::time_point detected) {
+                           Clock::time_point detected, const char* noticed_by) {
   TellLevel(node);
   double level = std::numeric_limits<double>::infinity();
   for (const auto& [unit, bound] : bounds_) level = std::min(level, bound);
@@ -518,7 +525,7 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
         loop->PrepareBlends(blend_generation, std::move(standby));
         return out;
       },
-      [this, cause, peer, detected, level, &node](Shown shown) {
+      [this, cause, peer, detected, level, noticed_by, &node](Shown shown) {
         if (shown.stale) return;
         if (!shown.status.ok()) {
           ST_LOG(kWarning) << "blend: " << shown.status.ToString();
@@ -537,6 +544,7 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           line["reblend"] = "left";
           line["peer"] = peer;
           line["detected_ns"] = SteadyNs(detected);
+          if (noticed_by != nullptr) line["noticed_by"] = noticed_by;
         } else {
           line["blended"] = true;
           line["cause"] = cause;

@@ -24,7 +24,8 @@
 //                                   each time a new mask is shown (waiting_for: overlapping
 //                                   units whose field it does not hold yet)
 //   {"blend":ID,"mpcdi":PATH,"alpha_from":K}   the runner, each time it rewrote the MPCDI export
-//   {"blend":ID,"reblend":"left","peer":K,"detected_ns":..,"shown_ns":..,"compose_ms":..}
+//   {"blend":ID,"reblend":"left","peer":K,"noticed_by":"connection"|"silence"|"member list",
+//    "detected_ns":..,"shown_ns":..,"compose_ms":..}
 // Threading: network thread, except the casts and lookups, which run on the node's workers
 // under the service's own lock.
 #pragma once
@@ -104,8 +105,9 @@ class BlendService : public NodeService {
 
  private:
   struct Core;  // what the workers touch, under its lock
+  // `noticed_by` (a static string, or null): how a neighbour that left was noticed.
   void Compose(NodeRuntime& node, const std::string& cause, NodeId peer,
-               std::chrono::steady_clock::time_point detected);
+               std::chrono::steady_clock::time_point detected, const char* noticed_by = nullptr);
   void SendShare(NodeId to, bool with_field, bool answer, NodeRuntime& node);
   // Looks a neighbour's field up at this projector's pixels (a worker), then recomposes.
   void ApplyField(NodeId from, const DistanceField& field, NodeRuntime& node);

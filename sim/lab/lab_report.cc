@@ -696,6 +696,32 @@ std::string LabReportMarkdown(const LabResult& r) {
   if (!r.live.empty() && r.live.contains("reblend_ms_max")) {
     md << "Re-blend after the kill (SIGKILL to the neighbours' first mask without it, shown): "
        << Fixed(r.live.value("reblend_ms_max", 0.0), 1) << " ms at most.\n\n";
+    // Where each neighbour's time went (docs/blend.md, "Results and limits").
+    const json reblends = r.live.value("reblend", json::object());
+    if (!reblends.empty()) {
+      md << "| neighbour | noticed (ms) | by | mask | mask in (ms) | frame (ms) | read back (ms) | "
+            "world's show (ms) | first re-blended frame (ms) | compose (ms) |\n"
+         << "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n";
+      for (const auto& [id, n] : reblends.items()) {
+        const json frame = n.value("frame", json::object());
+        const bool prepared = frame.value("prepared", false);
+        md << "| " << id << " | " << Fixed(n.value("detected_ms", 0.0), 1) << " | "
+           << n.value("noticed_by", std::string("?")) << " | "
+           << (prepared ? "prepared" : "composed") << " | "
+           << Fixed(frame.value("set_mask_ms", 0.0), 2) << " | "
+           << Fixed(frame.value("render_ms", 0.0), 1)
+           << (frame.value("rewarped", false) ? " (rewarp)" : "") << " | "
+           << Fixed(frame.value("read_ms", 0.0), 1) << " | "
+           << Fixed(frame.value("show_ms", 0.0), 1) << " | " << Fixed(n.value("shown_ms", 0.0), 1)
+           << " | " << Fixed(n.value("compose_ms", 0.0), 1) << (prepared ? " (after)" : "")
+           << " |\n";
+      }
+      md << "\n*prepared*: the mask for this neighbour's leaving was made ahead of time and "
+            "swapped "
+            "in; the composition ran after the frame, off the path. *composed*: composed and "
+            "uploaded once the kill was noticed. *by*: the dead node's connection closing (its "
+            "memory unmapped first), its silence, or the member list dropping it.\n\n";
+    }
   }
   return md.str();
 }

@@ -538,6 +538,7 @@ class LabRun {
       const double shown_ms = (line.value("shown_ns", int64_t{0}) - kill_ns_) * 1e-6;
       const double detected_ms = (line.value("detected_ns", int64_t{0}) - kill_ns_) * 1e-6;
       reblend[id] = {{"detected_ms", detected_ms},
+                     {"noticed_by", line.value("noticed_by", "")},
                      {"shown_ms", shown_ms},
                      {"compose_ms", line.value("compose_ms", 0.0)},
                      {"frame", line.value("frame", json::object())}};

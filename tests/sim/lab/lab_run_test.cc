@@ -487,6 +487,16 @@ TEST_F(LabRunTest, Sandtable3NodeThatLeavesCausesNoRecalibration) {
               live["reblend"][id]["detected_ms"].get<double>());
   }
   EXPECT_EQ(live["recalibrated_after_the_kill"].get<int>(), 0);
+  // report.md says where each neighbour's time went: a row per neighbour.
+  std::ifstream md(dir_ / "report.md");
+  const std::string text((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("| neighbour | noticed (ms) | by | mask |"), std::string::npos);
+  for (const char* id : {"0", "1"}) {
+    EXPECT_NE(text.find(std::string("\n| ") + id + " | "), std::string::npos) << id;
+    EXPECT_TRUE(live["reblend"][id]["frame"]["prepared"].is_boolean()) << live.dump();
+    const std::string by = live["reblend"][id]["noticed_by"].get<std::string>();
+    EXPECT_TRUE(by == "connection" || by == "silence" || by == "member list") << by;
+  }
   EXPECT_TRUE(AllProcessesGone(ReadJson("processes.json")));
 }
 
