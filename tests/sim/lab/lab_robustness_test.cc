@@ -128,6 +128,18 @@ Scene CantileverBlock() {
   return WithMaterials(std::move(s));
 }
 
+// A projector of the site file made width x height at the same field of view across, its image
+// shifted up by `shift_v` of its height (a lens shift).
+void Resize(json* projector, int width, int height, double shift_v) {
+  json& p = *projector;
+  const double scale = static_cast<double>(width) / p["width_px"].get<double>();
+  p["fx_px"] = p["fy_px"] = p["fx_px"].get<double>() * scale;
+  p["width_px"] = width;
+  p["height_px"] = height;
+  p["cx_px"] = 0.5 * (width - 1);
+  p["cy_px"] = 0.5 * (height - 1) + shift_v * height;
+}
+
 class LabRobustnessTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -173,10 +185,16 @@ class LabRobustnessTest : public ::testing::Test {
     return ran;
   }
 
-  void ExpectRunsToItsEnd(const std::string& site, const std::string& scene,
-                          const std::string& name, size_t units) {
+  // The site (written as NAME.json, its "name" the site's) and the scene (SCENE.gltf) through
+  // the lab, out to DIR/NAME.
+  void ExpectRunsToItsEnd(const json& site, const Scene& scene, const std::string& scene_name,
+                          size_t units) {
+    const std::string name = site["name"].get<std::string>();
+    const std::string site_path = Write(site, name + ".json");
+    const std::string scene_path = (dir_ / (scene_name + ".gltf")).string();
+    ASSERT_TRUE(WriteGltfScene(scene, scene_path).ok());
     const std::filesystem::path out = dir_ / name;
-    const Ran ran = RunLab({"--site", site, "--scene", scene, "--out", out.string()});
+    const Ran ran = RunLab({"--site", site_path, "--scene", scene_path, "--out", out.string()});
     ASSERT_EQ(ran.code, 0) << ran.output;
     std::ifstream in(out / "report.json");
     const json report = json::parse(in, nullptr, false);
@@ -205,19 +223,11 @@ TEST_F(LabRobustnessTest, MixedOpticsOverTerrainAndABridge) {
   json site = Sandtable3();
   site["name"] = "mixed-3";
   site["table"] = {{"shape", "rectangle"}, {"size_m", {1.6, 1.2}}};
-  json& p1 = site["units"][1]["projector"];  // 1024 x 768, the image shifted up by 8 %
-  p1["width_px"] = 1024;
-  p1["height_px"] = 768;
-  p1["fx_px"] = p1["fy_px"] = p1["fx_px"].get<double>() * 0.8;
-  p1["cx_px"] = 511.5;
-  p1["cy_px"] = 383.5 + 0.08 * 768;
+  Resize(&site["units"][1]["projector"], 1024, 768, 0.08);
   site["units"][2]["projector"]["distortion_k1_k2_p1_p2_k3"] = {0.12, -0.04, 0.0, 0.0, 0.0};
   site["units"][0]["camera"]["bit_depth"] = 16;
   site["units"][1]["camera"]["bit_depth"] = 12;
-  const std::string site_path = Write(site, "mixed-3.json");
-  const std::string scene_path = (dir_ / "terrain-bridge.gltf").string();
-  ASSERT_TRUE(WriteGltfScene(TerrainBridge(), scene_path).ok());
-  ExpectRunsToItsEnd(site_path, scene_path, "mixed", 3);
+  ExpectRunsToItsEnd(site, TerrainBridge(), "terrain-bridge", 3);
 }
 
 TEST_F(LabRobustnessTest, TwoProjectorsOfOtherSizesOverACantilever) {
@@ -227,18 +237,10 @@ TEST_F(LabRobustnessTest, TwoProjectorsOfOtherSizesOverACantilever) {
   json units = json::array({site["units"][0], site["units"][2]});
   units[1]["id"] = 1;
   units[1]["name"] = "unit-1";
-  json& p1 = units[1]["projector"];  // 800 x 500 at the same field of view
-  p1["width_px"] = 800;
-  p1["height_px"] = 500;
-  p1["fx_px"] = p1["fy_px"] = p1["fx_px"].get<double>() * 0.625;
-  p1["cx_px"] = 399.5;
-  p1["cy_px"] = 249.5;
+  Resize(&units[1]["projector"], 800, 500, 0.0);
   units[0]["camera"]["bit_depth"] = 10;
   site["units"] = units;
-  const std::string site_path = Write(site, "pair-2.json");
-  const std::string scene_path = (dir_ / "cantilever-block.gltf").string();
-  ASSERT_TRUE(WriteGltfScene(CantileverBlock(), scene_path).ok());
-  ExpectRunsToItsEnd(site_path, scene_path, "pair", 2);
+  ExpectRunsToItsEnd(site, CantileverBlock(), "cantilever-block", 2);
 }
 
 TEST_F(LabRobustnessTest, RefusesAnInvalidSiteOrSceneNamingTheFileAndField) {
