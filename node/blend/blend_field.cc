@@ -407,6 +407,16 @@ float LookupDistance(const DistanceField& field, const Eigen::Vector3d& point_in
   return d;
 }
 
+bool SameField(const DistanceField& a, const DistanceField& b) {
+  const CameraModel &p = a.projector, &q = b.projector;
+  return a.unit == b.unit && a.step_px == b.step_px && a.cols == b.cols && a.rows == b.rows &&
+         a.distance_m == b.distance_m && p.width_px == q.width_px && p.height_px == q.height_px &&
+         p.fx_px == q.fx_px && p.fy_px == q.fy_px && p.cx_px == q.cx_px && p.cy_px == q.cy_px &&
+         p.distortion.ToArray() == q.distortion.ToArray() &&
+         a.projector_from_table.rotation.coeffs() == b.projector_from_table.rotation.coeffs() &&
+         a.projector_from_table.translation == b.projector_from_table.translation;
+}
+
 Blender::Blender(ProjectorSurface surface, DistanceField own, const RayCaster* caster,
                  BlendOptions options)
     : surface_(std::move(surface)), own_(std::move(own)), caster_(caster), options_(options) {

@@ -114,6 +114,10 @@ struct DistanceField {
   Status Check() const;  // sizes agree, values finite (for fields off the wire)
 };
 
+// The same field, value for value (unit, grid, distances, the projector and its pose): a share
+// received again (a neighbour asked again, or answered twice) needs no new lookup.
+bool SameField(const DistanceField& a, const DistanceField& b);
+
 // Casts every pixel of the projector (distortion included) into `caster`'s scene.
 ProjectorSurface CastProjectorSurface(const CameraModel& projector,
                                       const Rigid3d& projector_from_table, const RayCaster& caster,

@@ -194,9 +194,12 @@ void BlendService::SetCalibration(const UnitCalibration& calibration, uint64_t r
         for (const auto& [unit, field] : *fields) {
           if (unit != id_) holding_.insert(unit);
         }
-        // Fields that came in during the cast.
+        // Fields that came in during the cast (new ones, or newer than the cast's).
         for (const auto& [unit, field] : fields_) {
-          if (unit != id_ && !fields->count(unit)) ApplyField(unit, field, node);
+          auto cast_with = fields->find(unit);
+          if (unit != id_ && (cast_with == fields->end() || !SameField(cast_with->second, field))) {
+            ApplyField(unit, field, node);
+          }
         }
         bounds_[id_] = cast.bound;
         ST_LOG(kInfo) << "blend: field and surface cast in " << cast.compute_ms
@@ -296,11 +299,16 @@ void BlendService::OnPeerMessage(net::Incoming request, NodeRuntime& node) {
       ST_LOG(kWarning) << "blend: node " << from << ": " << field.status().ToString();
       return;
     }
+    // The field the blend already holds (a neighbour asking again, or answering twice): no
+    // new lookup.
+    auto held = fields_.find(from);
+    const bool known =
+        holding_.count(from) > 0 && held != fields_.end() && SameField(held->second, *field);
     fields_[from] = *field;
     // Asked for the own field: answer, even when it was sent before (a node that dropped this
     // one on a silence asks again; only its answer ends its wait).
     if (ready_ && share.answer()) SendShare(from, /*with_field=*/true, /*answer=*/false, node);
-    if (ready_) ApplyField(from, *field, node);  // else: applied once the cast is done
+    if (ready_ && !known) ApplyField(from, *field, node);  // else: applied once the cast is done
     return;
   }
   if ((level_news || (black_news && options_.black_match)) && ready_) {

@@ -44,6 +44,27 @@ TEST(BlendShareTest, AFieldSurvivesTheWire) {
   EXPECT_EQ(back->DistanceAtPixel({-5.0, 10.0}), 0.0f);
 }
 
+// A share received again (a neighbour asked again) is recognised, so the node does not look it
+// up again; any change of the field, its projector or its pose is not.
+TEST(BlendShareTest, AFieldReceivedAgainIsTheSameAndAChangedOneIsNot) {
+  const wire::BlendShare share = ShareFromField(MakeField(), 3);
+  Expected<DistanceField> first = FieldFromShare(share), again = FieldFromShare(share);
+  ASSERT_TRUE(first.ok() && again.ok());
+  EXPECT_TRUE(SameField(*first, *again));
+  DistanceField changed = *again;
+  changed.distance_m[10] += 1e-6f;
+  EXPECT_FALSE(SameField(*first, changed));
+  changed = *again;
+  changed.projector_from_table.translation.x() += 1e-9;
+  EXPECT_FALSE(SameField(*first, changed));
+  changed = *again;
+  changed.projector.distortion.k1 = 0.01;
+  EXPECT_FALSE(SameField(*first, changed));
+  changed = *again;
+  changed.unit = 8;
+  EXPECT_FALSE(SameField(*first, changed));
+}
+
 TEST(BlendShareTest, RefusesSharesThatAreNotAField) {
   const wire::BlendShare good = ShareFromField(MakeField(), 1);
   {
