@@ -1,5 +1,6 @@
 #include "node/render/gl_context.h"
 
+#include <cstdlib>
 #include <string>
 
 #include <EGL/egl.h>
@@ -45,22 +46,7 @@ class EglContext : public GlContext {
       return InvalidArgumentError("EGL context: size " + std::to_string(size_px.width) + "x" +
                                   std::to_string(size_px.height) + " px is outside 1..16384");
     }
-    auto get_platform_display = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(
-        eglGetProcAddress("eglGetPlatformDisplayEXT"));
-    if (!get_platform_display) {
-      return UnavailableError("EGL: no eglGetPlatformDisplayEXT (install libegl-mesa0)");
-    }
-    display_ = get_platform_display(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr);
-    if (display_ == EGL_NO_DISPLAY) {
-      return UnavailableError(
-          "EGL: no surfaceless display (Mesa's EGL_MESA_platform_surfaceless; "
-          "install libegl-mesa0 libgl1-mesa-dri): " +
-          EglErrorText());
-    }
-    EGLint major = 0, minor = 0;
-    if (eglInitialize(display_, &major, &minor) != EGL_TRUE) {
-      return UnavailableError("EGL: eglInitialize failed: " + EglErrorText());
-    }
+    ST_RETURN_IF_ERROR(OpenDisplay());
     if (eglBindAPI(EGL_OPENGL_API) != EGL_TRUE) {
       return UnavailableError("EGL: no desktop OpenGL API: " + EglErrorText());
     }
@@ -98,8 +84,51 @@ class EglContext : public GlContext {
     glClearColor(0, 0, 0, 1);
     glClear(GL_COLOR_BUFFER_BIT);
     ST_RETURN_IF_ERROR(CheckGl("creating the offscreen output"));
-    description_ = GlDescription("EGL surfaceless");
+    description_ = GlDescription(back_end_);
     return OkStatus();
+  }
+
+  // Mesa's surfaceless platform first (llvmpipe in CI, any Mesa driver); where it offers no
+  // display, as under NVIDIA's driver without a display server, the first EGL device
+  // (EGL_EXT_platform_device) that initialises. SANDTABLE_EGL_PLATFORM=device skips the first.
+  Status OpenDisplay() {
+    const char* platform = std::getenv("SANDTABLE_EGL_PLATFORM");
+    const bool device_only = platform != nullptr && std::string(platform) == "device";
+    auto get_platform_display = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(
+        eglGetProcAddress("eglGetPlatformDisplayEXT"));
+    if (!get_platform_display) {
+      return UnavailableError("EGL: no eglGetPlatformDisplayEXT (install libegl-mesa0)");
+    }
+    EGLint major = 0, minor = 0;
+    std::string surfaceless_error = "skipped: SANDTABLE_EGL_PLATFORM=device";
+    if (!device_only) {
+      display_ = get_platform_display(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr);
+      if (display_ != EGL_NO_DISPLAY && eglInitialize(display_, &major, &minor) == EGL_TRUE) {
+        back_end_ = "EGL surfaceless";
+        return OkStatus();
+      }
+      surfaceless_error = EglErrorText();
+    }
+    display_ = EGL_NO_DISPLAY;
+    auto query_devices =
+        reinterpret_cast<PFNEGLQUERYDEVICESEXTPROC>(eglGetProcAddress("eglQueryDevicesEXT"));
+    EGLDeviceEXT devices[8];
+    EGLint device_count = 0;
+    if (query_devices && query_devices(8, devices, &device_count) == EGL_TRUE) {
+      for (EGLint i = 0; i < device_count; ++i) {
+        EGLDisplay display = get_platform_display(EGL_PLATFORM_DEVICE_EXT, devices[i], nullptr);
+        if (display != EGL_NO_DISPLAY && eglInitialize(display, &major, &minor) == EGL_TRUE) {
+          display_ = display;
+          back_end_ = "EGL device " + std::to_string(i);
+          return OkStatus();
+        }
+      }
+    }
+    return UnavailableError(
+        "EGL: no surfaceless display (Mesa's EGL_MESA_platform_surfaceless; install "
+        "libegl-mesa0 libgl1-mesa-dri: " +
+        surfaceless_error + ") and no EGL device that initialises (" +
+        std::to_string(device_count) + " found)");
   }
 
   Status MakeCurrent() override {
@@ -125,6 +154,7 @@ class EglContext : public GlContext {
   bool float_ = false;
   EGLDisplay display_ = EGL_NO_DISPLAY;
   EGLContext context_ = EGL_NO_CONTEXT;
+  std::string back_end_;
   GLuint framebuffer_ = 0, colour_ = 0;
   cv::Size size_;
   uint64_t frames_ = 0;

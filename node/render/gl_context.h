@@ -48,8 +48,11 @@ class GlContext {
 enum class OutputFormat { kRgba8, kRgba32f };
 
 // A headless context with an offscreen output of `size_px` (8-bit, or float for tests that
-// read positions back). UNAVAILABLE naming the step when EGL, the surfaceless platform or a
-// 3.3 core context is not there; INVALID_ARGUMENT for a size outside 1..16384.
+// read positions back), on Mesa's surfaceless platform, or where that offers no display (NVIDIA's
+// driver with no display server) on the first EGL device (EGL_EXT_platform_device);
+// SANDTABLE_EGL_PLATFORM=device in the environment goes to the devices straight away.
+// UNAVAILABLE naming the step when EGL, both platforms or a 3.3 core context are not there;
+// INVALID_ARGUMENT for a size outside 1..16384.
 Expected<std::unique_ptr<GlContext>> CreateEglContext(cv::Size size_px,
                                                       OutputFormat format = OutputFormat::kRgba8);
 

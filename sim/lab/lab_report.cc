@@ -267,7 +267,10 @@ std::string SummaryMarkdown(const LabResult& r) {
     add("calibration round, wall time", rr.value("wall_s", 0.0), 1, " s", 0, true);
   }
   if (r.render.contains("frame_ms_p50")) {
-    add("frame time p50 (llvmpipe)", r.render.value("frame_ms_p50", 0.0), 1, " ms", 16, true);
+    const bool software =
+        r.render.value("context", std::string()).find("llvmpipe") != std::string::npos;
+    add(software ? "frame time p50 (llvmpipe)" : "frame time p50 (GPU)",
+        r.render.value("frame_ms_p50", 0.0), 1, " ms", 16, true);
     const double floor = r.render.value("floor_ms", 0.0);
     if (floor > 0) {
       add("frame time p50 / floor", r.render.value("frame_ms_p50", 0.0) / floor, 2, "x", 2, true);

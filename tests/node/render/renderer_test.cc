@@ -655,6 +655,26 @@ TEST(RendererTest, GoldenImagesOfEachPass) {
   }
 }
 
+// The EGL device platform (the back-end NVIDIA's driver offers without a display server),
+// forced on Mesa's software device: the same golden picture as the surfaceless platform.
+TEST(RendererTest, TheEglDevicePlatformDrawsTheSamePicture) {
+  ASSERT_EQ(setenv("SANDTABLE_EGL_PLATFORM", "device", 1), 0);
+  Expected<std::unique_ptr<GlContext>> context = CreateEglContext(cv::Size(kW, kH));
+  ASSERT_EQ(unsetenv("SANDTABLE_EGL_PLATFORM"), 0);
+  ASSERT_TRUE(context.ok()) << context.status().ToString();
+  EXPECT_EQ((*context)->description().rfind("EGL device", 0), 0u) << (*context)->description();
+  std::unique_ptr<Renderer> renderer = MakeRenderer(context->get(), /*distortion=*/false);
+  ASSERT_TRUE(renderer);
+  RenderContent content;
+  ExpectGolden(RenderToImage(context->get(), renderer.get(), content), "scene");
+  content.pattern = TestPattern::kProjectorId;
+  content.projector_id = 7;
+  const cv::Mat image = RenderToImage(context->get(), renderer.get(), content);
+  EXPECT_EQ(CountDifferent(image, ProjectorIdPattern(image.size(), 7)), 0);
+  content.pattern = TestPattern::kTableGrid;
+  ExpectGolden(RenderToImage(context->get(), renderer.get(), content), "grid");
+}
+
 TEST(RendererTest, RefusesAViewOfAnotherSizeAndABadMask) {
   std::unique_ptr<GlContext> context = MakeContext();
   ASSERT_TRUE(context);
