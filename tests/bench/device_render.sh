@@ -70,8 +70,10 @@ for size in 1280x800 1920x1200 3840x2160; do
   w="${size%x*}" h="${size#*x}"
   echo "== render bench $size"
   timeout 120 "$bench" --frames "${FRAMES:-600}" --width "$w" --height "$h" \
-    --out "$out/render-bench-$size.json" >> "$out/bench.log" 2>&1
-  echo "rc=$?"
+    --out "$out/render-bench-$size.json" > /tmp/render-bench.log 2>&1
+  rc=$?
+  echo "rc=$rc"
+  [ "$rc" = 0 ] || tail -n 20 /tmp/render-bench.log
 done
 summarise() {
   python3 - "$@" << 'PY'
@@ -101,6 +103,8 @@ for t in node_render_renderer_test node_render_show_content_test; do
   timeout 180 "$unpacked/bin/$t" >> "$out/render-tests.txt" 2>&1
   echo "$t rc=$?" | tee -a "$out/render-tests.txt"
 done
-grep -E "^\[  (FAILED|PASSED) |Failure" "$out/render-tests.txt" | head -n 40
+grep -E "^\[  (FAILED|PASSED) |Failure|off by" "$out/render-tests.txt" | head -n 40
+# The pictures of any golden that differed (at most three come back with the five files above).
+find /tmp -maxdepth 1 -name '*-rendered.png' | head -n 3 | xargs -r cp -t "$out"
 
 exit 0
