@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
-# The renderer on a real GPU with no display: the frame-time benchmark at three sizes and the
-# renderer's golden-image and projection tests, on a machine lent with an NVIDIA GPU (the
-# workplace's device tool; it has none of our Debian libraries, and takes 64 MiB per call).
+# The renderer on a real GPU with no display: the frame-time benchmark at three sizes, the
+# renderer's golden-image and projection tests, and the lab on sandtable-3 (the default run and a
+# kill), on a machine lent with an NVIDIA GPU (the workplace's device tool; it has none of our
+# Debian libraries, and takes 64 MiB per call).
 #
 #   tests/bench/device_render.sh pack [BUILD_DIR]  # here: the programs + the shared libraries
 #                                                  # they need, stripped, as .gpubench/pack.tar.xz
 #                                                  # (git-ignored; ~50 MB, 2-3 min on 2 cores)
 #   tests/bench/device_render.sh run OUT_DIR       # there, from the repository root, after the
 #                                                  # glvnd loaders (.gl/*.deb) are unpacked into /
-#   FRAMES=600 (per benchmark run)
+#   FRAMES=600 (per benchmark run), STAGES="bench tests lab" (any of them)
 #
 # GL itself is not packed: glvnd's libEGL/libOpenGL dispatch to the machine's NVIDIA driver,
 # reached through EGL_EXT_platform_device (node/render/gl_context.cc). docs/results.md has the
@@ -24,14 +25,28 @@ if [ "$mode" = pack ]; then
   staging="$(mktemp -d)/gpubench"
   mkdir -p "$staging/bin" "$staging/lib" "$staging/lib-cxx" "$pack"
   programs=(tests/bench/sandtable_render_bench tests/node/render/node_render_renderer_test
-            tests/node/render/node_render_show_content_test)
+            tests/node/render/node_render_show_content_test sim/lab/sandtable-lab
+            sim/app/sandtable-world node/sandtable-node coordinator/sandtable-coordinator)
   for p in "${programs[@]}"; do
     [ -x "$build/$p" ] || { echo "device_render: no $build/$p: build it first" >&2; exit 2; }
     strip -o "$staging/bin/$(basename "$p")" "$build/$p"
   done
-  # Every shared library the programs load, but the C library, the C++ runtime (packed apart,
-  # used only where the machine's is older) and GL (the machine's driver through glvnd).
-  ldd "$staging"/bin/* | awk '/=> \//{print $3}' | sort -u | while read -r lib; do
+  # Stand-ins for what OpenCV's image codecs (GDAL, GDCM) and video module (FFmpeg, GStreamer,
+  # gphoto2, dc1394) link: loaded, never used (device_stub_library.py).
+  system=/lib/x86_64-linux-gnu
+  for p in libgdal.so.32 libgdcmMSFF.so.3.0 libgdcmDSED.so.3.0; do
+    python3 "$root/tests/bench/device_stub_library.py" "$staging/lib" "$system/$p" \
+      "$system/libopencv_imgcodecs.so.406" || exit 2
+  done
+  videoio="$system/libopencv_videoio.so.406"
+  for p in $(readelf -d "$videoio" | sed -n 's/.*NEEDED.*\[\(.*\)\]/\1/p' |
+    grep -v -E '^(libopencv_|libm\.|libstdc|libgcc_s|libc\.)'); do
+    python3 "$root/tests/bench/device_stub_library.py" "$staging/lib" "$system/$p" "$videoio" ||
+      exit 2
+  done
+  # Every other shared library the programs load, but the C library, the C++ runtime (packed
+  # apart, used only where the machine's is older) and GL (the machine's driver through glvnd).
+  LD_LIBRARY_PATH="$staging/lib" ldd "$staging"/bin/* | grep -v "$staging/lib" | awk '/=> \//{print $3}' | sort -u | while read -r lib; do
     case "$(basename "$lib")" in
       libc.so.*|libm.so.*|libpthread.so.*|libdl.so.*|librt.so.*|ld-linux*|libresolv.so.*) ;;
       libEGL*|libGL*|libOpenGL*|libGLX*|libGLdispatch*|libgbm*|libdrm*|libvulkan*) ;;
@@ -40,6 +55,10 @@ if [ "$mode" = pack ]; then
     esac
   done
   strip --strip-unneeded "$staging"/lib/* 2> /dev/null
+  if LD_LIBRARY_PATH="$staging/lib:$staging/lib-cxx" ldd "$staging"/bin/* | grep "not found"; then
+    echo "device_render: a library is missing from the pack" >&2
+    exit 2
+  fi
   tar -C "$(dirname "$staging")" -cf - gpubench | xz -T0 -9 > "$pack/pack.tar.xz"
   rm -rf "$(dirname "$staging")"
   ls -l "$pack/pack.tar.xz"
@@ -65,8 +84,9 @@ nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.max.sm --format=csv 
   tee "$out/summary.txt"
 nproc | sed 's/^/cpus: /' | tee -a "$out/summary.txt"
 
+stages="${STAGES:-bench tests lab}"
 bench="$unpacked/bin/sandtable_render_bench"
-for size in 1280x800 1920x1200 3840x2160; do
+[[ " $stages " == *" bench "* ]] && for size in 1280x800 1920x1200 3840x2160; do
   w="${size%x*}" h="${size#*x}"
   echo "== render bench $size"
   timeout 120 "$bench" --frames "${FRAMES:-600}" --width "$w" --height "$h" \
@@ -96,15 +116,43 @@ for path in sys.argv[1:]:
               f'rewarp {v.get("rewarp_ms_p50", 0):.3f} | {passes}')
 PY
 }
-summarise "$out"/render-bench-*.json | tee -a "$out/summary.txt"
+[[ " $stages " == *" bench "* ]] && summarise "$out"/render-bench-*.json | tee -a "$out/summary.txt"
 
-echo "== renderer tests"
-for t in node_render_renderer_test node_render_show_content_test; do
+[[ " $stages " == *" tests "* ]] && for t in node_render_renderer_test node_render_show_content_test; do
   timeout 180 "$unpacked/bin/$t" >> "$out/render-tests.txt" 2>&1
   echo "$t rc=$?" | tee -a "$out/render-tests.txt"
 done
-grep -E "^\[  (FAILED|PASSED) |Failure|off by" "$out/render-tests.txt" | head -n 40
-# The pictures of any golden that differed (at most three come back with the five files above).
-find /tmp -maxdepth 1 -name '*-rendered.png' | head -n 3 | xargs -r cp -t "$out"
+[[ " $stages " == *" tests "* ]] &&
+  grep -E "^\[  (FAILED|PASSED) |Failure|off by" "$out/render-tests.txt" | head -n 40
+
+# The lab on sandtable-3: the default run (calibration, blend, show), then a neighbour killed.
+lab() {
+  local name="$1"
+  shift
+  echo "== lab $name: $*" | tee -a "$out/lab.log"
+  timeout 240 "$unpacked/bin/sandtable-lab" run --bin-dir "$unpacked/bin" --out "/tmp/$name" "$@" \
+    >> "$out/lab.log" 2>&1
+  echo "lab $name rc=$?" | tee -a "$out/lab.log"
+  cp "/tmp/$name/report.json" "$out/$name-report.json" 2> /dev/null || return 0
+  python3 - "$out/$name-report.json" << 'PY' | tee -a "$out/summary.txt"
+import json, sys
+d = json.load(open(sys.argv[1]))
+print(sys.argv[1].split("/")[-1], "status", d.get("status"), "total_s", d.get("total_s"))
+r = d.get("render", {})
+print("  render:", {k: v for k, v in r.items() if not isinstance(v, (dict, list))})
+c = d.get("calibration", {})
+print("  calibration:", {k: c.get(k) for k in ("rms_mm", "p99_mm", "compute_time_s", "wall_s")})
+p = d.get("photometric", {})
+print("  photometric:", {k: v for k, v in p.items() if not isinstance(v, (dict, list))})
+live = d.get("live")
+if live:
+    print("  live:", json.dumps(live)[:1500])
+print("  phases:", json.dumps(d.get("phases"))[:800])
+PY
+}
+if [[ " $stages " == *" lab "* ]]; then
+  lab lab-show
+  lab lab-kill --hold-s 3 --kill-unit 2 --kill-at-s 1 --kill-after-calibration
+fi
 
 exit 0
