@@ -11,7 +11,9 @@
 // wand cursor (the overlay rebuilt), a blend mask. Reports frame time p50 / p99 (GL work
 // finished), the per-pass times of a second run that finishes after each pass, the floor, and the
 // context's description (llvmpipe, or a GPU's driver), for the shipped (deferred) renderer and
-// for the forward passes with a separate warp pass and folded. docs/render.md.
+// for the forward passes with a separate warp pass and folded; and a re-blend's frame: a new mask
+// over the last frame, set (`rewarp_ms_p50`) or prepared ahead (`prepared_rewarp_ms_*`,
+// --touch-prepared 0 without RendererOptions::touch_prepared_masks). docs/render.md.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -132,6 +134,9 @@ int main(int argc, char** argv) {
   app.add_option("--width", width, "output width, px")->check(cli::Integer(16, 8192));
   app.add_option("--height", height, "output height, px")->check(cli::Integer(16, 8192));
   app.add_option("--out", out, "JSON file of the figures");
+  bool touch_prepared = RendererOptions{}.touch_prepared_masks;
+  app.add_option("--touch-prepared", touch_prepared,
+                 "RendererOptions::touch_prepared_masks (1: the shipped default)");
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
 
   Expected<sim::Site> site = sim::MakeSitePreset("sandtable-3");
@@ -167,6 +172,7 @@ int main(int argc, char** argv) {
   report["height_px"] = height;
   report["triangles"] = scene.NumTriangles();
   report["frames"] = frames;
+  report["touch_prepared_masks"] = touch_prepared;
   report["max_distortion_px"] = view->max_displacement_px;
   // The shipped renderer (deferred: the surface cache drawn once, then the light pass and the
   // overlay each frame), then the same frames drawn whole every frame with the pre-warp and mask
@@ -185,6 +191,7 @@ int main(int argc, char** argv) {
       options.time_passes = timed_passes;
       options.fold_prewarp = fold;
       options.deferred = config == Config::kDeferred;
+      options.touch_prepared_masks = touch_prepared;
       Expected<std::unique_ptr<Renderer>> renderer =
           Renderer::Create(context->get(), scene, options);
       if (!renderer.ok() || !(*renderer)->SetView(*view).ok() || !(*renderer)->SetMask(mask).ok()) {
@@ -224,6 +231,29 @@ int main(int argc, char** argv) {
           rewarp_ms.push_back(stats->frame_ms);
         }
         run["rewarp_ms_p50"] = Percentile(rewarp_ms, 0.5);
+        // A mask prepared ahead (as a node prepares one per neighbour that may leave), a few
+        // frames drawn meanwhile, then made current and shown over the last frame: the re-blend
+        // after a kill. Timed from UseMask to the rewarped frame finished.
+        std::vector<double> prepared_ms;
+        for (int f = 0; f < std::min(frames, 30); ++f) {
+          if (!(*renderer)->PrepareMask(f + 1, mask).ok()) return 1;
+          for (int k = 0; k < 3; ++k) {
+            if (!(*renderer)->Render(Content(frames + 3 * f + k, scene.Bounds())).ok()) return 1;
+          }
+          const auto t0 = std::chrono::steady_clock::now();
+          if (!(*renderer)->UseMask(f + 1).ok()) return 1;
+          Expected<FrameStats> stats = (*renderer)->Rewarp();
+          if (!stats.ok()) {
+            std::cerr << stats.status().ToString() << "\n";
+            return 1;
+          }
+          prepared_ms.push_back(
+              std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                  .count());
+        }
+        run["prepared_rewarp_ms_first"] = prepared_ms.front();
+        run["prepared_rewarp_ms_p50"] = Percentile(prepared_ms, 0.5);
+        run["prepared_rewarp_ms_max"] = *std::max_element(prepared_ms.begin(), prepared_ms.end());
       }
       if (!timed_passes && config == Config::kDeferred) {
         std::vector<double> floor_ms;
