@@ -756,10 +756,10 @@ Renderer::~Renderer() {
     if (t->fbo) glDeleteFramebuffers(1, &t->fbo);
   }
   if (!textures.empty()) glDeleteTextures(static_cast<GLsizei>(textures.size()), textures.data());
-  for (GLuint rb : {ideal_depth_, output_depth_, touch_colour_}) {
+  for (GLuint rb : {ideal_depth_, output_depth_}) {
     if (rb) glDeleteRenderbuffers(1, &rb);
   }
-  for (GLuint fb : {shadow_fbo_, ideal_fbo_, face_light_fbo_, touch_fbo_}) {
+  for (GLuint fb : {shadow_fbo_, ideal_fbo_, face_light_fbo_}) {
     if (fb) glDeleteFramebuffers(1, &fb);
   }
   for (GLuint b : {scene_vbo_, shadow_vbo_, overlay_vbo_}) {
@@ -970,28 +970,6 @@ Status Renderer::PrepareMask(uint64_t key, const cv::Mat& mask) {
     UploadTexels(&slot.texture, prepared_scratch_);
   } else {
     UploadTexels(&slot.texture, slot.rows);
-  }
-  if (options_.touch_prepared_masks) {
-    if (!touch_fbo_) {
-      glGenRenderbuffers(1, &touch_colour_);
-      glBindRenderbuffer(GL_RENDERBUFFER, touch_colour_);
-      glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, 1, 1);
-      glGenFramebuffers(1, &touch_fbo_);
-      glBindFramebuffer(GL_FRAMEBUFFER, touch_fbo_);
-      glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER,
-                                touch_colour_);
-    }
-    glBindFramebuffer(GL_FRAMEBUFFER, touch_fbo_);
-    glViewport(0, 0, 1, 1);
-    glDisable(GL_DEPTH_TEST);
-    glUseProgram(blit_program_);
-    glUniform1i(glGetUniformLocation(blit_program_, "u_image"), 0);
-    glActiveTexture(GL_TEXTURE0);
-    glBindTexture(GL_TEXTURE_2D, slot.texture);
-    glBindVertexArray(empty_vao_);
-    glDrawArrays(GL_TRIANGLE_STRIP, 0, 4);
-    glViewport(0, 0, size_.width, size_.height);
-    glFlush();
   }
   return CheckGl("preparing a mask");
 }

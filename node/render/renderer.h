@@ -70,9 +70,6 @@ struct RendererOptions {
   double grid_line_width_m = 0.003;
   OverlayOptions overlay;
   bool time_passes = false;  // glFinish after each pass to time it (benchmarks)
-  // PrepareMask samples the new texture once into a 1x1 target, so that a driver that moves a
-  // texture to the GPU at its first use (NVIDIA's) does it then, not in a re-blend's frame.
-  bool touch_prepared_masks = true;
   Status Check() const;
 };
 
@@ -267,7 +264,6 @@ class Renderer {
   bool EncodeMask(const cv::Mat& mask, cv::Mat* texels, int stride, int offset) const;
   void SyncUsedMaskRows();
   unsigned int floor_texture_ = 0;
-  unsigned int touch_fbo_ = 0, touch_colour_ = 0;  // PrepareMask's 1x1 target
   bool has_view_ = false, has_mask_ = false;
   bool last_warped_ = false;  // the ideal image holds the last frame (see CanRewarp)
   bool has_lift_ = false;     // the mask carries a black-level lift (SetMask, CV_32FC2)

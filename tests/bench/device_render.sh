@@ -9,8 +9,7 @@
 #                                                  # (git-ignored; ~50 MB, 2-3 min on 2 cores)
 #   tests/bench/device_render.sh run OUT_DIR       # there, from the repository root, after the
 #                                                  # glvnd loaders (.gl/*.deb) are unpacked into /
-#   FRAMES=600 (per benchmark run), STAGES="bench tests lab" (any of them; "touch" adds a run
-#   without RendererOptions::touch_prepared_masks)
+#   FRAMES=600 (per benchmark run), STAGES="bench tests lab" (any of them)
 #
 # GL itself is not packed: glvnd's libEGL/libOpenGL dispatch to the machine's NVIDIA driver,
 # reached through EGL_EXT_platform_device (node/render/gl_context.cc). docs/results.md has the
@@ -116,16 +115,9 @@ for path in sys.argv[1:]:
         print(f'  {k}: p50 {v["frame_ms_p50"]:.3f} p99 {v["frame_ms_p99"]:.3f} '
               f'rewarp {v.get("rewarp_ms_p50", 0):.3f} prepared first/p50/max '
               f'{v.get("prepared_rewarp_ms_first", 0):.3f}/{v.get("prepared_rewarp_ms_p50", 0):.3f}/'
-              f'{v.get("prepared_rewarp_ms_max", 0):.3f} touch {d.get("touch_prepared_masks")} | {passes}')
+              f'{v.get("prepared_rewarp_ms_max", 0):.3f} | {passes}')
 PY
 }
-# The re-blend's frame without RendererOptions::touch_prepared_masks (the same size's run above
-# has it on).
-if [[ " $stages " == *" touch "* ]]; then
-  timeout 120 "$bench" --frames "${FRAMES:-600}" --touch-prepared 0 \
-    --out "$out/render-bench-1280x800-untouched.json" > /tmp/render-bench.log 2>&1 ||
-    tail -n 20 /tmp/render-bench.log
-fi
 [[ " $stages " == *" bench "* ]] && summarise "$out"/render-bench-*.json | tee -a "$out/summary.txt"
 
 [[ " $stages " == *" tests "* ]] && for t in node_render_renderer_test node_render_show_content_test; do

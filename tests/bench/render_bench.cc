@@ -12,8 +12,8 @@
 // finished), the per-pass times of a second run that finishes after each pass, the floor, and the
 // context's description (llvmpipe, or a GPU's driver), for the shipped (deferred) renderer and
 // for the forward passes with a separate warp pass and folded; and a re-blend's frame: a new mask
-// over the last frame, set (`rewarp_ms_p50`) or prepared ahead (`prepared_rewarp_ms_*`,
-// --touch-prepared 0 without RendererOptions::touch_prepared_masks). docs/render.md.
+// over the last frame, set (`rewarp_ms_p50`) or prepared ahead (`prepared_rewarp_ms_*`).
+// docs/render.md.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -134,9 +134,6 @@ int main(int argc, char** argv) {
   app.add_option("--width", width, "output width, px")->check(cli::Integer(16, 8192));
   app.add_option("--height", height, "output height, px")->check(cli::Integer(16, 8192));
   app.add_option("--out", out, "JSON file of the figures");
-  bool touch_prepared = RendererOptions{}.touch_prepared_masks;
-  app.add_option("--touch-prepared", touch_prepared,
-                 "RendererOptions::touch_prepared_masks (1: the shipped default)");
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
 
   Expected<sim::Site> site = sim::MakeSitePreset("sandtable-3");
@@ -172,7 +169,6 @@ int main(int argc, char** argv) {
   report["height_px"] = height;
   report["triangles"] = scene.NumTriangles();
   report["frames"] = frames;
-  report["touch_prepared_masks"] = touch_prepared;
   report["max_distortion_px"] = view->max_displacement_px;
   // The shipped renderer (deferred: the surface cache drawn once, then the light pass and the
   // overlay each frame), then the same frames drawn whole every frame with the pre-warp and mask
@@ -191,7 +187,6 @@ int main(int argc, char** argv) {
       options.time_passes = timed_passes;
       options.fold_prewarp = fold;
       options.deferred = config == Config::kDeferred;
-      options.touch_prepared_masks = touch_prepared;
       Expected<std::unique_ptr<Renderer>> renderer =
           Renderer::Create(context->get(), scene, options);
       if (!renderer.ok() || !(*renderer)->SetView(*view).ok() || !(*renderer)->SetMask(mask).ok()) {
