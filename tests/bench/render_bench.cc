@@ -12,14 +12,15 @@
 // finished), the per-pass times of a second run that finishes after each pass, the floor, and the
 // context's description (llvmpipe, or a GPU's driver), for the shipped (deferred) renderer and
 // for the forward passes with a separate warp pass and folded; and a re-blend's frame: a new mask
-// over the last frame, set (`rewarp_ms_p50`) or prepared ahead (`prepared_rewarp_ms_*`).
-// docs/render.md.
+// over the last frame, set (`rewarp_ms_p50`) or prepared ahead (`prepared_rewarp_ms_*`; with
+// --idle-s, also after the GPU sat idle). docs/render.md.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <fstream>
 #include <iostream>
 #include <random>
+#include <thread>
 
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/glcorearb.h>
@@ -134,6 +135,9 @@ int main(int argc, char** argv) {
   app.add_option("--width", width, "output width, px")->check(cli::Integer(16, 8192));
   app.add_option("--height", height, "output height, px")->check(cli::Integer(16, 8192));
   app.add_option("--out", out, "JSON file of the figures");
+  double idle_s = 0.0;
+  app.add_option("--idle-s", idle_s,
+                 "also time three prepared re-blend frames after this many seconds idle each");
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
 
   Expected<sim::Site> site = sim::MakeSitePreset("sandtable-3");
@@ -245,6 +249,23 @@ int main(int argc, char** argv) {
           prepared_ms.push_back(
               std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
                   .count());
+        }
+        // The same after the GPU sat idle (--idle-s): a site whose timeline is paused draws only
+        // on change, so the re-blend after a kill may come seconds after the last frame.
+        if (idle_s > 0 && config == Config::kDeferred) {
+          std::vector<double> idle_ms;
+          for (int f = 0; f < 3; ++f) {
+            if (!(*renderer)->PrepareMask(1000 + f, mask).ok()) return 1;
+            if (!(*renderer)->Render(Content(frames + f, scene.Bounds())).ok()) return 1;
+            std::this_thread::sleep_for(std::chrono::duration<double>(idle_s));
+            const auto t0 = std::chrono::steady_clock::now();
+            if (!(*renderer)->UseMask(1000 + f).ok() || !(*renderer)->Rewarp().ok()) return 1;
+            idle_ms.push_back(
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                    .count());
+          }
+          run["prepared_rewarp_after_idle_ms"] = idle_ms;
+          run["idle_s"] = idle_s;
         }
         run["prepared_rewarp_ms_first"] = prepared_ms.front();
         run["prepared_rewarp_ms_p50"] = Percentile(prepared_ms, 0.5);
