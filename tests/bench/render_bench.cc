@@ -233,22 +233,26 @@ int main(int argc, char** argv) {
         // A mask prepared ahead (as a node prepares one per neighbour that may leave), a few
         // frames drawn meanwhile, then made current and shown over the last frame: the re-blend
         // after a kill. Timed from UseMask to the rewarped frame finished.
+        // UseMask(key) and the rewarped frame, finished: ms, or -1 (the error printed).
+        auto show_prepared_ms = [&](uint64_t key) {
+          const auto t0 = std::chrono::steady_clock::now();
+          const Status used = (*renderer)->UseMask(key);
+          Expected<FrameStats> stats = used.ok() ? (*renderer)->Rewarp() : used;
+          if (!stats.ok()) {
+            std::cerr << stats.status().ToString() << "\n";
+            return -1.0;
+          }
+          return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+              .count();
+        };
         std::vector<double> prepared_ms;
         for (int f = 0; f < std::min(frames, 30); ++f) {
           if (!(*renderer)->PrepareMask(f + 1, mask).ok()) return 1;
           for (int k = 0; k < 3; ++k) {
             if (!(*renderer)->Render(Content(frames + 3 * f + k, scene.Bounds())).ok()) return 1;
           }
-          const auto t0 = std::chrono::steady_clock::now();
-          if (!(*renderer)->UseMask(f + 1).ok()) return 1;
-          Expected<FrameStats> stats = (*renderer)->Rewarp();
-          if (!stats.ok()) {
-            std::cerr << stats.status().ToString() << "\n";
-            return 1;
-          }
-          prepared_ms.push_back(
-              std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                  .count());
+          prepared_ms.push_back(show_prepared_ms(f + 1));
+          if (prepared_ms.back() < 0) return 1;
         }
         // The same after the GPU sat idle (--idle-s): a site whose timeline is paused draws only
         // on change, so the re-blend after a kill may come seconds after the last frame.
@@ -258,11 +262,8 @@ int main(int argc, char** argv) {
             if (!(*renderer)->PrepareMask(1000 + f, mask).ok()) return 1;
             if (!(*renderer)->Render(Content(frames + f, scene.Bounds())).ok()) return 1;
             std::this_thread::sleep_for(std::chrono::duration<double>(idle_s));
-            const auto t0 = std::chrono::steady_clock::now();
-            if (!(*renderer)->UseMask(1000 + f).ok() || !(*renderer)->Rewarp().ok()) return 1;
-            idle_ms.push_back(
-                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                    .count());
+            idle_ms.push_back(show_prepared_ms(1000 + f));
+            if (idle_ms.back() < 0) return 1;
           }
           run["prepared_rewarp_after_idle_ms"] = idle_ms;
           run["idle_s"] = idle_s;
