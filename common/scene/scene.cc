@@ -1,7 +1,11 @@
 #include "common/scene/scene.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <functional>
+#include <numeric>
+#include <unordered_map>
 
 namespace sandtable {
 
@@ -27,6 +31,56 @@ Eigen::Vector3d Scene::FaceNormal(int triangle) const {
   const Eigen::Vector3d n = (p1 - p0).cross(p2 - p0);
   const double norm = n.norm();
   return norm > 0.0 ? Eigen::Vector3d(n / norm) : Eigen::Vector3d::Zero();
+}
+
+std::vector<int> PlanarFaces(const Scene& scene) {
+  // Planes quantized to a grid (normal 1e-4, offset 1e-5 m); a plane near a cell's boundary
+  // may fall in the next cell, so each triangle is joined with any plane already seen in the 81
+  // cells around its own (union-find over triangles).
+  constexpr double kNormalStep = 1e-4, kOffsetStep_m = 1e-5;
+  using Key = std::array<int64_t, 4>;
+  struct KeyHash {
+    size_t operator()(const Key& k) const {
+      size_t h = 0;
+      for (int64_t v : k) h = h * 1000003u ^ std::hash<int64_t>()(v);
+      return h;
+    }
+  };
+  const int n = scene.NumTriangles();
+  std::vector<int> parent(n);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&parent](int i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  std::unordered_map<Key, int, KeyHash> cell;
+  std::vector<bool> degenerate(n, false);
+  for (int t = 0; t < n; ++t) {
+    const Eigen::Vector3d normal = scene.FaceNormal(t);
+    if (normal.squaredNorm() == 0) {
+      degenerate[t] = true;
+      continue;
+    }
+    const double offset =
+        normal.dot(scene.positions_in_table_m[scene.triangles[t][0]].cast<double>());
+    const Key key = {std::llround(normal.x() / kNormalStep), std::llround(normal.y() / kNormalStep),
+                     std::llround(normal.z() / kNormalStep), std::llround(offset / kOffsetStep_m)};
+    for (int k = 0; k < 81; ++k) {
+      Key near = key;
+      for (int j = 0, r = k; j < 4; ++j, r /= 3) near[j] += r % 3 - 1;
+      auto it = cell.find(near);
+      if (it == cell.end()) continue;
+      const int a = find(it->second), b = find(t);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    }
+    cell.emplace(key, t);
+  }
+  // A root is the smallest triangle of its plane (a union keeps the smaller root).
+  std::vector<int> face(n, -1);
+  for (int t = 0; t < n; ++t) {
+    if (!degenerate[t]) face[t] = find(t);
+  }
+  return face;
 }
 
 namespace {

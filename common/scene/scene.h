@@ -76,6 +76,14 @@ struct Scene {
 // table_from_model).
 Scene MovedScene(const Scene& scene, const Rigid3d& target_from_scene);
 
+// The plane of each triangle, as an id shared by every triangle of the scene lying in the same
+// plane (the same unit normal within ~2e-4 and offset along it within ~20 um), connected or
+// not: two buildings' walls in one plane, or two coincident faces (a wall where two boxes
+// touch) are one. The id is the smallest index of a triangle in that plane, so the same model
+// gives the same ids wherever it is loaded; -1 for a degenerate triangle. Computed on the model
+// in its own frame (not as placed), every node of a site finds the same planes.
+std::vector<int> PlanarFaces(const Scene& scene);
+
 // sRGB transfer function, 8-bit code -> linear [0, 1].
 double SrgbToLinear(double encoded);
 double LinearToSrgb(double linear);

@@ -56,6 +56,7 @@ struct Cast {
   double range_m = 0.0;  // 0: lights nothing
   double cos_incidence = 0.0;
   double albedo = 1.0;
+  int triangle = -1;
 };
 
 // The physical surface's albedo at a hit: the material's base colour factor as Rec. 709
@@ -94,6 +95,7 @@ std::vector<Cast> CastPixels(const std::vector<Eigen::Vector2d>& pixels, const R
     out[i].range_m = hits[i]->distance_m;
     out[i].cos_incidence = cos_incidence;
     out[i].albedo = SurfaceAlbedo(caster.scene(), hits[i]->triangle);
+    out[i].triangle = hits[i]->triangle;
   }
   return out;
 }
@@ -159,7 +161,8 @@ Status DistanceField::Check() const {
 
 ProjectorSurface CastProjectorSurface(const CameraModel& projector,
                                       const Rigid3d& projector_from_table, const RayCaster& caster,
-                                      const BlendOptions& options) {
+                                      const BlendOptions& options,
+                                      const std::vector<int>& face_of_triangle) {
   ProjectorSurface s;
   s.width_px = projector.width_px;
   s.height_px = projector.height_px;
@@ -169,6 +172,7 @@ ProjectorSurface CastProjectorSurface(const CameraModel& projector,
   s.range_m.assign(n, 0.0f);
   s.cos_incidence.assign(n, 0.0f);
   s.albedo.assign(n, 1.0f);
+  s.face.assign(n, -1);
   const RayTable rays(projector, options.grid_step_px);
   const double min_cos = std::cos(DegToRad(options.max_incidence_deg));
   // Row blocks keep the batches coherent and the memory bounded.
@@ -189,6 +193,8 @@ ProjectorSurface CastProjectorSurface(const CameraModel& projector,
       s.range_m[i] = static_cast<float>(casts[k].range_m);
       s.cos_incidence[i] = static_cast<float>(casts[k].cos_incidence);
       s.albedo[i] = static_cast<float>(casts[k].albedo);
+      const int t = casts[k].triangle;
+      if (t >= 0 && t < static_cast<int>(face_of_triangle.size())) s.face[i] = face_of_triangle[t];
       ++s.lit_pixels;
     }
   }
@@ -558,7 +564,8 @@ double Blender::LevelBound() const {
 
 cv::Mat Blender::Factor(double level) const { return Factor(level, options_.fill_limit); }
 
-cv::Mat Blender::Factor(double level, double fill_limit, NodeId without) const {
+cv::Mat Blender::Factor(double level, double fill_limit, NodeId without,
+                        const FaceLevels& face_levels) const {
   // A_i T / (E'_i R), R = sum_j A_j r_j: the share of the intended light the projectors lighting
   // the point deliver together (a projector past the correction limit delivers r < 1 of it);
   // dividing by R restores the level where one that faces the surface better can make it up.
@@ -598,7 +605,13 @@ cv::Mat Blender::Factor(double level, double fill_limit, NodeId without) const {
       delivered += o.wr[i];
       shared = shared || o.wr[i] > 0;
     }
-    const float unclipped = static_cast<float>(level) * own_gain_[i] / std::max(delivered, 1e-30f);
+    double level_here = level;
+    if (!face_levels.empty()) {
+      auto it = face_levels.find(surface_.face[i]);
+      if (it != face_levels.end()) level_here = std::min(level, it->second);
+    }
+    const float unclipped =
+        static_cast<float>(level_here) * own_gain_[i] / std::max(delivered, 1e-30f);
     // Lit by this projector alone and within its reach: nothing to fill (most pixels; the
     // terms below are what a re-blend's compose spent its time on).
     if (!shared && unclipped <= 1.0f) {
@@ -612,7 +625,7 @@ cv::Mat Blender::Factor(double level, double fill_limit, NodeId without) const {
     // The intended irradiance at the point (the surface shows T whatever its albedo).
     const double range = surface_.range_m[i];
     const double own_cap = surface_.cos_incidence[i] / (range * range);
-    const double target = level / std::max(static_cast<double>(surface_.albedo[i]), 0.01);
+    const double target = level_here / std::max(static_cast<double>(surface_.albedo[i]), 0.01);
     const double own_share = own_wr_[i] / delivered;
     bool any_clips = unclipped > 1.0f;
     for (const Other& o : others) {
@@ -649,6 +662,85 @@ cv::Mat Blender::Factor(double level, double fill_limit, NodeId without) const {
     f[i] = static_cast<float>(std::min(1.0, std::min(own_room, c * own_share * target) / own_cap));
   }
   return factor;
+}
+
+namespace {
+
+// The largest target irradiance u that projectors with (capacity, share) terms reach together
+// when each delivers min(capacity, fill_limit share u) (Blender::Factor's water filling); the
+// shares sum to 1. h(u) = sum_k min(cap_k, f s_k u) - u is concave and 0 at u = 0, rising or
+// flat there (f >= 1); the reachable target is where it falls below 0. Term k saturates at
+// u_k = cap_k / (f s_k).
+double ReachableTarget(std::vector<std::pair<double, double>>* terms, double fill_limit) {
+  std::sort(terms->begin(), terms->end(),
+            [](const auto& x, const auto& y) { return x.first * y.second < y.first * x.second; });
+  double fixed = 0.0, free_share = 1.0;
+  for (const auto& [cap, share] : *terms) {
+    if (share <= 0) continue;  // never given any light
+    const double u_k = cap / (fill_limit * share);
+    const double slope = fill_limit * free_share - 1.0;  // h(u) = fixed + slope u up to u_k
+    if (fixed + slope * u_k < 0.0) return fixed / -slope;
+    fixed += cap;
+    free_share -= share;
+  }
+  return fixed;  // every term saturated: all the light there is
+}
+
+}  // namespace
+
+FaceLevels LowestFaceLevels(const std::map<NodeId, FaceLevels>& maps, const FaceLevels& own,
+                            NodeId without) {
+  FaceLevels out = own;
+  for (const auto& [unit, levels] : maps) {
+    if (unit == without) continue;
+    for (const auto& [face, level] : levels) {
+      auto [it, inserted] = out.emplace(face, level);
+      if (!inserted) it->second = std::min(it->second, level);
+    }
+  }
+  return out;
+}
+
+FaceLevels Blender::FaceLevelBounds(double level, double fill_limit, NodeId without) const {
+  FaceLevels out;
+  if (surface_.face.empty()) return out;
+  struct Other {
+    const float *wr, *cap;
+  };
+  std::vector<Other> others;
+  for (const auto& [unit, wr] : neighbour_reach_) {
+    if (unit == without) continue;
+    others.push_back({wr.data(), neighbour_gain_.at(unit).data()});
+  }
+  std::vector<std::pair<double, double>> terms;
+  const double f = std::max(fill_limit, 1.0);
+  for (size_t i = 0; i < own_d_.size(); ++i) {
+    if (own_gain_[i] <= 0 || surface_.face[i] < 0) continue;
+    double delivered = own_wr_[i];
+    for (const Other& o : others) delivered += o.wr[i];
+    if (delivered <= 0) continue;
+    const double range = surface_.range_m[i];
+    const double own_cap = surface_.cos_incidence[i] / (range * range);
+    const double albedo = std::max(static_cast<double>(surface_.albedo[i]), 0.01);
+    // Where no projector clips at the level, the level is reached (each delivers at least its
+    // share of it): most pixels, skipped.
+    const double target = level / albedo;
+    bool any_clips = own_wr_[i] / delivered * target > own_cap;
+    for (const Other& o : others) {
+      any_clips = any_clips || (o.wr[i] > 0 && o.wr[i] / delivered * target > o.cap[i]);
+    }
+    if (!any_clips) continue;
+    terms.clear();
+    terms.emplace_back(own_cap, own_wr_[i] / delivered);
+    for (const Other& o : others) {
+      if (o.wr[i] > 0) terms.emplace_back(o.cap[i], o.wr[i] / delivered);
+    }
+    const double reachable = ReachableTarget(&terms, f) * albedo;
+    if (reachable >= level) continue;
+    auto [it, inserted] = out.emplace(surface_.face[i], reachable);
+    if (!inserted) it->second = std::min(it->second, reachable);
+  }
+  return out;
 }
 
 std::vector<double> Blender::BlackLight(double own_black, const std::map<NodeId, double>& black,

@@ -49,6 +49,13 @@
 
 namespace sandtable::node {
 
+// Per planar face of the model, a level below the site's common one (Blender::FaceLevelBounds).
+using FaceLevels = std::map<int32_t, double>;
+
+// The lowest level of each face over `maps` and `own`, leaving out `without`'s map.
+FaceLevels LowestFaceLevels(const std::map<NodeId, FaceLevels>& maps, const FaceLevels& own,
+                            NodeId without = kInvalidNodeId);
+
 // Largest |distance| a field may hold (fields from the wire are checked against it), m.
 inline constexpr double kMaxFieldDistance_m = 1000.0;
 
@@ -85,6 +92,8 @@ struct ProjectorSurface {
   std::vector<float> range_m;                    // from the projector's centre; 0: lights nothing
   std::vector<float> cos_incidence;              // E = albedo cos / range^2 follows (Blender)
   std::vector<float> albedo;  // the model's material (base colour factor, Rec. 709), [0, 1]
+  // The model's planar face each pixel lights (PlanarFaces; -1: unlit, or faces not given).
+  std::vector<int32_t> face;
   size_t lit_pixels = 0;
 };
 
@@ -119,9 +128,12 @@ struct DistanceField {
 bool SameField(const DistanceField& a, const DistanceField& b);
 
 // Casts every pixel of the projector (distortion included) into `caster`'s scene.
+// `face_of_triangle`: the model's planar face of each triangle (PlanarFaces), for the
+// surface's `face`; empty: every face -1 (no per-face levels).
 ProjectorSurface CastProjectorSurface(const CameraModel& projector,
                                       const Rigid3d& projector_from_table, const RayCaster& caster,
-                                      const BlendOptions& options);
+                                      const BlendOptions& options,
+                                      const std::vector<int>& face_of_triangle = {});
 
 // The field on the grid (its own casts, grid_step_px apart).
 DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
@@ -169,7 +181,21 @@ class Blender {
   // `without` (Alpha, Factor, BlackPeak, Lift): as if that neighbour had been removed
   // (RemoveNeighbour), the blender unchanged: a node prepares the mask it would show if a
   // neighbour left, so that a re-blend needs no compose (docs/blend.md, "Prepared masks").
-  cv::Mat Factor(double level, double fill_limit, NodeId without = kInvalidNodeId) const;
+  // `face_levels`: a lower level for some faces (FaceLevelBounds, the lowest over the site):
+  // a pixel on such a face uses min(level, its face's).
+  cv::Mat Factor(double level, double fill_limit, NodeId without = kInvalidNodeId,
+                 const FaceLevels& face_levels = {}) const;
+
+  // Per planar face (ProjectorSurface::face), the highest level the projectors lighting it can
+  // deliver at every one of this projector's pixels on it, where that is below `level`: past
+  // the correction limit (a wall every projector meets at 60-85 degrees) the site's level is
+  // out of reach, and a face showing what is reachable at one point but less at the next has a
+  // step wherever the alphas change. At a pixel the reachable level is the largest t with
+  // sum_k min(cap_k, fill_limit s_k t / albedo) >= t / albedo (Factor's water filling). The
+  // face's level is the lowest of these over the site (the nodes lighting it exchange theirs:
+  // blend_service), so the face shows one level everywhere. Faces at `level` are left out.
+  FaceLevels FaceLevelBounds(double level, double fill_limit,
+                             NodeId without = kInvalidNodeId) const;
 
   // Black-level matching. A projector showing black still emits its black level b; where
   // footprints overlap those add up. Black light at a lit pixel's point: sum over the

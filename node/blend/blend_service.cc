@@ -59,6 +59,30 @@ Expected<DistanceField> FieldFromShare(const wire::BlendShare& share) {
   return field;
 }
 
+Expected<std::optional<FaceLevels>> FaceLevelsFromShare(const wire::BlendShare& share) {
+  if (!share.has_face_levels()) {
+    if (share.face_levels_size() > 0) {
+      return InvalidArgumentError("blend share: face levels without has_face_levels");
+    }
+    return std::optional<FaceLevels>();
+  }
+  if (share.face_levels_size() > kMaxFaceLevels) {
+    return InvalidArgumentError("blend share: " + std::to_string(share.face_levels_size()) +
+                                " face levels (at most " + std::to_string(kMaxFaceLevels) + ")");
+  }
+  FaceLevels levels;
+  for (const wire::FaceLevel& f : share.face_levels()) {
+    if (f.face() < 0 || !std::isfinite(f.level_per_m2()) || f.level_per_m2() <= 0) {
+      return InvalidArgumentError("blend share: face " + std::to_string(f.face()) + " at level " +
+                                  std::to_string(f.level_per_m2()));
+    }
+    if (!levels.emplace(f.face(), f.level_per_m2()).second) {
+      return InvalidArgumentError("blend share: face " + std::to_string(f.face()) + " twice");
+    }
+  }
+  return std::optional<FaceLevels>(std::move(levels));
+}
+
 struct BlendService::Core {
   std::mutex mutex;
   std::shared_ptr<const Scene> scene;
@@ -138,6 +162,7 @@ void BlendService::SetCalibration(const UnitCalibration& calibration, uint64_t r
   runner_ = runner;
   const uint64_t generation = ++generation_;
   ready_ = false;
+  own_faces_.reset();
   pending_alpha_.reset();
   sent_to_.clear();
   asked_.clear();
@@ -157,6 +182,10 @@ void BlendService::SetCalibration(const UnitCalibration& calibration, uint64_t r
         Cast out;
         const Clock::time_point start = Clock::now();
         auto scene = std::make_shared<const Scene>(RenderLoop::SceneFor(model.get(), calibration));
+        // The planes of the model in its own frame (SceneFor keeps the triangles' order), so
+        // that every node finds the same face ids.
+        const bool placed = model && model->NumTriangles() > 0 && calibration.table_from_model;
+        const std::vector<int> faces = PlanarFaces(placed ? *model : *scene);
         Expected<std::unique_ptr<RayCaster>> caster = RayCaster::Create(scene, "threads=1");
         if (!caster.ok()) {
           out.status = caster.status();
@@ -165,8 +194,8 @@ void BlendService::SetCalibration(const UnitCalibration& calibration, uint64_t r
         const Rigid3d projector_from_table = calibration.table_from_projector->Inverse();
         DistanceField own = ComputeDistanceField(id, calibration.projector, projector_from_table,
                                                  **caster, options);
-        ProjectorSurface surface =
-            CastProjectorSurface(calibration.projector, projector_from_table, **caster, options);
+        ProjectorSurface surface = CastProjectorSurface(calibration.projector, projector_from_table,
+                                                        **caster, options, faces);
         auto blender = std::make_unique<Blender>(std::move(surface), own, caster->get(), options);
         for (const auto& [unit, field] : *fields) {
           if (unit != id) blender->SetNeighbour(field);
@@ -249,6 +278,14 @@ void BlendService::SendShare(NodeId to, bool with_field, bool answer, NodeRuntim
   double black_peak = 0.0;
   for (const auto& [unit, peak] : black_peaks_) black_peak = std::max(black_peak, peak);
   share->set_black_peak_known_per_m2(black_peak);
+  if (own_faces_) {
+    share->set_has_face_levels(true);
+    for (const auto& [face, level] : *own_faces_) {
+      wire::FaceLevel* f = share->add_face_levels();
+      f->set_face(face);
+      f->set_level_per_m2(level);
+    }
+  }
   bytes_sent_ += envelope.ByteSizeLong();
   if (Status sent = node.SendToPeer(to, std::move(envelope)); !sent.ok()) {
     ST_LOG(kWarning) << "blend: to node " << to << ": " << sent.ToString();
@@ -277,6 +314,18 @@ void BlendService::OnPeerMessage(net::Incoming request, NodeRuntime& node) {
     ST_LOG(kWarning) << "blend: a share from node " << from << " for projector "
                      << share.projector_id() << " dropped";
     return;
+  }
+  Expected<std::optional<FaceLevels>> faces = FaceLevelsFromShare(share);
+  if (!faces.ok()) {
+    ++bad_shares_;
+    ST_LOG(kWarning) << "blend: node " << from << ": " << faces.status().ToString();
+    return;
+  }
+  bool faces_news = false;
+  if (faces->has_value()) {
+    auto held = neighbour_faces_.find(from);
+    faces_news = held == neighbour_faces_.end() || held->second != **faces;
+    if (faces_news) neighbour_faces_[from] = std::move(**faces);
   }
   // Levels: the lowest bound anyone has heard of.
   double heard = share.level_known_per_m2();
@@ -311,8 +360,8 @@ void BlendService::OnPeerMessage(net::Incoming request, NodeRuntime& node) {
     if (ready_ && !known) ApplyField(from, *field, node);  // else: applied once the cast is done
     return;
   }
-  if ((level_news || (black_news && options_.black_match)) && ready_) {
-    Compose(node, level_news ? "level" : "black", from, Clock::now());
+  if ((level_news || faces_news || (black_news && options_.black_match)) && ready_) {
+    Compose(node, level_news ? "level" : faces_news ? "faces" : "black", from, Clock::now());
   }
 }
 
@@ -405,6 +454,7 @@ Status BlendService::OnStep(NodeRuntime& node) {
     }
     it = holding_.erase(it);
     fields_.erase(peer);
+    neighbour_faces_.erase(peer);
     sent_to_.erase(peer);
     dropped_[peer] = now;
     // The mask prepared for this (docs/blend.md, "Prepared masks") goes out at once; the
@@ -459,6 +509,9 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
     MaskFrameTimes frame;  // where the time went for the frame that showed it
     double compose_ms = 0.0;
     double black_peak = 0.0, black_target = 0.0, lift_max = 0.0;
+    FaceLevels own_faces;  // Blender::FaceLevelBounds at this blend
+    size_t faces_lower = 0;
+    double face_level_min = 0.0;
   };
   const uint64_t generation = generation_;
   const std::string png =
@@ -468,8 +521,8 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
                 .string();
   node.workers().Run<Shown>(
       [core = core_, loop = loop_, level, generation, png, to_runner = runner_ != kInvalidNodeId,
-       match, black_target, own_black = own_black_, blacks = blacks_,
-       max_lift = options_.max_lift] {
+       match, black_target, own_black = own_black_, blacks = blacks_, max_lift = options_.max_lift,
+       neighbour_faces = neighbour_faces_] {
         Shown out;
         const Clock::time_point start = Clock::now();
         cv::Mat factor, alpha, lift;
@@ -479,7 +532,14 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
             out.stale = true;
             return out;
           }
-          factor = core->blender->Factor(level);
+          const Blender& blender = *core->blender;
+          const double fill = blender.options().fill_limit;
+          out.own_faces = blender.FaceLevelBounds(level, fill);
+          const FaceLevels faces = LowestFaceLevels(neighbour_faces, out.own_faces);
+          out.faces_lower = faces.size();
+          out.face_level_min = level;
+          for (const auto& [face, l] : faces) out.face_level_min = std::min(out.face_level_min, l);
+          factor = blender.Factor(level, fill, kInvalidNodeId, faces);
           if (!png.empty()) alpha = core->blender->Alpha();
           if (match) {
             out.black_peak = core->blender->BlackPeak(own_black, blacks);
@@ -520,9 +580,12 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           std::lock_guard<std::mutex> lock(core->mutex);
           if (!core->blender || core->generation != generation) return out;
           const Blender& blender = *core->blender;
+          const double fill = blender.options().fill_limit;
           for (NodeId left : blender.neighbours()) {
             std::pair<cv::Mat, cv::Mat>& masks = standby[left];
-            masks.first = blender.Factor(level, blender.options().fill_limit, left);
+            const FaceLevels faces =
+                LowestFaceLevels(neighbour_faces, blender.FaceLevelBounds(level, fill, left), left);
+            masks.first = blender.Factor(level, fill, left, faces);
             if (match) {
               const double target =
                   std::max(black_target, blender.BlackPeak(own_black, blacks, left));
@@ -542,6 +605,10 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
         if (shown.black_peak > 0) {
           black_peaks_[id_] = std::max(black_peaks_[id_], shown.black_peak);
           TellLevel(node);
+        }
+        if (!own_faces_ || *own_faces_ != shown.own_faces) {
+          own_faces_ = std::move(shown.own_faces);
+          for (NodeId to : sent_to_) SendShare(to, /*with_field=*/false, /*answer=*/false, node);
         }
         if (!shown.alpha_values.empty()) {
           pending_alpha_ = PendingAlpha{shown.width_px, shown.height_px,
@@ -567,6 +634,9 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
         }
         line["waiting_for"] = waiting;
         line["level_per_m2"] = level;
+        // Faces shown below the level (walls met past the correction limit), the lowest.
+        line["faces_below_level"] = shown.faces_lower;
+        line["face_level_min_per_m2"] = shown.face_level_min;
         if (shown.black_target > 0) {
           line["black_target_per_m2"] = shown.black_target;
           line["lift_max"] = shown.lift_max;

@@ -8,7 +8,12 @@
 // mask (alpha x intensity correction at the site's common level) goes to the render loop
 // between frames. The common level is the minimum of every projector's bound: each share
 // carries the lowest bound its sender knows, and a node that learns a lower one tells its
-// neighbours (a level-only share), so it spreads neighbour to neighbour.
+// neighbours (a level-only share), so it spreads neighbour to neighbour. A face that the
+// projectors lighting it cannot bring to that level everywhere (a wall met at 60-85 degrees)
+// shows one lower level: each node sends its neighbours the level each such face reaches at its
+// pixels (Blender::FaceLevelBounds), and shows each face at the lowest it holds; the neighbours'
+// lists are not passed on (a face lit by two projectors that do not overlap, with a third
+// between, may show two levels).
 //
 // A neighbour that leaves (its connection drops: a process that dies closes its socket at once;
 // its heartbeats stop for `peer_silence`; or the member list drops it) is forgotten: the mask is
@@ -79,6 +84,10 @@ struct BlendServiceOptions {
 // BlendShare <-> DistanceField (the field's grid checked against its projector).
 wire::BlendShare ShareFromField(const DistanceField& field, uint64_t round);
 Expected<DistanceField> FieldFromShare(const wire::BlendShare& share);
+// A share's face levels (nullopt: it says nothing of faces); an error for a face id below 0, a
+// level that is not finite and positive, a face listed twice, or more than kMaxFaceLevels.
+inline constexpr int kMaxFaceLevels = 1 << 20;
+Expected<std::optional<FaceLevels>> FaceLevelsFromShare(const wire::BlendShare& share);
 
 class BlendService : public NodeService {
  public:
@@ -137,8 +146,12 @@ class BlendService : public NodeService {
     std::chrono::steady_clock::time_point at;
     std::chrono::milliseconds interval{0};
   };
-  std::map<NodeId, Asked> asked_;           // neighbours asked for their field, this calibration
-  std::map<NodeId, double> bounds_;         // level bounds heard (and own)
+  std::map<NodeId, Asked> asked_;    // neighbours asked for their field, this calibration
+  std::map<NodeId, double> bounds_;  // level bounds heard (and own)
+  // Face levels (Blender::FaceLevelBounds): the own, as last sent (nullopt: not composed yet),
+  // and each neighbour's latest. A face shows the lowest of them (and the site's level).
+  std::optional<FaceLevels> own_faces_;
+  std::map<NodeId, FaceLevels> neighbour_faces_;
   double level_told_ = 0.0;                 // the lowest level told to the neighbours
   double own_black_ = -1.0;                 // this projector's black level (< 0: unknown)
   std::map<NodeId, double> blacks_;         // the neighbours' black levels

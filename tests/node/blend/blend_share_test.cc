@@ -1,8 +1,12 @@
 // The blend's wire form (node/blend/blend_service.h): a distance field survives BlendShare
 // exactly, and a share that does not describe a field (a grid that does not span its projector,
-// values that are not finite, a model that does not check) is refused with a message.
+// values that are not finite, a model that does not check) is refused with a message; so are
+// face levels that are not levels.
 #include <cmath>
 #include <limits>
+#include <map>
+#include <optional>
+#include <utility>
 
 #include <gtest/gtest.h>
 
@@ -99,6 +103,55 @@ TEST(BlendShareTest, RefusesSharesThatAreNotAField) {
     bad.set_step_px(1000);
     EXPECT_FALSE(FieldFromShare(bad).ok());
   }
+}
+
+// Face levels (Blender::FaceLevelBounds) on the wire: absent (the sender has not composed),
+// present and empty (no face below the site's level), or a list; a face id below 0, a level
+// that is not finite and positive, or a face listed twice is refused.
+TEST(BlendShareTest, FaceLevelsSurviveTheWireAndBadOnesAreRefused) {
+  wire::BlendShare share = ShareFromField(MakeField(), 1);
+  Expected<std::optional<FaceLevels>> none = FaceLevelsFromShare(share);
+  ASSERT_TRUE(none.ok());
+  EXPECT_FALSE(none->has_value());
+  share.set_has_face_levels(true);
+  Expected<std::optional<FaceLevels>> empty = FaceLevelsFromShare(share);
+  ASSERT_TRUE(empty.ok() && empty->has_value());
+  EXPECT_TRUE((*empty)->empty());
+  for (auto [face, level] : {std::pair<int, double>{4, 0.05}, {130, 0.0123}}) {
+    wire::FaceLevel* f = share.add_face_levels();
+    f->set_face(face);
+    f->set_level_per_m2(level);
+  }
+  Expected<std::optional<FaceLevels>> two = FaceLevelsFromShare(share);
+  ASSERT_TRUE(two.ok()) << two.status().ToString();
+  ASSERT_TRUE(two->has_value());
+  EXPECT_EQ(**two, (FaceLevels{{4, 0.05}, {130, 0.0123}}));
+  for (auto [face, level] : {std::pair<int, double>{-1, 0.05},
+                             {5, 0.0},
+                             {5, -1.0},
+                             {5, std::numeric_limits<double>::infinity()},
+                             {5, std::numeric_limits<double>::quiet_NaN()},
+                             {4, 0.01}}) {
+    wire::BlendShare bad = share;
+    wire::FaceLevel* f = bad.add_face_levels();
+    f->set_face(face);
+    f->set_level_per_m2(level);
+    Expected<std::optional<FaceLevels>> refused = FaceLevelsFromShare(bad);
+    ASSERT_FALSE(refused.ok()) << face << " " << level;
+    EXPECT_NE(refused.status().message().find("face"), std::string::npos);
+  }
+  wire::BlendShare unflagged = share;
+  unflagged.set_has_face_levels(false);
+  EXPECT_FALSE(FaceLevelsFromShare(unflagged).ok());
+}
+
+// The level a face shows: the lowest any node holds for it, a node that left aside.
+TEST(BlendShareTest, AFaceShowsTheLowestLevelHeld) {
+  const std::map<NodeId, FaceLevels> held = {{1, {{4, 0.05}, {9, 0.02}}}, {2, {{4, 0.03}}}};
+  EXPECT_EQ(LowestFaceLevels(held, {{9, 0.04}, {12, 0.1}}),
+            (FaceLevels{{4, 0.03}, {9, 0.02}, {12, 0.1}}));
+  EXPECT_EQ(LowestFaceLevels(held, {{9, 0.04}}, 1), (FaceLevels{{4, 0.03}, {9, 0.04}}));
+  EXPECT_TRUE(LowestFaceLevels({}, {}).empty());
 }
 
 }  // namespace

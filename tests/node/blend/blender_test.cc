@@ -1,6 +1,7 @@
 // Blender: the composition without one neighbour (what a node prepares for that neighbour
 // leaving, docs/blend.md "Prepared masks") is, bit for bit, the composition after the neighbour
-// is removed. sandtable-3 at its true poses: unit 0 and its two overlapping neighbours.
+// is removed, face levels included. sandtable-3 at its true poses: unit 0 and its two overlapping
+// neighbours.
 #include <gtest/gtest.h>
 
 #include <cstring>
@@ -36,8 +37,9 @@ TEST(BlenderTest, WithoutANeighbourIsTheBlendAfterItIsRemoved) {
                              unit.projector.table_from_projector.Inverse(), **caster, options);
   }
   const sim::UnitSpec& own = site->units.at(0);
-  const ProjectorSurface surface = CastProjectorSurface(
-      own.projector.model, own.projector.table_from_projector.Inverse(), **caster, options);
+  const ProjectorSurface surface =
+      CastProjectorSurface(own.projector.model, own.projector.table_from_projector.Inverse(),
+                           **caster, options, PlanarFaces(*scene));
   Blender all(surface, fields.at(0), caster->get(), options);
   for (const auto& [id, field] : fields) {
     if (id != 0) all.SetNeighbour(field);
@@ -60,6 +62,12 @@ TEST(BlenderTest, WithoutANeighbourIsTheBlendAfterItIsRemoved) {
     EXPECT_TRUE(Identical(prepared, removed.Factor(level)));
     EXPECT_FALSE(Identical(prepared, all.Factor(level))) << "the neighbour shared this blend";
     EXPECT_TRUE(Identical(all.Alpha(left), removed.Alpha()));
+    // The faces' levels (walls met past the correction limit) and the mask at them.
+    const FaceLevels faces = all.FaceLevelBounds(level, options.fill_limit, left);
+    EXPECT_EQ(faces, removed.FaceLevelBounds(level, options.fill_limit));
+    EXPECT_FALSE(faces.empty());
+    EXPECT_TRUE(Identical(all.Factor(level, options.fill_limit, left, faces),
+                          removed.Factor(level, options.fill_limit, kInvalidNodeId, faces)));
     EXPECT_EQ(all.BlackPeak(kOwnBlack, black, left), removed.BlackPeak(kOwnBlack, black));
     EXPECT_TRUE(Identical(all.Lift(target, kOwnBlack, black, kMaxLift, left),
                           removed.Lift(target, kOwnBlack, black, kMaxLift)));
