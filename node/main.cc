@@ -11,7 +11,7 @@
 //                  [--render auto|on|off] [--timeline TRACKS.csv] [--sun on|off]
 //                  [--sun-start-h H] [--sun-hours-per-s R] [--render-max-fps F]
 //                  [--render-log FILE] [--blend on|off] [--blend-step-px N]
-//                  [--blend-fill-limit X] [--black-match on|off]
+//                  [--blend-fill-limit X] [--blend-edge-soft-mm E] [--black-match on|off]
 //                  [--bind ENDPOINT] [--curve-keys FILE] [--heartbeat-ms N] [--workers N]
 //                  [--fault-drop-share P] [--fault-corrupt-share P] [--fault-seed N] (lab chaos)
 //   (--world E is short for --projector world:E --camera world:E; node/devices/device_factory.h)
@@ -101,6 +101,7 @@ static int Run(int argc, char** argv) {
   std::string blend_mode = "on";
   int blend_step_px = node::BlendOptions{}.grid_step_px;
   double blend_fill_limit = node::BlendOptions{}.fill_limit;
+  double blend_edge_soft_mm = 1e3 * node::BlendOptions{}.edge_soft_m;
   std::string black_match = "off";
   app.add_option("--id", id, "this unit's node id (below 4294967280)")
       ->check(cli::Integer<uint32_t>(0, kFirstReservedSenderId - 1));
@@ -201,6 +202,10 @@ static int Run(int argc, char** argv) {
                  "past the correction limit the others make up a projector's shortfall, each at "
                  "most this many times its share (1: it clips alone)")
       ->check(CLI::Range(1.0, 100.0));
+  app.add_option("--blend-edge-soft-mm", blend_edge_soft_mm,
+                 "within this distance of its edge a projector's alpha leaves 0 with zero slope "
+                 "(0: Algorithm 1's plain distance), mm")
+      ->check(CLI::Range(0.0, 100.0));
   app.add_option("--black-match", black_match,
                  "raise the black where fewer projectors overlap to the site's highest (needs "
                  "the black level measured in self-calibration): on or off")
@@ -387,6 +392,7 @@ static int Run(int argc, char** argv) {
     node::BlendServiceOptions blend_options;
     blend_options.blend.grid_step_px = blend_step_px;
     blend_options.blend.fill_limit = blend_fill_limit;
+    blend_options.blend.edge_soft_m = 1e-3 * blend_edge_soft_mm;
     blend_options.export_dir = export_dir;
     blend_options.black_match = black_match == "on";
     blend = std::make_unique<node::BlendService>(

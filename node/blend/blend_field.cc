@@ -124,6 +124,12 @@ Status BlendOptions::Check() const {
   if (!(fill_limit >= 1.0) || !(fill_limit <= 100.0)) {
     return InvalidArgumentError("blend: fill_limit must be in [1, 100]");
   }
+  if (!(edge_soft_m >= 0.0) || !(edge_soft_m <= 0.1)) {
+    return InvalidArgumentError("blend: edge_soft_m must be in [0, 0.1]");
+  }
+  if (!(edge_soft_min_face_m2 >= 0.0) || !std::isfinite(edge_soft_min_face_m2)) {
+    return InvalidArgumentError("blend: edge_soft_min_face_m2 must be finite and >= 0");
+  }
   return OkStatus();
 }
 
@@ -173,6 +179,18 @@ ProjectorSurface CastProjectorSurface(const CameraModel& projector,
   s.cos_incidence.assign(n, 0.0f);
   s.albedo.assign(n, 1.0f);
   s.face.assign(n, -1);
+  s.face_area_m2.assign(n, 0.0f);
+  // Each face's area (faces are indexed by a triangle's index).
+  std::vector<double> area(face_of_triangle.size(), 0.0);
+  const Scene& scene = caster.scene();
+  for (size_t t = 0; t < face_of_triangle.size() && t < scene.triangles.size(); ++t) {
+    if (face_of_triangle[t] < 0 || face_of_triangle[t] >= static_cast<int>(area.size())) continue;
+    const Eigen::Vector3i& v = scene.triangles[t];
+    const Eigen::Vector3d a = scene.positions_in_table_m[v[0]].cast<double>();
+    const Eigen::Vector3d b = scene.positions_in_table_m[v[1]].cast<double>();
+    const Eigen::Vector3d c = scene.positions_in_table_m[v[2]].cast<double>();
+    area[face_of_triangle[t]] += 0.5 * (b - a).cross(c - a).norm();
+  }
   const RayTable rays(projector, options.grid_step_px);
   const double min_cos = std::cos(DegToRad(options.max_incidence_deg));
   // Row blocks keep the batches coherent and the memory bounded.
@@ -194,7 +212,10 @@ ProjectorSurface CastProjectorSurface(const CameraModel& projector,
       s.cos_incidence[i] = static_cast<float>(casts[k].cos_incidence);
       s.albedo[i] = static_cast<float>(casts[k].albedo);
       const int t = casts[k].triangle;
-      if (t >= 0 && t < static_cast<int>(face_of_triangle.size())) s.face[i] = face_of_triangle[t];
+      if (t >= 0 && t < static_cast<int>(face_of_triangle.size()) && face_of_triangle[t] >= 0) {
+        s.face[i] = face_of_triangle[t];
+        s.face_area_m2[i] = static_cast<float>(area[face_of_triangle[t]]);
+      }
       ++s.lit_pixels;
     }
   }
@@ -441,7 +462,7 @@ Blender::Blender(ProjectorSurface surface, DistanceField own, const RayCaster* c
   for (size_t i = 0; i < n; ++i) {
     if (surface_.range_m[i] <= 0) continue;
     own_w_[i] = static_cast<float>(
-        (own_d_[i] + options_.distance_floor_m) *
+        EdgeWeight(own_d_[i] + options_.distance_floor_m, surface_.face_area_m2[i], options_) *
         IncidenceWeight(surface_.cos_incidence[i], options_) *
         DensityWeight(own_.projector, surface_.cos_incidence[i], surface_.range_m[i], options_));
     own_reach_[i] = static_cast<float>(Reach(surface_.cos_incidence[i], options_));
@@ -453,6 +474,12 @@ Blender::Blender(ProjectorSurface surface, DistanceField own, const RayCaster* c
     own_wr_[i] = own_w_[i] * own_reach_[i];
     own_gain_[i] = static_cast<float>(own_w_[i] / CorrectedIrradiance(i));
   }
+}
+
+double EdgeWeight(double distance_m, double face_area_m2, const BlendOptions& options) {
+  const double e = options.edge_soft_m;
+  if (e <= 0 || face_area_m2 < options.edge_soft_min_face_m2) return distance_m;
+  return distance_m < e ? distance_m * distance_m / (2 * e) : distance_m - e / 2;
 }
 
 double Reach(double cos_incidence, const BlendOptions& options) {
@@ -497,7 +524,8 @@ void Blender::SetNeighbour(const DistanceField& field) {
         field.projector.Project(field.projector_from_table * x);
     if (!pixel || !field.projector.InImage(*pixel)) continue;
     w[i] = static_cast<float>(
-        (field.DistanceAtPixel(*pixel) + options_.distance_floor_m) *
+        EdgeWeight(field.DistanceAtPixel(*pixel) + options_.distance_floor_m,
+                   surface_.face_area_m2[i], options_) *
         IncidenceWeight(cos_incidence, options_) *
         DensityWeight(field.projector, cos_incidence, to_centre.norm(), options_));
     reach[i] = w[i] * static_cast<float>(Reach(cos_incidence, options_));  // w r

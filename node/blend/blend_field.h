@@ -77,6 +77,14 @@ struct BlendOptions {
   // Added to every lighting projector's D in the alpha, so that a point all of whose
   // projectors have D = 0 (the field's seeds) is shared among them rather than dark.
   double distance_floor_m = 1e-6;
+  // On faces of at least edge_soft_min_face_m2 (the table; not a building's walls and roofs,
+  // where seams are a few cm wide and this measured worse), within this distance of its edge a
+  // projector's D enters the weight as D^2 / (2 e) (and as D - e / 2 beyond: the same slope, no
+  // kink): its alpha leaves 0 with zero slope, so a pixel of another projector straddling its
+  // edge (one value across it) is off by far less than half a pixel times the alpha's slope.
+  // 0: D as it is (TR09-017). 1.5 mm measured best on sandtable-3 (docs/blend.md).
+  double edge_soft_m = 1.5e-3;
+  double edge_soft_min_face_m2 = 0.05;
   // Where a projector cannot deliver its share (past the correction limit), the others make up
   // the shortfall, each raising its own share at most this many times (Blender::Factor); 1: the
   // projector clips alone.
@@ -92,8 +100,10 @@ struct ProjectorSurface {
   std::vector<float> range_m;                    // from the projector's centre; 0: lights nothing
   std::vector<float> cos_incidence;              // E = albedo cos / range^2 follows (Blender)
   std::vector<float> albedo;  // the model's material (base colour factor, Rec. 709), [0, 1]
-  // The model's planar face each pixel lights (PlanarFaces; -1: unlit, or faces not given).
+  // The model's planar face each pixel lights (PlanarFaces; -1: unlit, or faces not given), and
+  // that face's area (m^2; 0 when faces are not given).
   std::vector<int32_t> face;
+  std::vector<float> face_area_m2;
   size_t lit_pixels = 0;
 };
 
@@ -140,6 +150,9 @@ DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
                                    const Rigid3d& projector_from_table, const RayCaster& caster,
                                    const BlendOptions& options);
 
+// The distance term of the weight: D, softened within edge_soft_m of the edge on a face of at
+// least edge_soft_min_face_m2.
+double EdgeWeight(double distance_m, double face_area_m2, const BlendOptions& options);
 // The incidence factor g of a projector meeting a surface at cos(theta).
 double IncidenceWeight(double cos_incidence, const BlendOptions& options);
 // The pixel-density factor of the weight (1 when options.density_weight is 0).
