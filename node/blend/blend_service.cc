@@ -323,9 +323,10 @@ void BlendService::OnPeerMessage(net::Incoming request, NodeRuntime& node) {
   }
   bool faces_news = false;
   if (faces->has_value()) {
+    // News only when the levels a face may show change (none held is an empty list).
     auto held = neighbour_faces_.find(from);
-    faces_news = held == neighbour_faces_.end() || held->second != **faces;
-    if (faces_news) neighbour_faces_[from] = std::move(**faces);
+    faces_news = held == neighbour_faces_.end() ? !(*faces)->empty() : held->second != **faces;
+    neighbour_faces_[from] = std::move(**faces);
   }
   // Levels: the lowest bound anyone has heard of.
   double heard = share.level_known_per_m2();
