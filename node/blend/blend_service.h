@@ -25,7 +25,8 @@
 //
 // JSON lines (common/base/ready_line.h), for the lab:
 //   {"blend":ID,"blended":true,"cause":..,"neighbours":[..],"waiting_for":[..],"level_per_m2":..,
-//    "cast_ms":..,"compose_ms":..,"shown_ns":..,"bytes_sent":..,"bytes_received":..}
+//    "faces_below_level":..,"face_level_min_per_m2":..,"cast_ms":..,"compose_ms":..,
+//    "shown_ns":..,"bytes_sent":..,"bytes_received":..}
 //                                   each time a new mask is shown (waiting_for: overlapping
 //                                   units whose field it does not hold yet)
 //   {"blend":ID,"mpcdi":PATH,"alpha_from":K}   the runner, each time it rewrote the MPCDI export
