@@ -72,8 +72,34 @@ Scene RenderLoop::SceneFor(const Scene* model, const UnitCalibration& calibratio
   if (model && model->NumTriangles() > 0 && calibration.table_from_model) {
     return MovedScene(*model, *calibration.table_from_model);
   }
-  // No placement: the table plane alone (3 x 3 m), so patterns and strokes still have a surface.
-  Scene plane = MakeRectangleMesh(Eigen::Vector2d(3.0, 3.0), 0);
+  // No placement: the table plane alone, so patterns, strokes and the blend still have a
+  // surface: 3 x 3 m about the origin, grown to hold the projector's footprint on it (a site
+  // wider than 3 m: grid-12's outer projectors lit nothing and blended to black).
+  Eigen::AlignedBox2d area(Eigen::Vector2d(-1.5, -1.5), Eigen::Vector2d(1.5, 1.5));
+  if (calibration.table_from_projector) {
+    const Rigid3d& table_from_projector = *calibration.table_from_projector;
+    const Eigen::Vector3d centre = table_from_projector.translation;
+    const Eigen::Matrix3d rotation = table_from_projector.RotationMatrix();
+    const CameraModel& projector = calibration.projector;
+    constexpr int kSteps = 4;  // a 5 x 5 grid of pixels, corners and edges included
+    constexpr double kMaxSide_m = 50.0;
+    for (int j = 0; j <= kSteps; ++j) {
+      for (int i = 0; i <= kSteps; ++i) {
+        const Eigen::Vector2d pixel(-0.5 + projector.width_px * i / static_cast<double>(kSteps),
+                                    -0.5 + projector.height_px * j / static_cast<double>(kSteps));
+        Expected<Eigen::Vector3d> ray = projector.Unproject(pixel);
+        if (!ray.ok()) continue;
+        const Eigen::Vector3d direction = rotation * *ray;
+        if (!(direction.z() < -1e-9)) continue;  // never meets the table
+        const Eigen::Vector3d hit = centre - centre.z() / direction.z() * direction;
+        if (hit.head<2>().cwiseAbs().maxCoeff() < 0.5 * kMaxSide_m) area.extend(hit.head<2>());
+      }
+    }
+  }
+  const Eigen::Vector2d size = 1.05 * area.sizes();
+  Scene plane = MovedScene(MakeRectangleMesh(size, 0),
+                           Rigid3d(Eigen::Quaterniond::Identity(),
+                                   Eigen::Vector3d(area.center().x(), area.center().y(), 0.0)));
   plane.materials.resize(1);
   plane.materials[0].name = "table";
   return plane;

@@ -160,7 +160,8 @@ class RenderLoop {
   RenderSummary Summary() const;  // with percentiles over the kept frames (not per step)
   // Frames shown and the last shown frame's pattern, cheaply (the service polls it every step).
   std::pair<uint64_t, std::string> ShownPattern() const;
-  // The scene the loop draws for `calibration` (the model placed, or a table plane).
+  // The scene the loop draws for `calibration` (the model placed, or a table plane holding
+  // 3 x 3 m about the origin and the projector's footprint).
   static Scene SceneFor(const Scene* model, const UnitCalibration& calibration);
 
  private:
