@@ -612,14 +612,7 @@ cv::Mat Blender::Factor(double level, double fill_limit, NodeId without,
   // projectors still add up to one level, lower only where together they cannot reach it.
   cv::Mat factor(surface_.height_px, surface_.width_px, CV_32FC1, cv::Scalar(0));
   float* f = factor.ptr<float>();
-  struct Other {
-    const float *wr, *cap;
-  };
-  std::vector<Other> others;
-  for (const auto& [unit, wr] : neighbour_reach_) {
-    if (unit == without) continue;
-    others.push_back({wr.data(), neighbour_gain_.at(unit).data()});
-  }
+  const std::vector<Other> others = Others(without);
   struct Term {
     double room, share;  // what it may deliver (irradiance); its share of the intended light
   };
@@ -729,17 +722,19 @@ FaceLevels LowestFaceLevels(const std::map<NodeId, FaceLevels>& maps, const Face
   return out;
 }
 
-FaceLevels Blender::FaceLevelBounds(double level, double fill_limit, NodeId without) const {
-  FaceLevels out;
-  if (surface_.face.empty()) return out;
-  struct Other {
-    const float *wr, *cap;
-  };
+std::vector<Blender::Other> Blender::Others(NodeId without) const {
   std::vector<Other> others;
   for (const auto& [unit, wr] : neighbour_reach_) {
     if (unit == without) continue;
     others.push_back({wr.data(), neighbour_gain_.at(unit).data()});
   }
+  return others;
+}
+
+FaceLevels Blender::FaceLevelBounds(double level, double fill_limit, NodeId without) const {
+  FaceLevels out;
+  if (surface_.face.empty()) return out;
+  const std::vector<Other> others = Others(without);
   std::vector<std::pair<double, double>> terms;
   const double f = std::max(fill_limit, 1.0);
   for (size_t i = 0; i < own_d_.size(); ++i) {

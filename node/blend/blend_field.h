@@ -234,6 +234,12 @@ class Blender {
 
  private:
   double CorrectedIrradiance(size_t i) const;  // E' of lit pixel i
+  // Each neighbour's w r and capacity cos / d^2 per pixel (Factor's and FaceLevelBounds'
+  // terms), `without` left out.
+  struct Other {
+    const float *wr, *cap;
+  };
+  std::vector<Other> Others(NodeId without) const;
 
   ProjectorSurface surface_;
   DistanceField own_;
