@@ -613,6 +613,15 @@ cv::Mat Blender::Factor(double level, double fill_limit, NodeId without,
   cv::Mat factor(surface_.height_px, surface_.width_px, CV_32FC1, cv::Scalar(0));
   float* f = factor.ptr<float>();
   const std::vector<Other> others = Others(without);
+  // The faces' levels by face id, for a lookup per pixel. Ids are triangle indices: one past
+  // the model's triangles (a share off the wire) is no face of this model and is left out.
+  std::vector<double> level_of_face;
+  const int32_t triangles = caster_ ? caster_->scene().NumTriangles() : 0;
+  for (const auto& [face, l] : face_levels) {
+    if (face < 0 || face >= triangles) continue;
+    if (level_of_face.size() <= static_cast<size_t>(face)) level_of_face.resize(face + 1, level);
+    level_of_face[face] = std::min(level, l);
+  }
   struct Term {
     double room, share;  // what it may deliver (irradiance); its share of the intended light
   };
@@ -626,11 +635,10 @@ cv::Mat Blender::Factor(double level, double fill_limit, NodeId without,
       delivered += o.wr[i];
       shared = shared || o.wr[i] > 0;
     }
-    double level_here = level;
-    if (!face_levels.empty()) {
-      auto it = face_levels.find(surface_.face[i]);
-      if (it != face_levels.end()) level_here = std::min(level, it->second);
-    }
+    const int32_t face = surface_.face.empty() ? -1 : surface_.face[i];
+    const double level_here = face >= 0 && face < static_cast<int32_t>(level_of_face.size())
+                                  ? level_of_face[face]
+                                  : level;
     const float unclipped =
         static_cast<float>(level_here) * own_gain_[i] / std::max(delivered, 1e-30f);
     // Lit by this projector alone and within its reach: nothing to fill (most pixels; the
