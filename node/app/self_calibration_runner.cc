@@ -595,9 +595,9 @@ nlohmann::json ModelChangesToJson(const ModelChangeReport& c) {
                       {"height_mm", e.height_m * 1e3},
                       {"points", e.points}});
   }
-  return {{"buildings", parts},   {"not_in_model", extras}, {"present", c.present},
-          {"moved", c.moved},     {"missing", c.missing},   {"unobserved", c.unobserved},
-          {"compute_s", c.time_s}};
+  return {{"buildings", parts},     {"not_in_model", extras}, {"present", c.present},
+          {"moved", c.moved},       {"missing", c.missing},   {"unobserved", c.unobserved},
+          {"in_place", c.in_place}, {"compute_s", c.time_s}};
 }
 
 // One log line per building that is not where the model has it, and per extra structure.

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 #include "common/base/thread_cpu_time.h"
 #include "common/estimation/resection.h"
@@ -11,7 +12,7 @@ namespace sandtable::node {
 namespace {
 // The change report judges a model only when it saw at least this many of its buildings.
 constexpr int kMinJudgedBuildings = 3;
-// A placement that puts this share of the buildings it saw where they stand is taken without
+// A placement that puts this share of the buildings it saw in place is taken without
 // judging the next candidates.
 constexpr double kConvincingPresent = 0.8;
 }  // namespace
@@ -222,13 +223,15 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
                                             : Expected<ModelRegistration>(candidates.status());
     // What each candidate placement shows, building by building (in the model frame, so before
     // its scale is applied: the scan divided by it). Of placements that fit about as well (a
-    // city's regular blocks), the one that puts the most buildings where they stand is taken
-    // (judged in order, stopping at one that puts 80 % of them where they stand).
-    // If even that one leaves most of the buildings it saw elsewhere or missing, the table
+    // city's regular blocks), the one that puts the most buildings in place (present, or within
+    // the change report's placement tolerance: a wide site's scan is off by some mm here and
+    // there) is taken, the most present first among equals (judged in order, stopping at one
+    // that puts 80 % of them in place).
+    // If even that one leaves most of the buildings it saw further off or missing, the table
     // matched the table: the model is not what stands there, and neither its placement nor its
     // scale is used.
     if (found.ok()) {
-      int most_present = -1;
+      std::pair<int, int> best_count(-1, -1);  // in place, present
       for (ModelRegistration candidate : *candidates) {
         if (candidate.coarse_only) {
           Expected<ModelRegistration> refined = matcher->Refine(
@@ -250,9 +253,10 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
           break;
         }
         const int observed = changes->present + changes->moved + changes->missing;
-        const bool convincing = changes->present >= kConvincingPresent * observed;
-        if (changes->present > most_present) {
-          most_present = changes->present;
+        const bool convincing = changes->in_place >= kConvincingPresent * observed;
+        const std::pair<int, int> count(changes->in_place, changes->present);
+        if (count > best_count) {
+          best_count = count;
           found = candidate;
           out.changes = std::move(*changes);
         }
@@ -261,13 +265,15 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
       stage_done("changes");
       if (out.changes) {
         const int observed = out.changes->present + out.changes->moved + out.changes->missing;
-        if (observed >= kMinJudgedBuildings && 2 * out.changes->present < observed) {
+        if (observed >= kMinJudgedBuildings && 2 * out.changes->in_place < observed) {
           found = NotFoundError(
               "model registration: the model does not match the scanned surface (of " +
               std::to_string(observed) + " buildings seen, " +
-              std::to_string(out.changes->present) + " stand where the best placement puts them, " +
-              std::to_string(out.changes->moved) + " elsewhere, " +
-              std::to_string(out.changes->missing) + " missing; " +
+              std::to_string(out.changes->in_place) + " stand within " +
+              std::to_string(std::lround(options.changes.placement_tolerance_m * 1e3)) +
+              " mm of where the best placement puts them, " +
+              std::to_string(observed - out.changes->in_place - out.changes->missing) +
+              " further off, " + std::to_string(out.changes->missing) + " missing; " +
               std::to_string(out.changes->extras.size()) + " structures not in the model)");
         }
       }

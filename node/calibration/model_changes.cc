@@ -195,10 +195,11 @@ PartPose FitPart(const PartSurface& surface, const std::vector<const ScanPoint*>
 Status ModelChangeOptions::Check() const {
   if (!(structure_height_m > 0) || !(cell_m > 0) || !(sample_spacing_m > 0) ||
       !(search_radius_m >= 0) || !(search_step_m > 0) || !(moved_threshold_m > 0) ||
-      !(icp_gate_m > 0) || !(missing_support >= 0 && missing_support <= 1) || min_points < 1 ||
-      min_extra_points < 1) {
+      !(placement_tolerance_m >= 0) || !(icp_gate_m > 0) ||
+      !(missing_support >= 0 && missing_support <= 1) || min_points < 1 || min_extra_points < 1) {
     return InvalidArgumentError(
-        "model changes: heights, cells, steps, gates > 0; missing_support in [0, 1]; counts >= 1");
+        "model changes: heights, cells, steps, gates > 0; placement tolerance >= 0; "
+        "missing_support in [0, 1]; counts >= 1");
   }
   return OkStatus();
 }
@@ -442,6 +443,11 @@ Expected<ModelChangeReport> DetectModelChanges(const Scene& model,
       const bool turned = turn > options.moved_threshold_m &&
                           std::abs(change.moved_yaw_deg) > kSigmas * change.yaw_sigma_deg;
       change.state = shifted || turned ? PartState::kMoved : PartState::kPresent;
+      change.displacement_m = std::max(shift, turn);
+      if (change.state == PartState::kPresent ||
+          change.displacement_m <= options.placement_tolerance_m) {
+        ++out.in_place;
+      }
     }
     switch (change.state) {
       case PartState::kPresent:

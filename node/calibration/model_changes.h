@@ -24,7 +24,10 @@
 //      missing. Moved by the found translation when it (or the footprint corners' turn by the
 //      found yaw) exceeds moved_threshold_m and 3 sigma of its estimate (the fit's covariance
 //      combined with the spread of the footprint search's equally good translations). Else
-//      present.
+//      present. Present, or moved by no more than placement_tolerance_m: in place, the count
+//      by which a placement of the model is judged (a scan of a wide site is off by several
+//      mm here and there: grid-12's showed half its buildings 5-10 mm from where the right
+//      placement put them; another layout leaves its buildings missing or further off).
 //   5. Up points that no part (at its found position) explains and that stand more than
 //      structure_height_m above the model there, grouped by 1 cm cells: extra structures of at
 //      least min_extra_points points.
@@ -51,6 +54,7 @@ struct ModelChangeOptions {
   double search_radius_m = 0.06;
   double search_step_m = 0.0025;
   double moved_threshold_m = 0.005;
+  double placement_tolerance_m = 0.015;
   double missing_support = 0.3;
   int min_points = 4;
   double icp_gate_m = 0.004;
@@ -86,6 +90,8 @@ struct PartChange {
   // One-sigma uncertainty of moved_by_m (its length) and of the yaw.
   double moved_sigma_mm = 0.0;
   double yaw_sigma_deg = 0.0;
+  // The larger of the translation and the footprint corners' turn by the yaw (m).
+  double displacement_m = 0.0;
 };
 
 struct ExtraStructure {
@@ -99,6 +105,7 @@ struct ModelChangeReport {
   std::vector<PartChange> parts;
   std::vector<ExtraStructure> extras;
   int present = 0, moved = 0, missing = 0, unobserved = 0;
+  int in_place = 0;     // present, or moved by no more than placement_tolerance_m
   double time_s = 0.0;  // thread CPU
 };
 
