@@ -54,6 +54,7 @@ struct Cast {
   Eigen::Vector3d point = Eigen::Vector3d::Zero();
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
   double range_m = 0.0;  // 0: lights nothing
+  bool surface = false;  // the ray meets the model (lit or not): false past its rim
   double cos_incidence = 0.0;
   double albedo = 1.0;
   int triangle = -1;
@@ -85,6 +86,7 @@ std::vector<Cast> CastPixels(const std::vector<Eigen::Vector2d>& pixels, const R
   caster.IntersectBatch(batch, &hits, /*coherent=*/true);
   std::vector<Cast> out(pixels.size());
   for (size_t i = 0; i < pixels.size(); ++i) {
+    out[i].surface = hits[i].has_value();
     if (!hits[i] || !hits[i]->front_face) continue;
     const Eigen::Vector3d dir = batch[i].direction_in_table.normalized();
     // normal_in_table faces the ray's origin: cos = -dir . n.
@@ -335,7 +337,14 @@ DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
         const int cc = c + dc[k], rr = r + dr[k];
         if (cc < 0 || rr < 0 || cc >= f.cols || rr >= f.rows) continue;
         const size_t j = static_cast<size_t>(rr) * f.cols + cc;
-        if (!lit(j) || broken[i * 8 + k]) crossings.push_back({i, j});
+        // Past the model's rim (no surface at all) no projector lights anything: that is
+        // where the surface ends, not this projector's light, and is no edge to blend from.
+        // (Counted as one, every projector's D fell to 0 at the table's rim and the alphas
+        // near it were ratios of small distances: steep, so a pixel's one value over its
+        // footprint left steps of several % along the rim.)
+        if (broken[i * 8 + k] || (!lit(j) && (casts[j].surface || !options.rim_is_no_edge))) {
+          crossings.push_back({i, j});
+        }
       }
     }
   }
@@ -393,9 +402,27 @@ DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
   for (size_t i = 0; i < n; ++i) {
     if (lit(i)) {
       f.distance_m[i] = std::isfinite(d[i]) ? static_cast<float>(d[i]) : 0.0f;
-    } else {
+    } else if (std::isfinite(outside[i])) {
       // Unlit: minus the distance to the nearest crossing; deep inside, a cell at 1 m.
-      f.distance_m[i] = static_cast<float>(std::isfinite(outside[i]) ? outside[i] : -cell_m);
+      f.distance_m[i] = static_cast<float>(outside[i]);
+    } else {
+      f.distance_m[i] = static_cast<float>(-cell_m);
+      if (casts[i].surface || !options.rim_is_no_edge) continue;
+      // Past the rim beside lit points: their mean distance, so that a lookup between the last
+      // lit grid points and the rim carries their field on instead of falling to 0.
+      const int r = static_cast<int>(i / f.cols), c = static_cast<int>(i % f.cols);
+      double sum = 0.0;
+      int count = 0;
+      for (int k = 0; k < 8; ++k) {
+        const int cc = c + dc[k], rr = r + dr[k];
+        if (cc < 0 || rr < 0 || cc >= f.cols || rr >= f.rows) continue;
+        const size_t j = static_cast<size_t>(rr) * f.cols + cc;
+        if (lit(j) && std::isfinite(d[j])) {
+          sum += d[j];
+          ++count;
+        }
+      }
+      if (count > 0) f.distance_m[i] = static_cast<float>(sum / count);
     }
   }
   return f;

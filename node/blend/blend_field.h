@@ -10,10 +10,12 @@
 //   2. DistanceField: on a grid every step_px pixels of the image, the distance D along the
 //      surface from each grid point to the nearest surface point this projector cannot light
 //      (Dijkstra over the grid with 3D edge lengths). What it cannot light is: pixels that light
-//      nothing, the image border, and surface breaks, where neighbouring grid points are far
-//      apart in 3D (a building's silhouette: the surface just behind it lies in this projector's
-//      shadow, and the building's far side faces away). The field is what a node shares with
-//      its overlapping neighbours (with its calibration, so they can look it up).
+//      nothing on the model (a back face, past max_incidence_deg; not a ray past the model's
+//      rim, where the surface itself ends), the image border, and surface breaks, where
+//      neighbouring grid points are far apart in 3D (a building's silhouette: the surface just
+//      behind it lies in this projector's shadow, and the building's far side faces away). The
+//      field is what a node shares with its overlapping neighbours (with its calibration, so they
+//      can look it up).
 //   3. D of projector k at a table point x: whether k lights x is decided exactly, as k's own
 //      pixels decide it: x in k's image, facing k within max_incidence_deg, and the segment from x
 //      to k's centre free of the model (a shadow ray in the same model); then D_k(x) is the
@@ -85,6 +87,10 @@ struct BlendOptions {
   // 0: D as it is (TR09-017). 1.5 mm measured best on sandtable-3 (docs/blend.md).
   double edge_soft_m = 1.5e-3;
   double edge_soft_min_face_m2 = 0.05;
+  // Past the model's rim (a ray that meets no surface) the surface ends for every projector:
+  // no edge of this one's light, so no seed of its D. false: a seed like any unlit pixel
+  // (TR09-017's "cannot light"; every D then falls to 0 at the table's rim).
+  bool rim_is_no_edge = true;
   // Where a projector cannot deliver its share (past the correction limit), the others make up
   // the shortfall, each raising its own share at most this many times (Blender::Factor); 1: the
   // projector clips alone.

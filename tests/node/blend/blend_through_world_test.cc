@@ -261,6 +261,7 @@ TEST(BlendThroughWorldTest, NoVisibleStepOnTableWallsRoofsOrShadows) {
   if (const char* dw = std::getenv("SANDTABLE_BLEND_DENSITY"))
     options.density_weight = std::atof(dw);
   if (const char* fl = std::getenv("SANDTABLE_BLEND_FILL")) options.fill_limit = std::atof(fl);
+  if (std::getenv("SANDTABLE_BLEND_RIM_EDGE")) options.rim_is_no_edge = false;
   if (const char* soft = std::getenv("SANDTABLE_BLEND_SOFT_MM"))
     options.edge_soft_m = 1e-3 * std::atof(soft);
   if (const char* area = std::getenv("SANDTABLE_BLEND_SOFT_FACE_M2"))
