@@ -7,6 +7,8 @@
 #include <utility>
 #include <vector>
 
+#include <opencv2/imgcodecs.hpp>
+
 #include "common/base/log.h"
 #include "common/io/image_file.h"
 #include "node/net/node_runtime.h"
@@ -133,6 +135,42 @@ void BlendService::TakeAlpha(NodeId unit, int width_px, int height_px, std::stri
   region->alpha = std::move(alpha);
   mpcdi_dirty_ = true;
   if (!mpcdi_writing_) WriteSiteMpcdi(unit, node);  // else: written again after the one in flight
+}
+
+void BlendService::TakeAlphaPng(NodeId unit, int width_px, int height_px, std::string png,
+                                NodeRuntime& node) {
+  if (!site_mpcdi_ || site_mpcdi_path_.empty()) return;  // not the runner: nothing to write
+  const std::optional<cv::Size> stated = io::ImageHeaderSize(png);
+  if (!stated || stated->width != width_px || stated->height != height_px) {
+    ++bad_shares_;
+    ST_LOG(kWarning) << "blend: an alpha map PNG from node " << unit << " dropped (its header "
+                     << (stated ? "states another size" : "is not a PNG's") << ")";
+    return;
+  }
+  node.workers().Run<std::string>(
+      [png = std::move(png), width_px, height_px] {
+        cv::Mat image;
+        try {
+          image = cv::imdecode(
+              cv::Mat(1, static_cast<int>(png.size()), CV_8UC1, const_cast<char*>(png.data())),
+              cv::IMREAD_UNCHANGED);
+        } catch (const cv::Exception&) {
+          return std::string();
+        }
+        if (image.type() != CV_8UC1 || image.cols != width_px || image.rows != height_px) {
+          return std::string();
+        }
+        return std::string(reinterpret_cast<const char*>(image.data), image.total());
+      },
+      [this, unit, width_px, height_px, &node](std::string values) {
+        if (values.empty()) {
+          ++bad_shares_;
+          ST_LOG(kWarning) << "blend: an alpha map PNG from node " << unit
+                           << " dropped (not an 8-bit grey image of its stated size)";
+          return;
+        }
+        TakeAlpha(unit, width_px, height_px, std::move(values), node);
+      });
 }
 
 void BlendService::WriteSiteMpcdi(NodeId latest, NodeRuntime& node) {
@@ -298,14 +336,19 @@ void BlendService::OnPeerMessage(net::Incoming request, NodeRuntime& node) {
   if (request.envelope.has_blend_alpha()) {
     const wire::BlendAlpha& a = request.envelope.blend_alpha();
     const uint64_t w = a.width_px(), h = a.height_px();
+    const bool png = !a.png().empty();
     if (a.projector_id() != from || w == 0 || h == 0 || w > 8192 || h > 8192 ||
-        a.values().size() != w * h) {
+        (png ? !a.values().empty() : a.values().size() != w * h)) {
       ++bad_shares_;
       ST_LOG(kWarning) << "blend: an alpha map from node " << from << " dropped (" << w << "x" << h
-                       << ", " << a.values().size() << " bytes)";
+                       << ", " << a.values().size() << " bytes, " << a.png().size() << " as PNG)";
       return;
     }
-    TakeAlpha(from, static_cast<int>(w), static_cast<int>(h), a.values(), node);
+    if (png) {
+      TakeAlphaPng(from, static_cast<int>(w), static_cast<int>(h), a.png(), node);
+    } else {
+      TakeAlpha(from, static_cast<int>(w), static_cast<int>(h), a.values(), node);
+    }
     return;
   }
   const wire::BlendShare& share = request.envelope.blend_share();
@@ -386,7 +429,7 @@ void BlendService::SendAlpha(NodeRuntime& node) {
   PendingAlpha alpha = std::move(*pending_alpha_);
   pending_alpha_.reset();
   if (runner_ == id_) {
-    TakeAlpha(id_, alpha.width_px, alpha.height_px, std::move(alpha.values), node);
+    TakeAlphaPng(id_, alpha.width_px, alpha.height_px, std::move(alpha.png), node);
     return;
   }
   wire::Envelope envelope;
@@ -395,7 +438,7 @@ void BlendService::SendAlpha(NodeRuntime& node) {
   a->set_calibration_round(round_);
   a->set_width_px(static_cast<uint32_t>(alpha.width_px));
   a->set_height_px(static_cast<uint32_t>(alpha.height_px));
-  a->set_values(std::move(alpha.values));
+  a->set_png(std::move(alpha.png));
   bytes_sent_ += envelope.ByteSizeLong();
   if (Status sent = node.SendToPeer(runner_, std::move(envelope)); !sent.ok()) {
     ST_LOG(kWarning) << "blend: alpha to node " << runner_ << ": " << sent.ToString();
@@ -502,8 +545,8 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
   double black_target = 0.0;
   for (const auto& [unit, peak] : black_peaks_) black_target = std::max(black_target, peak);
   struct Shown {
-    bool stale = false;        // a newer calibration replaced the blender
-    std::string alpha_values;  // the mask, 8-bit (for the MPCDI export)
+    bool stale = false;     // a newer calibration replaced the blender
+    std::string alpha_png;  // the mask, 8-bit grey PNG (for the MPCDI export)
     int width_px = 0, height_px = 0;
     Status status = OkStatus();
     int64_t shown_ns = 0;
@@ -555,7 +598,11 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           factor.convertTo(bytes, CV_8UC1, 255.0);
           out.width_px = bytes.cols;
           out.height_px = bytes.rows;
-          out.alpha_values.assign(reinterpret_cast<const char*>(bytes.data), bytes.total());
+          std::vector<uchar> encoded;
+          // zlib's fastest level: the masks are smooth and compress well at any level.
+          if (cv::imencode(".png", bytes, encoded, {cv::IMWRITE_PNG_COMPRESSION, 1})) {
+            out.alpha_png.assign(encoded.begin(), encoded.end());
+          }
         }
         if (!alpha.empty()) {
           cv::Mat picture;
@@ -611,9 +658,9 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           own_faces_ = std::move(shown.own_faces);
           for (NodeId to : sent_to_) SendShare(to, /*with_field=*/false, /*answer=*/false, node);
         }
-        if (!shown.alpha_values.empty()) {
-          pending_alpha_ = PendingAlpha{shown.width_px, shown.height_px,
-                                        std::move(shown.alpha_values), Clock::now()};
+        if (!shown.alpha_png.empty()) {
+          pending_alpha_ = PendingAlpha{shown.width_px, shown.height_px, std::move(shown.alpha_png),
+                                        Clock::now()};
         }
         nlohmann::json line = {{"blend", id_}};
         if (cause == "left") {

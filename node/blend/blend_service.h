@@ -115,6 +115,9 @@ class BlendService : public NodeService {
   // each region's alpha map as the masks come in.
   void SetSiteMpcdi(std::shared_ptr<const MpcdiSite> site, std::string path);
 
+  // Shares and alpha maps refused so far (malformed, or fitting nothing here).
+  uint64_t bad_messages() const { return bad_shares_; }
+
  private:
   struct Core;  // what the workers touch, under its lock
   // `noticed_by` (a static string, or null): how a neighbour that left was noticed.
@@ -125,6 +128,9 @@ class BlendService : public NodeService {
   void ApplyField(NodeId from, const DistanceField& field, NodeRuntime& node);
   void TellLevel(NodeRuntime& node);  // the lowest level and the highest black light heard
   void TakeAlpha(NodeId unit, int width_px, int height_px, std::string values, NodeRuntime& node);
+  // The same from a PNG (BlendAlpha.png), decoded on a worker; a PNG whose header states
+  // another size, or that does not decode to an 8-bit grey image of it, is dropped.
+  void TakeAlphaPng(NodeId unit, int width_px, int height_px, std::string png, NodeRuntime& node);
   void WriteSiteMpcdi(NodeId latest, NodeRuntime& node);  // on a worker; repeats while dirty
   void SendAlpha(NodeRuntime& node);                      // the pending mask to the runner
 
@@ -168,7 +174,7 @@ class BlendService : public NodeService {
   bool mpcdi_writing_ = false, mpcdi_dirty_ = false;
   struct PendingAlpha {
     int width_px = 0, height_px = 0;
-    std::string values;  // 8-bit, row-major
+    std::string png;  // 8-bit grey PNG
     std::chrono::steady_clock::time_point composed;
   };
   std::optional<PendingAlpha> pending_alpha_;  // the last mask, not yet sent to the runner

@@ -5,7 +5,9 @@
 // blended unit 0 with one neighbour of two).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <set>
@@ -13,6 +15,11 @@
 
 #include <nlohmann/json.hpp>
 
+#include <opencv2/imgcodecs.hpp>
+
+#include "common/io/mpcdi.h"
+#include "common/io/mpcdi_builder.h"
+#include "common/scene/procedural_scene.h"
 #include "coordinator/membership/coordinator_server.h"
 #include "node/blend/blend_service.h"
 #include "node/net/node_runtime.h"
@@ -104,6 +111,69 @@ TEST(BlendServiceTest, AsksAgainForAFieldThatDidNotCome) {
       << (a->lines.empty() ? std::string("no line") : a->lines.back().dump()) << "\n"
       << (b->lines.empty() ? std::string("no line") : b->lines.back().dump());
   EXPECT_TRUE(a->lines.back()["waiting_for"].empty()) << a->lines.back().dump();
+}
+
+// The runner takes each unit's mask as a PNG (BlendAlpha.png) into the site's MPCDI export. A
+// PNG whose header states another size, garbage behind a right header, or a message with both
+// raw values and a PNG is refused and counted; the good one lands in the file byte for byte.
+TEST(BlendServiceTest, TakesAnAlphaMapAsPngAndRefusesBadOnes) {
+  Expected<sim::Site> site = sim::MakeSitePreset("sandtable-3");
+  ASSERT_TRUE(site.ok()) << site.status().ToString();
+  coordinator::CoordinatorServer coordinator(CoordinatorFor());
+  ASSERT_TRUE(coordinator.Start().ok());
+  std::unique_ptr<Unit> runner = MakeUnit(0, coordinator);
+  ASSERT_TRUE(runner->runtime->Start().ok());
+  const UnitCalibration one = TrueCalibration(*site, 1);
+  Expected<MpcdiSite> mpcdi = BuildMpcdiSite(
+      {MpcdiUnit{"", one, std::nullopt}},
+      std::make_shared<const Scene>(MakeRectangleMesh(Eigen::Vector2d(3.0, 3.0), 0)));
+  ASSERT_TRUE(mpcdi.ok()) << mpcdi.status().ToString();
+  const std::string path = ::testing::TempDir() + "/blend_alpha_png.mpcdi";
+  std::filesystem::remove(path);
+  runner->blend->SetSiteMpcdi(std::make_shared<const MpcdiSite>(*mpcdi), path);
+
+  const int w = one.projector.width_px, h = one.projector.height_px;
+  cv::Mat mask(h, w, CV_8UC1);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) mask.at<uint8_t>(y, x) = static_cast<uint8_t>((x + 3 * y) % 256);
+  }
+  std::vector<uchar> png;
+  ASSERT_TRUE(cv::imencode(".png", mask, png));
+  auto send = [&](int width_px, int height_px, std::string values, std::string png_bytes) {
+    net::Incoming in;
+    in.envelope.set_sender_id(1);
+    wire::BlendAlpha* a = in.envelope.mutable_blend_alpha();
+    a->set_projector_id(1);
+    a->set_width_px(static_cast<uint32_t>(width_px));
+    a->set_height_px(static_cast<uint32_t>(height_px));
+    a->set_values(std::move(values));
+    a->set_png(std::move(png_bytes));
+    runner->blend->OnPeerMessage(std::move(in), *runner->runtime);
+  };
+  const std::string good(png.begin(), png.end());
+  send(w + 1, h, "", good);  // the header states another size
+  send(w, h, std::string(static_cast<size_t>(w) * h, '\1'), good);  // both forms
+  std::string garbage = good.substr(0, 40);  // the right header, then no image
+  garbage.resize(good.size(), '\x7f');
+  send(w, h, "", garbage);
+  ASSERT_TRUE(StepUntil(
+      coordinator, {runner->runtime.get()}, [&] { return runner->blend->bad_messages() == 3; },
+      kBlendDeadline))
+      << runner->blend->bad_messages();
+  EXPECT_FALSE(std::filesystem::exists(path));
+  send(w, h, "", good);
+  ASSERT_TRUE(StepUntil(
+      coordinator, {runner->runtime.get()}, [&] { return std::filesystem::exists(path); },
+      kBlendDeadline));
+  EXPECT_EQ(runner->blend->bad_messages(), 3u);
+  Expected<MpcdiSite> written = ReadMpcdi(path);
+  ASSERT_TRUE(written.ok()) << written.status().ToString();
+  ASSERT_EQ(written->regions.size(), 1u);
+  ASSERT_TRUE(written->regions[0].alpha.has_value());
+  const MpcdiBlendMap& alpha = *written->regions[0].alpha;
+  ASSERT_EQ(alpha.width_px, w);
+  ASSERT_EQ(alpha.height_px, h);
+  EXPECT_TRUE(std::equal(alpha.values.begin(), alpha.values.end(), mask.data));
 }
 
 }  // namespace
