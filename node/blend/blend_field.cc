@@ -326,6 +326,7 @@ DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
   struct Crossing {
     size_t i, j;
     double lo = 0.0, hi = 1.0;  // lit and near i at lo, not at hi
+    bool rim = false;           // j: a ray past the model's rim
   };
   std::vector<Crossing> crossings;
   for (int r = 0; r < f.rows; ++r) {
@@ -337,13 +338,8 @@ DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
         const int cc = c + dc[k], rr = r + dr[k];
         if (cc < 0 || rr < 0 || cc >= f.cols || rr >= f.rows) continue;
         const size_t j = static_cast<size_t>(rr) * f.cols + cc;
-        // Past the model's rim (no surface at all) no projector lights anything: that is
-        // where the surface ends, not this projector's light, and is no edge to blend from.
-        // (Counted as one, every projector's D fell to 0 at the table's rim and the alphas
-        // near it were ratios of small distances: steep, so a pixel's one value over its
-        // footprint left steps of several % along the rim.)
-        if (broken[i * 8 + k] || (!lit(j) && (casts[j].surface || !options.rim_is_no_edge))) {
-          crossings.push_back({i, j});
+        if (!lit(j) || broken[i * 8 + k]) {
+          crossings.push_back({i, j, 0.0, 1.0, !lit(j) && !broken[i * 8 + k] && !casts[j].surface});
         }
       }
     }
@@ -366,38 +362,52 @@ DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
       (near_lit ? x.lo : x.hi) = mid;
     }
   }
-  for (const Crossing& x : crossings) {
-    const double t = 0.5 * (x.lo + x.hi);
-    const double pixel_step = (pixels[x.j] - pixels[x.i]).norm();
-    const double metres_per_px = casts[x.i].range_m / focal_px;
-    // The 3D distance to the crossing, at least what the pixel distance spans (a chord).
-    seed(x.i, t * pixel_step * metres_per_px);
-    if (!lit(x.j)) {
-      outside[x.j] = std::max(outside[x.j], -(1.0 - t) * pixel_step * metres_per_px);
-    }
-  }
-  while (!queue.empty()) {
-    const auto [di, i] = queue.top();
-    queue.pop();
-    if (di > d[i]) continue;
-    const int r = static_cast<int>(i / f.cols), c = static_cast<int>(i % f.cols);
-    if (!lit(i)) {
-      // Unlit points pass no distance on (their 3D position is not a surface this projector
-      // reaches); their lit neighbours were seeded above.
-      continue;
-    }
-    for (int k = 0; k < 8; ++k) {
-      const int cc = c + dc[k], rr = r + dr[k];
-      if (cc < 0 || rr < 0 || cc >= f.cols || rr >= f.rows) continue;
-      const size_t j = static_cast<size_t>(rr) * f.cols + cc;
-      if (!lit(j) || broken[i * 8 + k]) continue;
-      const double step_m = (casts[i].point - casts[j].point).norm();
-      if (di + step_m < d[j]) {
-        d[j] = di + step_m;
-        queue.emplace(d[j], j);
+  // Seeds the crossings (rim ones only where `take_rim` says), then spreads the distances.
+  auto spread = [&](const std::function<bool(const Crossing&)>& take) {
+    for (const Crossing& x : crossings) {
+      if (!take(x)) continue;
+      const double t = 0.5 * (x.lo + x.hi);
+      const double pixel_step = (pixels[x.j] - pixels[x.i]).norm();
+      const double metres_per_px = casts[x.i].range_m / focal_px;
+      // The 3D distance to the crossing, at least what the pixel distance spans (a chord).
+      seed(x.i, t * pixel_step * metres_per_px);
+      if (!lit(x.j)) {
+        outside[x.j] = std::max(outside[x.j], -(1.0 - t) * pixel_step * metres_per_px);
       }
     }
-  }
+    while (!queue.empty()) {
+      const auto [di, i] = queue.top();
+      queue.pop();
+      if (di > d[i]) continue;
+      const int r = static_cast<int>(i / f.cols), c = static_cast<int>(i % f.cols);
+      if (!lit(i)) {
+        // Unlit points pass no distance on (their 3D position is not a surface this projector
+        // reaches); their lit neighbours were seeded above.
+        continue;
+      }
+      for (int k = 0; k < 8; ++k) {
+        const int cc = c + dc[k], rr = r + dr[k];
+        if (cc < 0 || rr < 0 || cc >= f.cols || rr >= f.rows) continue;
+        const size_t j = static_cast<size_t>(rr) * f.cols + cc;
+        if (!lit(j) || broken[i * 8 + k]) continue;
+        const double step_m = (casts[i].point - casts[j].point).norm();
+        if (di + step_m < d[j]) {
+          d[j] = di + step_m;
+          queue.emplace(d[j], j);
+        }
+      }
+    }
+  };
+  // Past the model's rim (no surface at all) no projector lights anything: that is where the
+  // surface ends, not this projector's light, and no edge to blend from. (Counted as one, every
+  // projector's D fell to 0 at the table's rim and the alphas near it were ratios of small
+  // distances: steep, so a pixel's one value over its footprint left steps of several % along
+  // the rim.) Only a lit region with no other edge at all (the whole table inside the image)
+  // is measured from the rim, as TR09-017 would: it is reached from nothing else.
+  spread([&](const Crossing& x) { return !x.rim || !options.rim_is_no_edge; });
+  std::vector<uint8_t> unreached(n, 0);
+  for (size_t i = 0; i < n; ++i) unreached[i] = lit(i) && !std::isfinite(d[i]);
+  spread([&](const Crossing& x) { return x.rim && unreached[x.i]; });
   const double cell_m = f.step_px * 1.0 / focal_px;  // per metre of range
   for (size_t i = 0; i < n; ++i) {
     if (lit(i)) {
@@ -407,7 +417,7 @@ DistanceField ComputeDistanceField(NodeId unit, const CameraModel& projector,
       f.distance_m[i] = static_cast<float>(outside[i]);
     } else {
       f.distance_m[i] = static_cast<float>(-cell_m);
-      if (casts[i].surface || !options.rim_is_no_edge) continue;
+      if (casts[i].surface) continue;
       // Past the rim beside lit points: their mean distance, so that a lookup between the last
       // lit grid points and the rim carries their field on instead of falling to 0.
       const int r = static_cast<int>(i / f.cols), c = static_cast<int>(i % f.cols);

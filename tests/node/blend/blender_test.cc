@@ -1,7 +1,7 @@
 // Blender: the composition without one neighbour (what a node prepares for that neighbour
 // leaving, docs/blend.md "Prepared masks") is, bit for bit, the composition after the neighbour
 // is removed, face levels included. sandtable-3 at its true poses: unit 0 and its two overlapping
-// neighbours.
+// neighbours. The distance field at the model's rim: no edge of a projector's light.
 #include <gtest/gtest.h>
 
 #include <cstdint>
@@ -9,6 +9,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <optional>
 
 #include "common/scene/procedural_scene.h"
 #include "node/blend/blend_field.h"
@@ -78,6 +79,48 @@ TEST(BlenderTest, WithoutANeighbourIsTheBlendAfterItIsRemoved) {
     EXPECT_TRUE(Identical(all.Lift(target, kOwnBlack, black, kMaxLift, left),
                           removed.Lift(target, kOwnBlack, black, kMaxLift)));
   }
+}
+
+// A 0.6 m square table under a projector 1 m above it, looking straight down. Where its image
+// reaches past the table, the rim is where the surface ends, not an edge of its light: D beside
+// the rim is the distance to its image border on the table (0.25 m off), not to the rim (3 mm;
+// what TR09-017's "cannot light" and BlendOptions::rim_is_no_edge = false give). A projector
+// whose image holds the whole table has no other edge: D is measured from the rim there.
+TEST(BlenderTest, TheModelsRimIsNoEdgeOfAProjectorsLight) {
+  auto table = std::make_shared<const Scene>(MakeRectangleMesh(Eigen::Vector2d(0.6, 0.6), 0));
+  Expected<std::unique_ptr<RayCaster>> caster = RayCaster::Create(table);
+  ASSERT_TRUE(caster.ok()) << caster.status().ToString();
+  const CameraModel projector(1024, 768, 1000.0, 1000.0, 511.5, 383.5);  // 1.02 x 0.77 m at 1 m
+  Eigen::Matrix3d down;  // x right = table x, y down = table -y, forward = table -z
+  down << 1, 0, 0, 0, -1, 0, 0, 0, -1;
+  auto d_at = [&](const DistanceField& f, const Eigen::Vector3d& point) {
+    const std::optional<Eigen::Vector2d> pixel =
+        f.projector.Project(f.projector_from_table * point);
+    EXPECT_TRUE(pixel.has_value());
+    return pixel ? f.DistanceAtPixel(*pixel) : -1.0f;
+  };
+  // Table points 3 mm inside the left rim and at the centre.
+  const Eigen::Vector3d by_rim(-0.297, 0.0, 0.0), centre(0.0, 0.0, 0.0);
+  constexpr double kRim_m = 0.003, kTolerance_m = 0.003;
+
+  // The image's right border falls on the table at x = 0.26 m; its others lie past the rim.
+  const Rigid3d left_from_table = Rigid3d(down, Eigen::Vector3d(-0.25, 0.0, 1.0)).Inverse();
+  BlendOptions options;
+  const DistanceField left = ComputeDistanceField(0, projector, left_from_table, **caster, options);
+  const double border_x = -0.25 + (1023.5 - 511.5) / 1000.0;
+  EXPECT_NEAR(d_at(left, by_rim), border_x - by_rim.x(), kTolerance_m);
+  EXPECT_NEAR(d_at(left, centre), border_x, kTolerance_m);
+  options.rim_is_no_edge = false;
+  const DistanceField from_rim =
+      ComputeDistanceField(0, projector, left_from_table, **caster, options);
+  EXPECT_NEAR(d_at(from_rim, by_rim), kRim_m, kTolerance_m);
+
+  // The whole table in the image: measured from the rim.
+  options.rim_is_no_edge = true;
+  const Rigid3d over_from_table = Rigid3d(down, Eigen::Vector3d(0.0, 0.0, 1.0)).Inverse();
+  const DistanceField over = ComputeDistanceField(1, projector, over_from_table, **caster, options);
+  EXPECT_NEAR(d_at(over, by_rim), kRim_m, kTolerance_m);
+  EXPECT_NEAR(d_at(over, centre), 0.3, kTolerance_m);
 }
 
 }  // namespace
