@@ -429,7 +429,11 @@ void BlendService::SendAlpha(NodeRuntime& node) {
   PendingAlpha alpha = std::move(*pending_alpha_);
   pending_alpha_.reset();
   if (runner_ == id_) {
-    TakeAlphaPng(id_, alpha.width_px, alpha.height_px, std::move(alpha.png), node);
+    if (!alpha.values.empty()) {
+      TakeAlpha(id_, alpha.width_px, alpha.height_px, std::move(alpha.values), node);
+    } else {
+      TakeAlphaPng(id_, alpha.width_px, alpha.height_px, std::move(alpha.png), node);
+    }
     return;
   }
   wire::Envelope envelope;
@@ -438,7 +442,11 @@ void BlendService::SendAlpha(NodeRuntime& node) {
   a->set_calibration_round(round_);
   a->set_width_px(static_cast<uint32_t>(alpha.width_px));
   a->set_height_px(static_cast<uint32_t>(alpha.height_px));
-  a->set_png(std::move(alpha.png));
+  if (!alpha.png.empty()) {
+    a->set_png(std::move(alpha.png));
+  } else {  // composed while this node was the runner; the runner has changed since
+    a->set_values(std::move(alpha.values));
+  }
   bytes_sent_ += envelope.ByteSizeLong();
   if (Status sent = node.SendToPeer(runner_, std::move(envelope)); !sent.ok()) {
     ST_LOG(kWarning) << "blend: alpha to node " << runner_ << ": " << sent.ToString();
@@ -545,8 +553,9 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
   double black_target = 0.0;
   for (const auto& [unit, peak] : black_peaks_) black_target = std::max(black_target, peak);
   struct Shown {
-    bool stale = false;     // a newer calibration replaced the blender
-    std::string alpha_png;  // the mask, 8-bit grey PNG (for the MPCDI export)
+    bool stale = false;        // a newer calibration replaced the blender
+    std::string alpha_png;     // the mask, 8-bit grey PNG (for the MPCDI export at the runner)
+    std::string alpha_values;  // or its values, when this node is the runner (no PNG round trip)
     int width_px = 0, height_px = 0;
     Status status = OkStatus();
     int64_t shown_ns = 0;
@@ -565,8 +574,8 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
                 .string();
   node.workers().Run<Shown>(
       [core = core_, loop = loop_, level, generation, png, to_runner = runner_ != kInvalidNodeId,
-       match, black_target, own_black = own_black_, blacks = blacks_, max_lift = options_.max_lift,
-       neighbour_faces = neighbour_faces_] {
+       runner_is_self = runner_ == id_, match, black_target, own_black = own_black_,
+       blacks = blacks_, max_lift = options_.max_lift, neighbour_faces = neighbour_faces_] {
         Shown out;
         const Clock::time_point start = Clock::now();
         cv::Mat factor, alpha, lift;
@@ -600,7 +609,9 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           out.height_px = bytes.rows;
           std::vector<uchar> encoded;
           // zlib's fastest level: the masks are smooth and compress well at any level.
-          if (cv::imencode(".png", bytes, encoded, {cv::IMWRITE_PNG_COMPRESSION, 1})) {
+          if (runner_is_self) {
+            out.alpha_values.assign(reinterpret_cast<const char*>(bytes.data), bytes.total());
+          } else if (cv::imencode(".png", bytes, encoded, {cv::IMWRITE_PNG_COMPRESSION, 1})) {
             out.alpha_png.assign(encoded.begin(), encoded.end());
           }
         }
@@ -658,9 +669,9 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           own_faces_ = std::move(shown.own_faces);
           for (NodeId to : sent_to_) SendShare(to, /*with_field=*/false, /*answer=*/false, node);
         }
-        if (!shown.alpha_png.empty()) {
+        if (!shown.alpha_png.empty() || !shown.alpha_values.empty()) {
           pending_alpha_ = PendingAlpha{shown.width_px, shown.height_px, std::move(shown.alpha_png),
-                                        Clock::now()};
+                                        std::move(shown.alpha_values), Clock::now()};
         }
         nlohmann::json line = {{"blend", id_}};
         if (cause == "left") {

@@ -174,7 +174,8 @@ class BlendService : public NodeService {
   bool mpcdi_writing_ = false, mpcdi_dirty_ = false;
   struct PendingAlpha {
     int width_px = 0, height_px = 0;
-    std::string png;  // 8-bit grey PNG
+    std::string png;     // 8-bit grey PNG, for another node as runner
+    std::string values;  // or the 8-bit values themselves, when this node is the runner
     std::chrono::steady_clock::time_point composed;
   };
   std::optional<PendingAlpha> pending_alpha_;  // the last mask, not yet sent to the runner
