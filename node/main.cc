@@ -102,6 +102,7 @@ static int Run(int argc, char** argv) {
   int blend_step_px = node::BlendOptions{}.grid_step_px;
   double blend_fill_limit = node::BlendOptions{}.fill_limit;
   double blend_edge_soft_mm = 1e3 * node::BlendOptions{}.edge_soft_m;
+  double blend_soft_face_m2 = node::BlendOptions{}.edge_soft_min_face_m2;
   std::string black_match = "off";
   app.add_option("--id", id, "this unit's node id (below 4294967280)")
       ->check(cli::Integer<uint32_t>(0, kFirstReservedSenderId - 1));
@@ -206,6 +207,10 @@ static int Run(int argc, char** argv) {
                  "within this distance of its edge a projector's alpha leaves 0 with zero slope "
                  "(0: Algorithm 1's plain distance), mm")
       ->check(CLI::Range(0.0, 100.0));
+  app.add_option("--blend-soft-face-m2", blend_soft_face_m2,
+                 "the blend's face-area threshold: soft edges (--blend-edge-soft-mm) only on "
+                 "planar faces of at least this area, m^2 (0: every face)")
+      ->check(CLI::Range(0.0, 1e6));
   app.add_option("--black-match", black_match,
                  "raise the black where fewer projectors overlap to the site's highest (needs "
                  "the black level measured in self-calibration): on or off")
@@ -393,6 +398,7 @@ static int Run(int argc, char** argv) {
     blend_options.blend.grid_step_px = blend_step_px;
     blend_options.blend.fill_limit = blend_fill_limit;
     blend_options.blend.edge_soft_m = 1e-3 * blend_edge_soft_mm;
+    blend_options.blend.edge_soft_min_face_m2 = blend_soft_face_m2;
     blend_options.export_dir = export_dir;
     blend_options.black_match = black_match == "on";
     blend = std::make_unique<node::BlendService>(

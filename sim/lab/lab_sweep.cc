@@ -31,6 +31,13 @@ using nlohmann::json;
 SweepConfig Knob(const std::string& knob, const std::string& value) {
   return {knob + "=" + value, knob, value, {"--" + knob + "=" + value}, false};
 }
+// A knob that `sandtable-lab run` has an option for (and hands on to its nodes itself).
+SweepConfig LabKnob(const std::string& knob, const std::string& value) {
+  SweepConfig c = Knob(knob, value);
+  c.lab_args = std::move(c.node_args);
+  c.node_args.clear();
+  return c;
+}
 SweepConfig BlendKnob(const std::string& knob, const std::string& value) {
   SweepConfig c = Knob(knob, value);
   c.blend = true;
@@ -234,10 +241,15 @@ std::vector<SweepConfig> DefaultSweep() {
   for (const char* v : {"8", "32"}) c.push_back(Knob("grid-step-px", v));
   for (const char* v : {"3", "10"}) c.push_back(Knob("bundle-iterations", v));
   c.push_back(Knob("bundle-free", "poses"));
+  // The planar path off (on a site that is not planar `auto` takes the full path anyway: this
+  // point then measures what the planarity probe costs).
+  c.push_back(LabKnob("calibration-path", "full"));
   SweepConfig blend{"blend", "", "", {}, true};
   c.push_back(blend);
   for (const char* v : {"4", "16"}) c.push_back(BlendKnob("blend-step-px", v));
   for (const char* v : {"1", "3"}) c.push_back(BlendKnob("blend-fill-limit", v));
+  // The face-area threshold of the soft edges (0: every face; 100: no face of a table model).
+  for (const char* v : {"0", "100"}) c.push_back(BlendKnob("blend-soft-face-m2", v));
   return c;
 }
 
@@ -335,6 +347,7 @@ int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std:
     if (!point.config.blend) args.insert(args.end(), {"--render", "off"});
     if (!options.bin_dir.empty()) args.insert(args.end(), {"--bin-dir", options.bin_dir});
     for (const std::string& a : point.config.node_args) args.push_back("--node-arg=" + a);
+    args.insert(args.end(), point.config.lab_args.begin(), point.config.lab_args.end());
     err << "sweep: " << (i + 1) << "/" << configs.size() << " " << point.config.name << " ..."
         << std::endl;
     point.error = RunChildLab(args, (dir / "runs" / (point.config.name + ".log")).string(), stop);

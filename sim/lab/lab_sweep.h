@@ -16,13 +16,14 @@
 namespace sandtable::sim {
 
 struct SweepConfig {
-  std::string name;   // "phase-steps=4"; "defaults" for the shipped configuration
-  std::string knob;   // "phase-steps"; empty for the defaults
-  std::string value;  // "4"
-  std::vector<std::string> node_args;
+  std::string name;                    // "phase-steps=4"; "defaults" for the shipped configuration
+  std::string knob;                    // "phase-steps"; empty for the defaults
+  std::string value;                   // "4"
+  std::vector<std::string> node_args;  // passed to every node (--node-arg=...)
   // A blend configuration: the run shows and blends (its figures: the blend's steps against its
   // cast time), "blend" for the shipped blend.
   bool blend = false;
+  std::vector<std::string> lab_args;  // or to `sandtable-lab run` itself, for its own options
 };
 
 // The configurations swept: the defaults first, then each calibration knob's values one at a

@@ -8,6 +8,8 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <optional>
+#include <set>
 #include <sstream>
 
 #include <gtest/gtest.h>
@@ -91,14 +93,50 @@ TEST(SweepConfigTest, DefaultsFirstThenOneKnobAtATime) {
       ++blend_defaults;
       continue;
     }
-    ASSERT_EQ(configs[i].node_args.size(), 1u) << configs[i].name;
-    EXPECT_EQ(configs[i].node_args[0], "--" + configs[i].knob + "=" + configs[i].value);
+    // One flag, to the nodes or to `sandtable-lab run`.
+    const std::vector<std::string>& args =
+        configs[i].lab_args.empty() ? configs[i].node_args : configs[i].lab_args;
+    EXPECT_EQ(configs[i].node_args.size() + configs[i].lab_args.size(), 1u) << configs[i].name;
+    ASSERT_EQ(args.size(), 1u) << configs[i].name;
+    EXPECT_EQ(args[0], "--" + configs[i].knob + "=" + configs[i].value);
     blend_knobs += configs[i].blend;
     // Blend knobs are the node's blend flags.
     EXPECT_EQ(configs[i].blend, configs[i].knob.rfind("blend-", 0) == 0) << configs[i].name;
   }
   EXPECT_EQ(blend_defaults, 1);
   EXPECT_GE(blend_knobs, 2);
+}
+
+std::string HelpOf(const std::vector<std::string>& argv) {
+  testing::ChildProcess program(argv);
+  std::string help;
+  while (std::optional<std::string> line = program.ReadLine(std::chrono::milliseconds(20000))) {
+    help += *line + "\n";
+  }
+  EXPECT_EQ(program.Wait(), 0) << argv[0];
+  return help;
+}
+
+// Every knob the sweep turns is a flag of sandtable-node, or of `sandtable-lab run` where the
+// lab passes it on itself (a renamed flag, or one the lab also gives, would otherwise only
+// show as a failed configuration in a 10-minute sweep).
+TEST(SweepConfigTest, EveryKnobIsAFlagOfTheNodeOrTheLab) {
+  const std::string node_help = HelpOf({SANDTABLE_NODE_BIN, "--help"});
+  const std::string lab_help = HelpOf({SANDTABLE_LAB_BIN, "run", "--help"});
+  int knobs = 0;
+  for (const SweepConfig& c : DefaultSweep()) {
+    if (c.knob.empty()) continue;
+    ++knobs;
+    const std::string flag = "--" + c.knob + " ";
+    if (c.lab_args.empty()) {
+      EXPECT_NE(node_help.find(flag), std::string::npos) << c.name << " in\n" << node_help;
+      // Not one the lab gives its nodes already (CLI11 refuses it twice).
+      EXPECT_EQ(lab_help.find(flag), std::string::npos) << c.name << " is the lab's own";
+    } else {
+      EXPECT_NE(lab_help.find(flag), std::string::npos) << c.name << " in\n" << lab_help;
+    }
+  }
+  EXPECT_GE(knobs, 10);
 }
 
 // Blend points have a front of their own (walls' p99 against cast time), apart from the
