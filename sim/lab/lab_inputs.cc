@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <optional>
 #include <random>
 
 #include <Eigen/Geometry>
@@ -11,6 +12,7 @@
 #include "common/scene/gltf_loader.h"
 #include "common/scene/gltf_writer.h"
 #include "common/scene/procedural_scene.h"
+#include "common/scene/random_scene.h"
 #include "sim/site/factory_calibration.h"
 #include "sim/site/site_json.h"
 #include "sim/site/site_presets.h"
@@ -63,6 +65,13 @@ Expected<LabInputs> PrepareLabInputs(const std::string& site_arg, const std::str
       return InvalidArgumentError("--scene " + scene_arg + ": " + scene.status().message());
     }
     inputs.scene_path = std::filesystem::absolute(scene_arg).string();
+  } else if (std::optional<uint64_t> scene_seed = ParseRandomSeedName(scene_arg)) {
+    RandomSceneOptions options;
+    options.seed = *scene_seed;
+    Expected<RandomScene> scene = MakeRandomScene(options);
+    if (!scene.ok()) return scene.status();
+    inputs.scene_path = (dir / "scene.gltf").string();
+    ST_RETURN_IF_ERROR(WriteGltfScene(scene->scene.scene, inputs.scene_path));
   } else {
     Expected<ScenePreset> preset = ParseScenePreset(scene_arg);
     if (!preset.ok()) {

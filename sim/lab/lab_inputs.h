@@ -43,10 +43,12 @@ struct LabInputs {
   Rigid3d model_from_table = Rigid3d::Identity();
 };
 
-// `site` / `scene`: a preset name (sandtable-3, grid-N, flat-4 / sandtable, city, flat) or a
-// file (site JSON / glTF). The scene presets use `seed`; so do the factory calibrations.
-// `model`: "" writes model.gltf, the scene moved by a placement drawn from `seed` (up to
-// kMaxModelOffset_m in x and y and kMaxModelYaw_deg about z); a file is handed over as given.
+// `site` / `scene`: a preset name (sandtable-3, grid-N, flat-4, random:SEED / sandtable, city,
+// flat, random:SEED) or a file (site JSON / glTF). random:SEED draws a site (sim/site/
+// random_site.h) or a scene (common/scene/random_scene.h) from its own seed, not `seed`. The scene
+// presets use `seed`; so do the factory calibrations. `model`: "" writes model.gltf, the scene
+// moved by a placement drawn from `seed` (up to kMaxModelOffset_m in x and y and kMaxModelYaw_deg
+// about z); a file is handed over as given.
 inline constexpr double kMaxModelOffset_m = 0.05;
 inline constexpr double kMaxModelYaw_deg = 10.0;
 // `resolution_scale` < 1: every projector and camera at that fraction of its resolution

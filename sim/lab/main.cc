@@ -54,8 +54,11 @@ static int Run(int argc, char** argv) {
   sim::LabRunOptions options;
   std::string progress = "auto";
   run->add_option("--site", options.site,
-                  "Site: sandtable-3, grid-N (1..64), flat-4, or a site file");
-  run->add_option("--scene", options.scene, "Scene: sandtable, city, flat, or a glTF file");
+                  "Site: sandtable-3, grid-N (1..64), flat-4, random:SEED (a random sound site), "
+                  "or a site file");
+  run->add_option("--scene", options.scene,
+                  "Scene: sandtable, city, flat, random:SEED (terrain and structures), or a "
+                  "glTF file");
   run->add_option("--out", options.out_dir, "Output directory (report, logs, calibrations)")
       ->required();
   run->add_option("--seed", options.seed, "Seed of the scene preset, factory errors and metric")
@@ -66,6 +69,10 @@ static int Run(int argc, char** argv) {
   run->add_option("--bin-dir", options.bin_dir,
                   "Directory of sandtable-world/-coordinator/-node (default: beside this program, "
                   "then the build tree)");
+  run->add_option("--max-rms-mm", options.verdict.max_rms_mm,
+                  "the registration's bar: a completed run whose site rms is over it fails "
+                  "(status failed, exit code 3); 0: no bar")
+      ->check(cli::Real(0.0, 1e6));
   run->add_option("--samples", options.metric_samples,
                   "Surface points sampled by the registration metric")
       ->check(cli::Integer<int>(1, 10000000));
@@ -178,7 +185,8 @@ static int Run(int argc, char** argv) {
   cli::Configure(*sweep);
   sim::LabSweepOptions sweep_options;
   sweep->add_option("--site", sweep_options.site,
-                    "Site: sandtable-3, grid-N (1..64), flat-4, or a site file");
+                    "Site: sandtable-3, grid-N (1..64), flat-4, random:SEED (a random sound site), "
+                    "or a site file");
   sweep->add_option("--scene", sweep_options.scene, "Scene: sandtable, city, flat, or a glTF file");
   sweep->add_option("--out", sweep_options.out_dir, "Output directory (sweep.md, sweep.csv, runs/)")
       ->required();

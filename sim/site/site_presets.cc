@@ -2,10 +2,13 @@
 
 #include <cmath>
 #include <numbers>
+#include <optional>
 #include <string>
 
 #include "common/base/units.h"
 #include "common/scene/procedural_scene.h"
+#include "common/scene/random_scene.h"
+#include "sim/site/random_site.h"
 
 namespace sandtable::sim {
 
@@ -159,9 +162,12 @@ Status ScaleSiteResolution(double factor, Site* site) {
 }
 
 Expected<Site> MakeSitePreset(std::string_view name) {
-  Expected<Site> site = InvalidArgumentError("unknown site preset '" + std::string(name) +
-                                             "' (use sandtable-3, grid-N with N in 1..64, flat-4)");
-  if (name == "sandtable-3") {
+  Expected<Site> site =
+      InvalidArgumentError("unknown site preset '" + std::string(name) +
+                           "' (use sandtable-3, grid-N with N in 1..64, flat-4, random:SEED)");
+  if (std::optional<uint64_t> seed = ParseRandomSeedName(std::string(name))) {
+    site = MakeRandomSite(*seed);
+  } else if (name == "sandtable-3") {
     site = Sandtable3();
   } else if (name == "flat-4") {
     site = Grid("flat-4", 4, {2.0, 1.5}, 10.0);

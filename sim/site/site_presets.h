@@ -13,6 +13,7 @@
 //     exposure is 5 ms for throws of 1.6 to 2.6 m and goes as throw^2 outside (the white stays in
 //     range: grid-2 at 5.1 m gets 19 ms, grid-64 at 0.64 m 0.8 ms).
 //   flat-4: the flat table (2.0 m x 1.5 m), 2x2 projectors tilted 10 degrees, overlapping 25 %.
+//   random:SEED: a random site of 3 to 8 mixed units, checked sound (sim/site/random_site.h).
 // Every unit has a camera. Ids are 0..N-1. The presets pass Site::Check().
 #pragma once
 
