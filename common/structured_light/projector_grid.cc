@@ -16,6 +16,22 @@ struct NodeSums {
   double fy[3] = {0, 0, 0};
   double cc = 0.0;
   int count = 0;
+  void Add(double dx, double dy, double x, double y) {
+    ff[0] += 1.0;
+    ff[1] += dx;
+    ff[2] += dy;
+    ff[3] += dx * dx;
+    ff[4] += dx * dy;
+    ff[5] += dy * dy;
+    fx[0] += x;
+    fx[1] += dx * x;
+    fx[2] += dy * x;
+    fy[0] += y;
+    fy[1] += dx * y;
+    fy[2] += dy * y;
+    cc += x * x + y * y;
+    ++count;
+  }
 };
 
 }  // namespace
@@ -32,6 +48,9 @@ Status ProjectorGridOptions::Check() const {
   }
   if (!(support_radius_px > 0.0) || support_radius_px >= step_px) {
     return InvalidArgumentError("projector grid: support_radius_px must be in (0, step_px)");
+  }
+  if (!(wide_support_radius_px >= 0.0) || !std::isfinite(wide_support_radius_px)) {
+    return InvalidArgumentError("projector grid: wide_support_radius_px must be >= 0");
   }
   if (min_support < 3) return InvalidArgumentError("projector grid: min_support must be >= 3");
   if (!(max_fit_rms_px > 0.0)) {
@@ -63,6 +82,9 @@ Expected<std::vector<ProjectorGridPoint>> SampleProjectorGrid(const Decoding& de
   }
   std::vector<NodeSums> sums(static_cast<size_t>(nx) * ny);
   const double r = options.support_radius_px;
+  const double wide_r =
+      std::max(r, std::min(options.wide_support_radius_px, 0.5 * options.step_px));
+  std::vector<NodeSums> wide_sums(wide_r > r ? sums.size() : 0);
   const double inv_step = 1.0 / options.step_px;
   for (int y = 0; y < decoding.valid.rows; ++y) {
     const uint8_t* valid = decoding.valid.ptr<uint8_t>(y);
@@ -77,37 +99,31 @@ Expected<std::vector<ProjectorGridPoint>> SampleProjectorGrid(const Decoding& de
       if (i < 0 || j < 0 || i >= nx || j >= ny) continue;
       const double dx = u - (options.offset_px + i * options.step_px);
       const double dy = v - (options.offset_px + j * options.step_px);
-      if (std::abs(dx) > r || std::abs(dy) > r) continue;
+      const double distance = std::max(std::abs(dx), std::abs(dy));
+      if (distance > wide_r) continue;
+      const size_t node = static_cast<size_t>(j) * nx + i;
+      if (!wide_sums.empty()) wide_sums[node].Add(dx, dy, x, y);
+      if (distance > r) continue;
       ++local.supporting_pixels;
-      NodeSums& s = sums[static_cast<size_t>(j) * nx + i];
-      s.ff[0] += 1.0;
-      s.ff[1] += dx;
-      s.ff[2] += dy;
-      s.ff[3] += dx * dx;
-      s.ff[4] += dx * dy;
-      s.ff[5] += dy * dy;
-      s.fx[0] += x;
-      s.fx[1] += dx * x;
-      s.fx[2] += dy * x;
-      s.fy[0] += y;
-      s.fy[1] += dx * y;
-      s.fy[2] += dy * y;
-      s.cc += static_cast<double>(x) * x + static_cast<double>(y) * y;
-      ++s.count;
+      sums[node].Add(dx, dy, x, y);
     }
   }
-  // The support is a square of side 2r; a well-surrounded node has second moments of about
-  // r^2 / 3 per axis. Less than a tenth of that in some direction: the support is a sliver.
-  const double min_eigen = 0.1 * r * r / 3.0;
   for (int j = 0; j < ny; ++j) {
     for (int i = 0; i < nx; ++i) {
-      const NodeSums& s = sums[static_cast<size_t>(j) * nx + i];
+      const size_t node = static_cast<size_t>(j) * nx + i;
+      const bool wide = sums[node].count < options.min_support && !wide_sums.empty() &&
+                        wide_sums[node].count >= options.min_support;
+      const NodeSums& s = wide ? wide_sums[node] : sums[node];
       if (s.count == 0) continue;
       ++local.nodes_with_support;
       if (s.count < options.min_support) {
         ++local.rejected_support;
         continue;
       }
+      // The support is a square of side 2r; a well-surrounded node has second moments of
+      // about r^2 / 3 per axis. Less than a tenth of that in some direction: a sliver.
+      const double support_r = wide ? wide_r : r;
+      const double min_eigen = 0.1 * support_r * support_r / 3.0;
       Eigen::Matrix3d m;
       m << s.ff[0], s.ff[1], s.ff[2], s.ff[1], s.ff[3], s.ff[4], s.ff[2], s.ff[4], s.ff[5];
       // Conditioning of the slope part: covariance of (dx, dy) about their mean.
@@ -144,6 +160,7 @@ Expected<std::vector<ProjectorGridPoint>> SampleProjectorGrid(const Decoding& de
       point.fit_rms_px = static_cast<float>(rms);
       point.support = static_cast<uint16_t>(std::min(s.count, 65535));
       out.push_back(point);
+      local.nodes_on_wide_support += wide;
     }
   }
   local.nodes_kept = static_cast<int>(out.size());

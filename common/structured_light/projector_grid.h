@@ -15,6 +15,12 @@
 //   when it has at least min_support pixels, the 3x3 normal matrix is well conditioned (the
 //   support surrounds the node, not a line beside it) and the fit's rms residual in camera px
 //   is at most max_fit_rms_px (a support straddling a depth edge does not fit one plane).
+//   A camera that sees the projector coarsely (a camera pixel spanning 2.5 projector px or
+//   more: a 1920-wide projector seen by a 700 px focal length camera from beside it) puts fewer
+//   than min_support pixels inside support_radius_px of any node. Such a node is fitted on its
+//   wide support instead, the pixels within wide_support_radius_px (at most half the step, so
+//   supports never overlap): the same fit and the same checks on a larger square. Nodes with
+//   enough pixels in the small support keep it, so a finely sampling camera is unaffected.
 // Frames and units: camera px and projector px, pixel (0,0) centred at (0.0, 0.0).
 // Errors: INVALID_ARGUMENT for a decoding that is not CV_32FC2 + CV_8UC1 of one size, or bad
 // options (Check()). Cost: O(camera pixels + nodes), single-threaded.
@@ -36,8 +42,11 @@ struct ProjectorGridOptions {
   double step_px = 16.0;           // grid spacing, projector px (> 0)
   double offset_px = 8.0;          // first node, projector px (>= 0)
   double support_radius_px = 3.0;  // max-norm radius of a node's support, projector px
-  int min_support = 6;             // decoded camera pixels per node, at least (>= 3)
-  double max_fit_rms_px = 0.75;    // affine fit residual, camera px
+  // The wide support for nodes with too few pixels in the small one (>= 0; used as clamped to
+  // [support_radius_px, step_px / 2]; support_radius_px or less: none).
+  double wide_support_radius_px = 7.5;
+  int min_support = 6;           // decoded camera pixels per node, at least (>= 3)
+  double max_fit_rms_px = 0.75;  // affine fit residual, camera px
   Status Check() const;
 };
 
@@ -54,6 +63,7 @@ struct ProjectorGridReport {
   int nodes_with_support = 0;
   int nodes_kept = 0;
   int rejected_support = 0, rejected_conditioning = 0, rejected_fit = 0;
+  int nodes_on_wide_support = 0;  // of the kept nodes, fitted on the wide support
 };
 
 Expected<std::vector<ProjectorGridPoint>> SampleProjectorGrid(

@@ -502,6 +502,7 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
       grid.step_px = step.grid_step_px() > 0 ? step.grid_step_px() : options_.grid_step_px;
       grid.offset_px = grid.step_px / 2;
       grid.support_radius_px = std::min(3.0, grid.step_px / 2 - 0.5);
+      grid.wide_support_radius_px = std::max(grid.support_radius_px, grid.step_px / 2 - 0.5);
       struct Decoded {
         Expected<std::vector<ProjectorGridPoint>> points = std::vector<ProjectorGridPoint>{};
         CameraDecodeReport report;

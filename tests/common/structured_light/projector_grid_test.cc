@@ -98,6 +98,54 @@ TEST(ProjectorGrid, RefusesSupportAcrossADepthEdge) {
   }
 }
 
+TEST(ProjectorGrid, ACoarseCameraStillGivesEveryNodeItSees) {
+  // The unseen site of issue 34: a 1920-wide projector seen by a 700 px camera, 3 projector px
+  // per camera px. Inside the small support (6 x 6 projector px) a node gets ~4 camera pixels,
+  // under min_support: with the small support alone 3 of ~350 nodes survived.
+  Eigen::Matrix2d a;
+  a << 3.0, 0.3, -0.2, 2.9;
+  const Eigen::Vector2d b(-30.0, -20.0);
+  const Decoding d = AffineDecoding(150, 110, a, b, 0.1, 11);
+  ProjectorGridOptions small = Options();
+  small.wide_support_radius_px = 0.0;
+  ProjectorGridReport small_report;
+  Expected<std::vector<ProjectorGridPoint>> few = SampleProjectorGrid(d, small, &small_report);
+  ASSERT_TRUE(few.ok());
+  EXPECT_LT(few->size(), 20u) << "the small support alone loses the coarse camera's nodes";
+
+  ProjectorGridReport report;
+  Expected<std::vector<ProjectorGridPoint>> points = SampleProjectorGrid(d, Options(), &report);
+  ASSERT_TRUE(points.ok());
+  // Nodes whose whole wide support lies in the decoded area: (150 x 110 camera px) x 3 = a
+  // 450 x 320 projector region, clipped to the 400 x 300 image, 16 px apart.
+  EXPECT_GT(points->size(), 300u);
+  EXPECT_EQ(report.nodes_on_wide_support,
+            static_cast<int>(points->size()) - static_cast<int>(few->size()));
+  double sum_sq = 0;
+  for (const ProjectorGridPoint& p : *points) {
+    const Eigen::Vector2d expected = a.inverse() * (p.projector_px.cast<double>() - b);
+    sum_sq += (p.camera_px.cast<double>() - expected).squaredNorm();
+  }
+  // 0.1 projector px of noise is 0.033 camera px per pixel, averaged over ~25 pixels.
+  EXPECT_LT(std::sqrt(sum_sq / points->size()), kNoisyTolerance_px);
+}
+
+TEST(ProjectorGrid, AFineCameraKeepsTheSmallSupport) {
+  Eigen::Matrix2d a = Eigen::Matrix2d::Identity() * 1.2;
+  const Decoding d = AffineDecoding(320, 250, a, Eigen::Vector2d(2.0, 1.0), 0.1, 5);
+  ProjectorGridOptions small = Options();
+  small.wide_support_radius_px = 0.0;
+  Expected<std::vector<ProjectorGridPoint>> without = SampleProjectorGrid(d, small);
+  ProjectorGridReport report;
+  Expected<std::vector<ProjectorGridPoint>> with = SampleProjectorGrid(d, Options(), &report);
+  ASSERT_TRUE(without.ok() && with.ok());
+  ASSERT_EQ(without->size(), with->size());
+  EXPECT_EQ(report.nodes_on_wide_support, 0);
+  for (size_t i = 0; i < with->size(); ++i) {
+    EXPECT_EQ((*with)[i].camera_px, (*without)[i].camera_px);
+  }
+}
+
 TEST(ProjectorGrid, RefusesBadInput) {
   Decoding d;
   d.projector_px = cv::Mat(10, 10, CV_32FC1);
@@ -105,6 +153,9 @@ TEST(ProjectorGrid, RefusesBadInput) {
   EXPECT_FALSE(SampleProjectorGrid(d, Options()).ok());
   ProjectorGridOptions bad = Options();
   bad.support_radius_px = 20;  // >= step
+  EXPECT_FALSE(bad.Check().ok());
+  bad = Options();
+  bad.wide_support_radius_px = -1;
   EXPECT_FALSE(bad.Check().ok());
 }
 
