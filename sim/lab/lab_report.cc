@@ -9,6 +9,7 @@
 #include "common/io/json_reader.h"
 #include "sim/lab/child_process.h"
 #include "sim/lab/lab_html.h"
+#include "sim/lab/lab_verdict.h"
 
 namespace sandtable::sim {
 
@@ -99,6 +100,12 @@ json LabReportJson(const LabResult& r) {
               {"command", r.command},
               {"seed", r.seed},
               {"total_s", r.total_s}};
+  json reasons = json::array();
+  for (const LabReason& reason : r.reasons) {
+    reasons.push_back({{"what", reason.what}, {"detail", reason.detail}});
+  }
+  out["reasons"] = reasons;
+  out["max_rms_mm"] = r.max_rms_mm;
   json phases = json::array();
   for (const auto& [name, seconds] : r.phase_seconds) {
     phases.push_back({{"name", name}, {"seconds", seconds}});
@@ -249,9 +256,14 @@ std::string SummaryMarkdown(const LabResult& r) {
     }
     rows.push_back(row);
   };
+  // A figure from too few samples: its value is not shown as one.
+  auto not_measured = [&](const std::string& figure, const std::string& target,
+                          const std::string& why) {
+    rows.push_back({figure, "not measured", target, why});
+  };
   if (r.registration) {
     const RegistrationReport& reg = *r.registration;
-    add("registration rms (site)", reg.site.all.rms_mm, 3, " mm", 0, true);
+    add("registration rms (site)", reg.site.all.rms_mm, 3, " mm", r.max_rms_mm, true);
     add("registration max (site)", reg.site.all.max_mm, 2, " mm", 0, true);
   }
   if (r.self_calibration.contains("runner_report")) {
@@ -282,15 +294,33 @@ std::string SummaryMarkdown(const LabResult& r) {
   const json& p = r.photometric;
   if (p.contains("max_step_pct_per_5mm")) {
     const json& m = p["max_step_pct_per_5mm"];
-    add("largest step per 5 mm, table", m.value("table", 0.0), 2, " %", 1.5, true);
-    add("largest step per 5 mm, walls", m.value("walls", 0.0), 2, " %", 2, true);
-    if (p.contains("p99_step_pct_per_5mm")) {
-      add("p99 step per 5 mm, table", p["p99_step_pct_per_5mm"].value("table", 0.0), 2, " %", 0,
-          true);
-      add("p99 step per 5 mm, walls", p["p99_step_pct_per_5mm"].value("walls", 0.0), 2, " %", 0,
-          true);
+    const std::string table_missing = StepNotMeasured(p, "table", r.min_step_pairs);
+    const std::string walls_missing = StepNotMeasured(p, "walls", r.min_step_pairs);
+    if (table_missing.empty()) {
+      add("largest step per 5 mm, table", m.value("table", 0.0), 2, " %", 1.5, true);
+    } else {
+      not_measured("largest step per 5 mm, table", "< 1.50 %", table_missing);
     }
-    add("table uniformity min/max", p.value("uniformity_min_over_max", 0.0), 3, "", 0, true);
+    if (walls_missing.empty()) {
+      add("largest step per 5 mm, walls", m.value("walls", 0.0), 2, " %", 2, true);
+    } else {
+      not_measured("largest step per 5 mm, walls", "< 2.00 %", walls_missing);
+    }
+    if (p.contains("p99_step_pct_per_5mm")) {
+      if (table_missing.empty()) {
+        add("p99 step per 5 mm, table", p["p99_step_pct_per_5mm"].value("table", 0.0), 2, " %", 0,
+            true);
+      }
+      if (walls_missing.empty()) {
+        add("p99 step per 5 mm, walls", p["p99_step_pct_per_5mm"].value("walls", 0.0), 2, " %", 0,
+            true);
+      }
+    }
+    if (table_missing.empty()) {
+      add("table uniformity min/max", p.value("uniformity_min_over_max", 0.0), 3, "", 0, true);
+    } else {
+      not_measured("table uniformity min/max", "-", table_missing);
+    }
   }
   if (p.contains("black_step_pct")) {
     add("black level step, table", p.value("black_step_pct", 0.0), 1, " %", 0, true);
@@ -319,7 +349,18 @@ std::string SummaryMarkdown(const LabResult& r) {
 std::string LabReportMarkdown(const LabResult& r) {
   std::ostringstream md;
   md << "# Site lab report: " << r.site_name << " / " << r.scene_label << "\n\n";
-  md << "Status: **" << r.status << "**. Command:\n\n    " << r.command << "\n\n";
+  md << "Status: **" << r.status << "**";
+  if (!r.reasons.empty()) {
+    md << ": " << r.reasons.size() << (r.reasons.size() == 1 ? " reason" : " reasons");
+  }
+  md << ". Command:\n\n    " << r.command << "\n\n";
+  if (!r.reasons.empty()) {
+    md << "## Why it failed\n\n";
+    for (const LabReason& reason : r.reasons) {
+      md << "- **" << reason.what << "**: " << reason.detail << "\n";
+    }
+    md << "\n";
+  }
   if (r.failure) {
     const LabFailure& f = *r.failure;
     md << "## Failure\n\n" << f.reason << " (phase: " << f.phase << ")\n\n";

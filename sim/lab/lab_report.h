@@ -3,7 +3,8 @@
 // not (a failed run's report says which child failed, how, and the end of its log).
 //
 // report.json (format "sandtable.lab_report", version 1):
-//   status: "ok" | "failed" | "interrupted"; command; seed; total_s; phases: [{name, seconds}]
+//   status: "ok" | "failed" | "interrupted"; reasons: [{what, detail}] (a completed run's
+//   failures, lab_verdict.h); max_rms_mm; command; seed; total_s; phases: [{name, seconds}]
 //   site: {name, label, units, file}; scene: {label, file, triangles}
 //   processes: [{name, pid, role, exit}]
 //   calibration: {source, rms_mm, p99_mm, max_mm, rms_px, p99_px, max_px, count, unmeasured,
@@ -55,6 +56,12 @@ struct LabUnitResult {
   std::string json_path, yaml_path;  // relative to the output directory
 };
 
+// Why a completed run failed (sim/lab/lab_verdict.h): what, and the figures behind it.
+struct LabReason {
+  std::string what;
+  std::string detail;
+};
+
 struct LabResult {
   std::string status = "ok";  // ok | failed | interrupted
   std::string command;
@@ -72,6 +79,11 @@ struct LabResult {
   std::string top_white_png, heatmap_png;  // relative; empty when not made
   double heatmap_scale_mm = 0.0;
   std::optional<LabFailure> failure;
+  // A completed run's verdict (status "failed" when any): first in report.md, "reasons" in
+  // report.json. Step figures from fewer than min_step_pairs pairs show "not measured".
+  std::vector<LabReason> reasons;
+  int min_step_pairs = 1;
+  double max_rms_mm = 0.0;  // the bar the registration was judged by (0: none)
   // Self-calibration (docs/calibration.md): the runner's report, per-unit compute, messages
   // and bytes; units that could not calibrate and why; the model's placement against the truth.
   nlohmann::json self_calibration = nlohmann::json::object();

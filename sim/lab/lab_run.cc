@@ -69,7 +69,8 @@ int64_t SteadyNowNs() {
       .count();
 }
 
-constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2, kExitInterrupted = 130;
+constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2, kExitVerdict = 3,
+              kExitInterrupted = 130;
 constexpr int kLogTailLines = 20;
 
 milliseconds ToMs(double seconds) { return milliseconds(static_cast<int64_t>(seconds * 1e3)); }
@@ -1592,6 +1593,10 @@ class LabRun {
                                    child->DescribeExit(), child->cpu_s(), child->max_rss_mb()});
     }
     result_.phase_seconds = progress_.phase_seconds();
+    result_.max_rms_mm = options_.verdict.max_rms_mm;
+    result_.min_step_pairs = options_.verdict.min_step_pairs;
+    result_.reasons = JudgeLabRun(result_, options_.verdict);
+    if (!result_.reasons.empty()) result_.status = "failed";
     result_.total_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
     const Status written = WriteLabReport(result_, options_.out_dir);
@@ -1616,9 +1621,12 @@ class LabRun {
            << result_.calibration_source << ": rms " << s.rms_mm << " mm, p99 " << s.p99_mm
            << " mm, max " << s.max_mm << " mm, rms " << s.rms_px << " px\n";
     }
+    for (const LabReason& reason : result_.reasons) {
+      err_ << "sandtable-lab run: failed: " << reason.what << ": " << reason.detail << "\n";
+    }
     err_ << "sandtable-lab run: report " << (fs::path(options_.out_dir) / "report.md").string()
          << "\n";
-    return kExitOk;
+    return result_.reasons.empty() ? kExitOk : kExitVerdict;
   }
 
   // ---- helpers ----
@@ -1859,6 +1867,7 @@ Status LabRunOptions::Check() const {
     return InvalidArgumentError("timeouts must be > 0");
   }
   if (metric_samples < 1) return InvalidArgumentError("--samples must be >= 1");
+  ST_RETURN_IF_ERROR(verdict.Check());
   if (image_width_px < 16) return InvalidArgumentError("--image-width must be >= 16");
   if (kill_unit >= 0 && !(kill_at_s >= 0)) return InvalidArgumentError("--kill-at-s must be >= 0");
   if (stall_unit >= 0 && (!(stall_at_s >= 0) || !(stall_for_s > 0))) {

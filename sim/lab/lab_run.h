@@ -25,6 +25,9 @@
 // The lab prints its own JSON lines on stdout for supervisors and tests:
 //   {"lab":"phase","phase":"hold","hold_s":30}   when a phase starts
 //   {"lab":"done","status":"ok","report":"DIR/report.json"}
+// Exit codes: 0 ok; 1 a child, deadline or file failed; 2 usage; 3 the run completed and failed
+// its verdict (registration over --max-rms-mm, model not found, a unit left out, a figure not
+// measured: lab_verdict.h); 130 interrupted.
 #pragma once
 
 #include <atomic>
@@ -34,6 +37,7 @@
 #include <vector>
 
 #include "common/base/status.h"
+#include "sim/lab/lab_verdict.h"
 
 namespace sandtable::sim {
 
@@ -73,6 +77,11 @@ struct LabRunOptions {
   // Self-calibration path of the nodes: "auto" (planar when every footprint is planar) or
   // "full" (docs/calibration.md, "Planar sites").
   std::string calibration_path = "auto";
+  // The verdict on a completed run (sim/lab/lab_verdict.h): its registration bar
+  // (--max-rms-mm, 0 = none) and the sample counts under which a figure is "not measured". A
+  // run that fails it ends with status "failed", its reasons first in report.md, and exit
+  // code 3.
+  LabVerdictOptions verdict;
   // A unit started only once the others hold their calibration (a live join, docs/lab.md):
   // it is calibrated against them; the report says whether any of them was recalibrated.
   // -1: none.

@@ -57,7 +57,8 @@ std::string SweepCsv(const std::vector<SweepPoint>& points);
 // Shared by sweep and scale (sim/lab/lab_scale.h).
 // Runs `sandtable-lab run ARGS` (this program, `run_args` after "run") as a child whose
 // stdout and stderr go to `log_path`, until it exits; on `stop` it is sent SIGTERM (it tears
-// its site down and writes its report). An empty string when it exited 0, else why not.
+// its site down and writes its report). An empty string when it completed (exit 0, or 3: its
+// verdict failed, lab_run.h), else why not.
 std::string RunChildLab(const std::vector<std::string>& run_args, const std::string& log_path,
                         const std::atomic<bool>& stop);
 // Draws `script` with gnuplot (found on PATH); an empty string when it did, else why not.
