@@ -81,7 +81,8 @@ void AddWorldCommands(CLI::App& app, WorldCommandLine& line) {
 
   CLI::App* site = app.add_subcommand("make-site", "write a site preset (and factory files)");
   MakeSiteArgs& m = line.make_site;
-  site->add_option("--preset", m.preset, "site preset: sandtable-3, grid-N (N units), flat-4")
+  site->add_option("--preset", m.preset,
+                   "site preset: sandtable-3, grid-N (N units), flat-4, random:SEED")
       ->required();
   site->add_option("--seed", m.seed, "random seed of the factory calibrations' errors")
       ->check(kSeed);
