@@ -1,5 +1,6 @@
 #include "common/structured_light/projector_grid.h"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -108,10 +109,24 @@ Expected<std::vector<ProjectorGridPoint>> SampleProjectorGrid(const Decoding& de
       sums[node].Add(dx, dy, x, y);
     }
   }
+  // A coarse camera: the median node holds fewer than twice min_support pixels in its small
+  // support. Only then do nodes short of pixels take their wide support; a fine camera's nodes
+  // short of pixels lie at the edges of what it sees (a footprint's rim, an occlusion), where
+  // a wider support would reach across the edge.
+  std::vector<int> inner_counts;
+  for (const NodeSums& s : sums) {
+    if (s.count > 0) inner_counts.push_back(s.count);
+  }
+  bool coarse = false;
+  if (!wide_sums.empty() && !inner_counts.empty()) {
+    std::nth_element(inner_counts.begin(), inner_counts.begin() + inner_counts.size() / 2,
+                     inner_counts.end());
+    coarse = inner_counts[inner_counts.size() / 2] < 2 * options.min_support;
+  }
   for (int j = 0; j < ny; ++j) {
     for (int i = 0; i < nx; ++i) {
       const size_t node = static_cast<size_t>(j) * nx + i;
-      const bool wide = sums[node].count < options.min_support && !wide_sums.empty() &&
+      const bool wide = coarse && sums[node].count < options.min_support &&
                         wide_sums[node].count >= options.min_support;
       const NodeSums& s = wide ? wide_sums[node] : sums[node];
       if (s.count == 0) continue;

@@ -19,8 +19,11 @@
 //   more: a 1920-wide projector seen by a 700 px focal length camera from beside it) puts fewer
 //   than min_support pixels inside support_radius_px of any node. Such a node is fitted on its
 //   wide support instead, the pixels within wide_support_radius_px (at most half the step, so
-//   supports never overlap): the same fit and the same checks on a larger square. Nodes with
-//   enough pixels in the small support keep it, so a finely sampling camera is unaffected.
+//   supports never overlap): the same fit and the same checks on a larger square. A camera is
+//   coarse when its median node holds fewer than 2 min_support pixels in the small support; a
+//   fine camera's nodes never take the wide support (its nodes short of pixels lie at the rim
+//   of what it sees, where a wider support would reach across the edge), nor do nodes with
+//   enough pixels in the small one.
 // Frames and units: camera px and projector px, pixel (0,0) centred at (0.0, 0.0).
 // Errors: INVALID_ARGUMENT for a decoding that is not CV_32FC2 + CV_8UC1 of one size, or bad
 // options (Check()). Cost: O(camera pixels + nodes), single-threaded.
