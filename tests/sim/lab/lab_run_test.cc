@@ -425,7 +425,10 @@ TEST_F(LabRunTest, Sandtable3NodeStalledMidCalibrationIsCalibratedWithTheOthers)
   ASSERT_TRUE(RunToEnd(LabArgs({"--stall-unit", "1", "--stall-at-s", "7", "--stall-for-s", "4",
                                 "--render", "off", "--blend", "off"},
                                site_path.string(), dir_ / "run"),
-                       "run", &report));
+                       "run", &report, kExitVerdictFailed));
+  // Unit 2's projector is dark: it is left out, and the verdict says so (only that).
+  ASSERT_EQ(report["reasons"].size(), 1u) << report["reasons"].dump();
+  EXPECT_EQ(report["reasons"][0]["what"], "a unit left out");
   const json& c = report["calibration"];
   ASSERT_TRUE(c.contains("stall")) << c.dump();
   EXPECT_TRUE(c["stall"].contains("resumed_at_s")) << c["stall"].dump();
