@@ -41,8 +41,9 @@ bench="$build/tests/bench"
 #    per unit) on localhost, measured against the world's truth (docs/lab.md); then the
 #    ceiling-grid site over the city table.
 step lab "$lab" run --site sandtable-3 --scene sandtable --out "$out/lab" --progress plain
+# The true-pose baseline (factory intrinsics) is measured, not held to the self-calibration's bar.
 step lab_true_pose "$lab" run --site sandtable-3 --scene sandtable --calibration true-pose \
-  --out "$out/lab-true-pose" --progress plain
+  --max-rms-mm 0 --out "$out/lab-true-pose" --progress plain
 step lab_grid8 "$lab" run --site grid-8 --scene city --out "$out/lab-grid8" --progress plain
 
 # The lab's other commands, small enough for the demo (docs/results.md has the full ones): run
