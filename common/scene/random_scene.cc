@@ -193,36 +193,26 @@ Scene StructureMesh(const RandomStructure& s, SceneRng* rng) {
   return mesh.Take();
 }
 
-// Footprint and visible height of a structure of `kind`, before it is placed.
+// Footprint and visible height of a structure of `kind`, before it is placed: a tower is round
+// (radius, then height), every other kind draws width, depth and height from its ranges, m.
 void DrawShape(SceneRng* rng, RandomStructure* s) {
-  switch (s->kind) {
-    case RandomStructureKind::kTower: {
-      const double r = rng->Uniform(0.025, 0.05);
-      s->width_m = s->depth_m = 2 * r;
-      s->height_m = rng->Uniform(0.15, 0.30);
-      break;
-    }
-    case RandomStructureKind::kBridge:
-      s->width_m = rng->Uniform(0.2, 0.4);
-      s->depth_m = rng->Uniform(0.05, 0.08);
-      s->height_m = rng->Uniform(0.06, 0.12);
-      break;
-    case RandomStructureKind::kCourtyard:
-      s->width_m = rng->Uniform(0.15, 0.3);
-      s->depth_m = rng->Uniform(0.15, 0.3);
-      s->height_m = rng->Uniform(0.04, 0.12);
-      break;
-    case RandomStructureKind::kAntenna:
-      s->width_m = rng->Uniform(0.06, 0.1);
-      s->depth_m = rng->Uniform(0.06, 0.1);
-      s->height_m = rng->Uniform(0.15, 0.25);
-      break;
-    default:
-      s->width_m = rng->Uniform(0.07, 0.2);
-      s->depth_m = rng->Uniform(0.07, 0.2);
-      s->height_m = rng->Uniform(0.05, 0.25);
-      break;
+  if (s->kind == RandomStructureKind::kTower) {
+    const double r = rng->Uniform(0.025, 0.05);
+    s->width_m = s->depth_m = 2 * r;
+    s->height_m = rng->Uniform(0.15, 0.30);
+    return;
   }
+  struct Ranges {
+    double width[2], depth[2], height[2];
+  };
+  const Ranges ranges =
+      s->kind == RandomStructureKind::kBridge      ? Ranges{{0.2, 0.4}, {0.05, 0.08}, {0.06, 0.12}}
+      : s->kind == RandomStructureKind::kCourtyard ? Ranges{{0.15, 0.3}, {0.15, 0.3}, {0.04, 0.12}}
+      : s->kind == RandomStructureKind::kAntenna   ? Ranges{{0.06, 0.1}, {0.06, 0.1}, {0.15, 0.25}}
+                                                   : Ranges{{0.07, 0.2}, {0.07, 0.2}, {0.05, 0.25}};
+  s->width_m = rng->Uniform(ranges.width[0], ranges.width[1]);
+  s->depth_m = rng->Uniform(ranges.depth[0], ranges.depth[1]);
+  s->height_m = rng->Uniform(ranges.height[0], ranges.height[1]);
 }
 
 }  // namespace

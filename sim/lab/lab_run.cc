@@ -69,7 +69,7 @@ int64_t SteadyNowNs() {
       .count();
 }
 
-constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2, kExitVerdict = 3,
+constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2, kExitVerdict = kLabExitVerdict,
               kExitInterrupted = 130;
 constexpr int kLogTailLines = 20;
 

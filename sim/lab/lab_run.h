@@ -41,6 +41,10 @@
 
 namespace sandtable::sim {
 
+// The exit code of a run that completed and failed its verdict (sweep and scale read its
+// figures all the same).
+inline constexpr int kLabExitVerdict = 3;
+
 struct LabRunOptions {
   std::string site = "sandtable-3";
   std::string scene = "sandtable";

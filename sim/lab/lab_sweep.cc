@@ -21,6 +21,7 @@
 
 #include "sim/lab/child_process.h"
 #include "sim/lab/lab_html.h"
+#include "sim/lab/lab_run.h"
 
 namespace sandtable::sim {
 namespace {
@@ -219,10 +220,9 @@ std::string RunChildLab(const std::vector<std::string>& run_args, const std::str
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   c.ReadLines();
-  // 3: the run completed and its report holds a verdict that failed (lab_run.h); its figures
-  // are what a sweep or a scale compares.
-  constexpr int kExitVerdict = 3;
-  return c.exit_code() == 0 || c.exit_code() == kExitVerdict
+  // The run completed and its report holds a verdict that failed: its figures are what a
+  // sweep or a scale compares.
+  return c.exit_code() == 0 || c.exit_code() == kLabExitVerdict
              ? std::string()
              : "sandtable-lab run: " + c.DescribeExit();
 }

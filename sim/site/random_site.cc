@@ -35,10 +35,6 @@ constexpr double kFootprintCells = 1.4;
 constexpr double kWhiteShare = 0.35;
 constexpr int kMaxDraws = 200;
 
-struct LitPoint {
-  Eigen::Vector2d xy_in_table_m;
-};
-
 // Table points lit by a projector, on a 32 x 20 grid of its image (z = 0 plane).
 std::vector<Eigen::Vector2d> LitTable(const TableSpec& table, const ProjectorSpec& projector,
                                       int* samples) {
@@ -164,8 +160,11 @@ Expected<Site> DrawSite(uint64_t seed, uint64_t draw) {
   Site site;
   site.name = "random-" + std::to_string(seed);
   site.table.is_disc = table.is_disc;
-  site.table.diameter_m = table.is_disc ? table.diameter_m : site.table.diameter_m;
-  site.table.size_m = table.is_disc ? site.table.size_m : table.size_m;
+  if (table.is_disc) {
+    site.table.diameter_m = table.diameter_m;
+  } else {
+    site.table.size_m = table.size_m;
+  }
   site.ambient_luminance_nits = rng.Uniform(2.0, 10.0);
   const int n = kMinUnits + rng.Index(kMaxUnits - kMinUnits + 1);
   const std::vector<Eigen::Vector2d> centres = Layout(table, n, &rng);
