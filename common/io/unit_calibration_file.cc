@@ -63,6 +63,14 @@ Status UnitCalibration::Check() const {
         "projector_response: gamma = " + std::to_string(projector_response->gamma) +
         " must be in [0.5, 5] and black_level < 1");
   }
+  if (predicted_error &&
+      (!FiniteNonNegative(predicted_error->rms_px) || !std::isfinite(predicted_error->rms_mm) ||
+       predicted_error->samples < 0 || !FiniteNonNegative(predicted_error->sigma_px) ||
+       !(predicted_error->weak_share >= 0.0 && predicted_error->weak_share <= 1.0))) {
+    return InvalidArgumentError(
+        "predicted_error: rms_px, sigma_px and samples must be finite and >= 0, rms_mm finite, "
+        "weak_share in [0, 1]");
+  }
   if (unit_id != kInvalidNodeId && !IsValidNodeId(unit_id)) {
     return InvalidArgumentError("unit_id = " + std::to_string(unit_id) +
                                 " is a reserved sender id, not a node id");
@@ -91,6 +99,14 @@ json UnitCalibrationToJsonValue(const UnitCalibration& c) {
     if (c.projector_response->black_level >= 0.0) {
       root["projector_response"]["black_level"] = c.projector_response->black_level;
     }
+  }
+  if (c.predicted_error) {
+    const PredictedErrorRecord& p = *c.predicted_error;
+    json predicted{{"rms_px", p.rms_px},         {"samples", p.samples},
+                   {"sigma_px", p.sigma_px},     {"weak_direction", p.weak_direction},
+                   {"weak_share", p.weak_share}, {"undetermined", p.undetermined}};
+    if (p.rms_mm >= 0.0) predicted["rms_mm"] = p.rms_mm;
+    root["predicted_error"] = predicted;
   }
   return root;
 }
@@ -142,6 +158,22 @@ Expected<UnitCalibration> UnitCalibrationFromJson(const json& j, std::string_vie
     ST_RETURN_IF_ERROR(response->Number("black_level", &r.black_level, io::Presence::kOptional));
     ST_RETURN_IF_ERROR(response->End());
     c.projector_response = r;
+  }
+  if (root.Has("predicted_error")) {
+    Expected<io::ObjectReader> in = root.Object("predicted_error");
+    if (!in.ok()) return in.status();
+    PredictedErrorRecord p;
+    int64_t samples = 0;
+    ST_RETURN_IF_ERROR(in->Number("rms_px", &p.rms_px, io::Presence::kRequired));
+    ST_RETURN_IF_ERROR(in->Number("rms_mm", &p.rms_mm, io::Presence::kOptional));
+    ST_RETURN_IF_ERROR(in->Integer("samples", 0, 1 << 30, &samples));
+    p.samples = static_cast<int>(samples);
+    ST_RETURN_IF_ERROR(in->Number("sigma_px", &p.sigma_px, io::Presence::kOptional));
+    ST_RETURN_IF_ERROR(in->String("weak_direction", &p.weak_direction, io::Presence::kOptional));
+    ST_RETURN_IF_ERROR(in->Number("weak_share", &p.weak_share, io::Presence::kOptional));
+    ST_RETURN_IF_ERROR(in->String("undetermined", &p.undetermined, io::Presence::kOptional));
+    ST_RETURN_IF_ERROR(in->End());
+    c.predicted_error = p;
   }
   ST_RETURN_IF_ERROR(root.End());
   if (Status valid = c.Check(); !valid.ok()) return valid.WithContext(source);

@@ -16,7 +16,11 @@
 //    "camera": CAMERA_MODEL, "projector": CAMERA_MODEL, "projector_from_camera": RIGID,
 //    "table_from_projector": RIGID, "table_from_model": RIGID,          (optional)
 //    "camera_rms_px": 0.12, "projector_rms_px": 0.31, "poses_used": ["capture_0", ...],
-//    "projector_response": {"gamma": 2.21, "black_level": 0.002}}  (optional; black_level too)
+//    "projector_response": {"gamma": 2.21, "black_level": 0.002},  (optional; black_level too)
+//    "predicted_error": {"rms_px": 0.04, "rms_mm": 0.09, "samples": 180, "sigma_px": 0.05,
+//                        "weak_direction": "...", "weak_share": 0.6, "undetermined": "..."}}
+//    (optional: what the solve's covariance predicts, node/calibration/cluster_uncertainty.h;
+//    rms_mm absent when it had too few points on the table to say)
 // unit_id, source, table_from_* and the rms/poses fields are optional (rms and poses are written
 // when the calibration came from poses). Also loaded: version 1 files
 // ("format": "sandtable-unit-calibration", 3x3 rotation, camera_matrix intrinsics; source
@@ -61,6 +65,18 @@ struct ProjectorResponseRecord {
   double black_level = -1.0;  // fraction of peak; < 0: not measured
 };
 
+// What a self-calibration's covariance predicts of this unit's registration error (1 sigma):
+// where its projector images the surface (px) and where its pixels land on the table (mm).
+struct PredictedErrorRecord {
+  double rms_px = 0.0;
+  double rms_mm = -1.0;        // < 0: not predicted (too few of its points on the table)
+  int samples = 0;             // points the mm figure is the rms over
+  double sigma_px = 0.0;       // the observation noise it was scaled by
+  std::string weak_direction;  // the direction carrying most of it, in words
+  double weak_share = 0.0;     // that direction's share of the variance, [0, 1]
+  std::string undetermined;    // what the data leave to the gauge (table frame, model)
+};
+
 struct UnitCalibration {
   NodeId unit_id = kInvalidNodeId;  // kInvalidNodeId: not written
   std::string source;               // one of the kSource* values above; empty: not written
@@ -73,6 +89,7 @@ struct UnitCalibration {
   double projector_rms_px = 0.0;  // dense decoded points in the projector, joint refinement
   std::vector<std::string> poses_used;
   std::optional<ProjectorResponseRecord> projector_response;  // once measured
+  std::optional<PredictedErrorRecord> predicted_error;        // a self-calibration's
 
   // Both models valid (CameraModel::Check), transforms finite, rms finite and >= 0, unit_id a
   // node id or kInvalidNodeId. The message names the field ("projector: fx_px = -3 ...").

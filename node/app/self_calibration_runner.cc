@@ -898,6 +898,16 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
                                    {"free_parameters", u.free_parameters},
                                    {"termination", s.bundle.termination},
                                    {"iterations", s.bundle.iterations}};
+      const auto c = s.calibrations.find(id);
+      if (c != s.calibrations.end() && c->second.predicted_error) {
+        const PredictedErrorRecord& p = *c->second.predicted_error;
+        nlohmann::json& unit = units[std::to_string(id)];
+        unit["predicted_rms_px"] = p.rms_px;
+        unit["predicted_rms_mm"] = p.rms_mm;
+        unit["predicted_samples"] = p.samples;
+        unit["weak_direction"] = p.weak_direction;
+        unit["weak_share"] = p.weak_share;
+      }
     }
     report["bundle"] = {{"termination", s.bundle.termination},
                         {"iterations", s.bundle.iterations},
@@ -907,6 +917,8 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
                         {"initial_rms_px", s.bundle.initial_rms_px},
                         {"final_rms_px", s.bundle.final_rms_px},
                         {"solve_time_s", s.bundle.solve_time_s},
+                        {"sigma_px", s.bundle.sigma_px},
+                        {"undetermined", s.bundle.undetermined},
                         {"units", units}};
     report["table"] = {{"points", s.table_points},         {"plane_rms_mm", s.table_plane_rms_mm},
                        {"max_height_mm", s.max_height_mm}, {"planar", s.planar},
@@ -977,6 +989,17 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
       result->set_reprojection_rms_px(u.projector_rms_px);
       result->set_camera_rms_px(u.camera_rms_px);
       result->set_compute_time_s(r.compute_s[m]);
+      if (u.predicted_error) {
+        const PredictedErrorRecord& p = *u.predicted_error;
+        wire::PredictedError* w = result->mutable_predicted_error();
+        w->set_rms_px(p.rms_px);
+        w->set_rms_mm(p.rms_mm);
+        w->set_samples(static_cast<uint32_t>(p.samples));
+        w->set_sigma_px(p.sigma_px);
+        w->set_weak_direction(p.weak_direction);
+        w->set_weak_share(p.weak_share);
+        w->set_undetermined(p.undetermined);
+      }
     } else {
       result->set_ok(false);
       std::string why = r.left_out.count(m) ? r.left_out[m]

@@ -814,6 +814,18 @@ void SelfCalibrationService::HandleResult(const wire::CalibrationResult& result,
   c.projector_rms_px = result.reprojection_rms_px();
   c.camera_rms_px = result.camera_rms_px();
   c.projector_response = response_;
+  if (result.has_predicted_error()) {
+    const wire::PredictedError& w = result.predicted_error();
+    PredictedErrorRecord p;
+    p.rms_px = w.rms_px();
+    p.rms_mm = w.rms_mm();
+    p.samples = static_cast<int>(std::min<uint32_t>(w.samples(), 1u << 30));
+    p.sigma_px = w.sigma_px();
+    p.weak_direction = w.weak_direction();
+    p.weak_share = w.weak_share();
+    p.undetermined = w.undetermined();
+    c.predicted_error = p;
+  }
   if (result.has_table_from_model()) {
     Expected<Rigid3d> table_from_model = proto::FromWire(result.table_from_model());
     if (table_from_model.ok()) c.table_from_model = *table_from_model;

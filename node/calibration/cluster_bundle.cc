@@ -8,6 +8,7 @@
 
 #include "common/base/thread_cpu_time.h"
 #include "common/estimation/triangulation.h"
+#include "node/calibration/cluster_uncertainty.h"
 #include "node/calibration/procam_model.h"
 
 namespace sandtable::node {
@@ -117,6 +118,7 @@ struct Residual {
   ceres::ResidualBlockId id = nullptr;
   NodeId unit = kInvalidNodeId;
   bool camera = false;
+  int point = -1;
 };
 
 // A track's point from the units' models and these poses; none when a view is missing or the
@@ -243,7 +245,7 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
         new ProjectorCost{track.projector_px, inverse_sigma});
     residuals.push_back(
         {problem.AddResidualBlock(projector_cost, loss, pb.pose, pb.pk, pb.pd, points[i].data()),
-         track.projector_unit, false});
+         track.projector_unit, false, i});
     for (const CameraObservation& o : track.cameras) {
       auto cb = blocks.find(o.camera_unit);
       if (cb == blocks.end()) continue;
@@ -252,7 +254,7 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
       residuals.push_back(
           {problem.AddResidualBlock(camera_cost, loss, cb->second.pose, cb->second.mount,
                                     cb->second.ck, cb->second.cd, points[i].data()),
-           o.camera_unit, true});
+           o.camera_unit, true, i});
     }
   }
   // The model's surface (second refinement).
@@ -415,6 +417,23 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
     }
   }
   result.report.final_rms_px = rms_px(false);
+  if (options.estimate_uncertainty) {
+    std::map<NodeId, UnitParameterBlocks> unit_blocks;
+    for (auto& [id, b] : blocks) {
+      unit_blocks[id] = {b.pose, b.mount, b.pk, b.pd, b.ck, b.cd};
+    }
+    std::vector<double*> point_blocks;
+    for (auto& p : points) point_blocks.push_back(p.data());
+    std::vector<ObservationBlock> observed;
+    for (const Residual& r : residuals) {
+      if (!r.id) continue;
+      const Track& track = observations.tracks[result.point_track[r.point]];
+      observed.push_back({r.id, r.unit, r.camera, r.point, track.projector_px});
+    }
+    const Status predicted = PredictUnitErrors(problem, unit_blocks, point_blocks, observed,
+                                               options, &result.report, &result.predicted);
+    if (!predicted.ok()) result.report.uncertainty_note = predicted.message();
+  }
   // Per unit residuals.
   std::map<NodeId, std::pair<double, int>> projector_sum, camera_sum;
   for (const Residual& r : residuals) {

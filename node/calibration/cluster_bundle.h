@@ -60,6 +60,10 @@ struct BundleOptions {
   int min_tracks = 50;
   int rounds = 2;
   bool log_progress = false;  // Ceres' per-iteration lines and full report on stderr (sweeps)
+  // Each unit's predicted projector error from the solve's covariance (BundleResult::predicted,
+  // cluster_uncertainty.h): one Jacobian evaluation of every residual after the last round.
+  bool estimate_uncertainty = true;
+  int uncertainty_samples = 200;  // per unit: its projector observations, evenly spaced
   // Units held entirely (pose, mount, intrinsics, distortion: no priors), e.g. the calibrated
   // units a joining unit is fitted against; with any held unit no other pose is held.
   std::set<NodeId> held_units;
@@ -72,6 +76,11 @@ struct UnitBundleReport {
   double projector_rms_px = 0.0;
   double camera_rms_px = 0.0;
   std::vector<std::string> free_parameters;  // e.g. "projector fx fy cx cy", "mount"
+  // Predicted from the covariance (BundleOptions::estimate_uncertainty); < 0: not predicted.
+  // rms over the unit's samples of the projector pixel error (1 sigma, both axes).
+  double predicted_rms_px = -1.0;
+  std::string weak_direction;  // the one direction carrying most of it, in words
+  double weak_share = 0.0;     // its share of the predicted variance, [0, 1]
 };
 
 struct BundleReport {
@@ -81,6 +90,20 @@ struct BundleReport {
   double initial_rms_px = 0.0, final_rms_px = 0.0;  // all observations, px
   double solve_time_s = 0.0;                        // thread CPU time
   std::map<NodeId, UnitBundleReport> units;
+  // The noise the prediction scales by: observation residual rms corrected for the degrees of
+  // freedom (px); 0 when not predicted. `undetermined`: the directions the data do not fix
+  // (left to the gauge: the held root pose, the table frame, the model's placement), in words;
+  // `uncertainty_note`: why nothing was predicted, when so.
+  double sigma_px = 0.0;
+  std::string undetermined;
+  std::string uncertainty_note;
+};
+
+// One sample of a unit's predicted error: a track's point (index into
+// BundleResult::points_in_world) and the covariance of where the unit's projector images it.
+struct PredictedSample {
+  int point = -1;
+  Eigen::Matrix2d px_covariance = Eigen::Matrix2d::Zero();  // px^2
 };
 
 struct BundleResult {
@@ -89,6 +112,7 @@ struct BundleResult {
   std::vector<Eigen::Vector3d> points_in_world;  // tracks used
   std::vector<int> point_track;                  // index into the input tracks
   BundleReport report;
+  std::map<NodeId, std::vector<PredictedSample>> predicted;  // when estimated
 };
 
 // A surface the points must lie on (the registered model): point `point` (index into

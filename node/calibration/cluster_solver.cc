@@ -7,6 +7,7 @@
 #include "common/base/thread_cpu_time.h"
 #include "common/estimation/resection.h"
 #include "common/estimation/triangulation.h"
+#include "node/calibration/cluster_uncertainty.h"
 
 namespace sandtable::node {
 namespace {
@@ -200,6 +201,9 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
   std::map<NodeId, Rigid3d> projector_from_world = bundle->projector_from_world;
   std::map<NodeId, UnitModel> units = bundle->units;
   std::vector<Eigen::Vector3d> points = bundle->points_in_world;
+  // The prediction of the bundle whose points and poses the solution keeps.
+  BundleReport predicting = bundle->report;
+  std::map<NodeId, std::vector<PredictedSample>> predicted = bundle->predicted;
 
   // The root projector's centre (the world origin) is above the table.
   Expected<TableFit> table = FitTable(points, options.plane, Eigen::Vector3d::Zero());
@@ -326,6 +330,8 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
         stage_done("model_bundle");
         if (second.ok()) {
           out.model_bundle = second->report;
+          predicting = second->report;
+          predicted = second->predicted;
           units = second->units;
           projector_from_world = second->projector_from_world;
           points = second->points_in_world;
@@ -371,6 +377,10 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
   for (const auto& [id, unit] : units) {
     out.calibrations[id] = SolvedUnitCalibration(
         id, unit, out.table_from_world * projector_from_world.at(id).Inverse(), out);
+  }
+  PredictOnTable(predicting, predicted, out.points_in_table_m, &out.calibrations);
+  if (!predicting.uncertainty_note.empty()) {
+    out.notes.push_back("predicted error: " + predicting.uncertainty_note);
   }
   out.time_s = ThreadCpuSeconds() - cpu_start;
   return out;

@@ -12,6 +12,7 @@
 #include "common/estimation/resection.h"
 #include "common/estimation/table_frame.h"
 #include "common/estimation/triangulation.h"
+#include "node/calibration/cluster_uncertainty.h"
 
 namespace sandtable::node {
 namespace {
@@ -487,6 +488,8 @@ Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservati
 
   // 5. The joint refinement with every cell on the plane z = 0 of the table frame.
   std::map<NodeId, UnitModel> units = observations.units;
+  BundleReport predicting;
+  std::map<NodeId, std::vector<PredictedSample>> predicted;
   if (options.refine) {
     BundleResult previous;
     previous.units = observations.units;
@@ -528,6 +531,8 @@ Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservati
       }
       out.bundle = refined->report;
       out.bundle.termination = "planar, refined: " + refined->report.termination;
+      predicting = refined->report;
+      predicted = refined->predicted;
     }
   }
 
@@ -553,6 +558,7 @@ Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservati
   for (const auto& [id, pose] : projector_from_table) {
     out.calibrations[id] = SolvedUnitCalibration(id, units.at(id), pose.Inverse(), out);
   }
+  PredictOnTable(predicting, predicted, out.points_in_table_m, &out.calibrations);
   out.time_s = ThreadCpuSeconds() - cpu_start;
   out.bundle.solve_time_s = out.time_s;
   return out;

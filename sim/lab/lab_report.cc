@@ -9,6 +9,7 @@
 #include "common/io/json_reader.h"
 #include "sim/lab/child_process.h"
 #include "sim/lab/lab_html.h"
+#include "sim/lab/lab_prediction.h"
 #include "sim/lab/lab_verdict.h"
 
 namespace sandtable::sim {
@@ -143,6 +144,10 @@ json LabReportJson(const LabResult& r) {
       per_unit[std::to_string(id)] = unit;
     }
     calibration["per_unit"] = per_unit;
+    if (r.self_calibration.contains("runner_report")) {
+      calibration["prediction"] =
+          PredictionJson(ComparePrediction(reg, r.self_calibration["runner_report"]));
+    }
     calibration["metric"] = {{"candidates", reg.num_candidates},
                              {"lit_points", reg.num_lit_points},
                              {"table_points", reg.num_table_points},
@@ -402,6 +407,9 @@ std::string LabReportMarkdown(const LabResult& r) {
          << StatsRow(unit + ": buildings", errors.buildings);
     }
     md << "\n";
+    if (r.self_calibration.contains("runner_report")) {
+      md << PredictionMarkdown(ComparePrediction(reg, r.self_calibration["runner_report"]));
+    }
   }
   if (!r.unit_failures.empty()) {
     md << "## Units that could not calibrate\n\n| unit | cause |\n| --- | --- |\n";

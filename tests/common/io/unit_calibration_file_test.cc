@@ -73,6 +73,45 @@ TEST(UnitCalibrationFile, RoundTripKeepsEveryField) {
   EXPECT_EQ(parsed->projector_rms_px, c.projector_rms_px);
 }
 
+TEST(UnitCalibrationFile, PredictedErrorRoundTripsAndIsChecked) {
+  UnitCalibration c = Example();
+  PredictedErrorRecord p;
+  p.rms_px = 0.042;
+  p.rms_mm = 0.081;
+  p.samples = 180;
+  p.sigma_px = 0.051;
+  p.weak_direction = "the image grows or shrinks, 71 % of it: focal fx";
+  p.weak_share = 0.64;
+  p.undetermined = "";
+  c.predicted_error = p;
+  Expected<UnitCalibration> parsed = ParseUnitCalibration(UnitCalibrationToJson(c), "unit-3.json");
+  ASSERT_TRUE(parsed.ok()) << parsed.status().ToString();
+  ASSERT_TRUE(parsed->predicted_error.has_value());
+  EXPECT_EQ(parsed->predicted_error->rms_px, p.rms_px);
+  EXPECT_EQ(parsed->predicted_error->rms_mm, p.rms_mm);
+  EXPECT_EQ(parsed->predicted_error->samples, p.samples);
+  EXPECT_EQ(parsed->predicted_error->weak_direction, p.weak_direction);
+  EXPECT_EQ(parsed->predicted_error->weak_share, p.weak_share);
+  // Not predicted on the table: rms_mm is left out and reads back as not predicted.
+  c.predicted_error->rms_mm = -1.0;
+  const json j = json::parse(UnitCalibrationToJson(c));
+  EXPECT_FALSE(j["predicted_error"].contains("rms_mm"));
+  parsed = ParseUnitCalibration(j.dump(), "unit-3.json");
+  ASSERT_TRUE(parsed.ok()) << parsed.status().ToString();
+  EXPECT_LT(parsed->predicted_error->rms_mm, 0.0);
+  // A negative spread is refused, naming the field.
+  json bad = j;
+  bad["predicted_error"]["rms_px"] = -0.1;
+  parsed = ParseUnitCalibration(bad.dump(), "unit-3.json");
+  ASSERT_FALSE(parsed.ok());
+  EXPECT_NE(parsed.status().message().find("predicted_error"), std::string::npos);
+  bad = j;
+  bad["predicted_error"]["colour"] = 1;
+  parsed = ParseUnitCalibration(bad.dump(), "unit-3.json");
+  ASSERT_FALSE(parsed.ok());
+  EXPECT_NE(parsed.status().message().find("colour"), std::string::npos);
+}
+
 TEST(UnitCalibrationFile, WritesFormatVersionAndTheCodecForms) {
   const json j = json::parse(UnitCalibrationToJson(Example()));
   EXPECT_EQ(j["format"], "sandtable.unit_calibration");
