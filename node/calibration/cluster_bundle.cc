@@ -430,9 +430,13 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
       const Track& track = observations.tracks[result.point_track[r.point]];
       observed.push_back({r.id, r.unit, r.camera, r.point, track.projector_px});
     }
-    const Status predicted = PredictUnitErrors(problem, unit_blocks, point_blocks, observed,
-                                               options, &result.report, &result.predicted);
-    if (!predicted.ok()) result.report.uncertainty_note = predicted.message();
+    Expected<BundleUncertainty> uncertainty =
+        EstimateUncertainty(problem, unit_blocks, point_blocks, observed, options, &result.report);
+    if (uncertainty.ok()) {
+      result.uncertainty = std::move(*uncertainty);
+    } else {
+      result.report.uncertainty_note = uncertainty.status().message();
+    }
   }
   // Per unit residuals.
   std::map<NodeId, std::pair<double, int>> projector_sum, camera_sum;

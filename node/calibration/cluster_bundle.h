@@ -21,6 +21,7 @@
 #pragma once
 
 #include <map>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -60,7 +61,7 @@ struct BundleOptions {
   int min_tracks = 50;
   int rounds = 2;
   bool log_progress = false;  // Ceres' per-iteration lines and full report on stderr (sweeps)
-  // Each unit's predicted projector error from the solve's covariance (BundleResult::predicted,
+  // The covariance of the units' parameters (BundleResult::uncertainty,
   // cluster_uncertainty.h): one Jacobian evaluation of every residual after the last round.
   bool estimate_uncertainty = true;
   int uncertainty_samples = 200;  // per unit: its projector observations, evenly spaced
@@ -76,11 +77,6 @@ struct UnitBundleReport {
   double projector_rms_px = 0.0;
   double camera_rms_px = 0.0;
   std::vector<std::string> free_parameters;  // e.g. "projector fx fy cx cy", "mount"
-  // Predicted from the covariance (BundleOptions::estimate_uncertainty); < 0: not predicted.
-  // rms over the unit's samples of the projector pixel error (1 sigma, both axes).
-  double predicted_rms_px = -1.0;
-  std::string weak_direction;  // the one direction carrying most of it, in words
-  double weak_share = 0.0;     // its share of the predicted variance, [0, 1]
 };
 
 struct BundleReport {
@@ -100,10 +96,21 @@ struct BundleReport {
 };
 
 // One sample of a unit's predicted error: a track's point (index into
-// BundleResult::points_in_world) and the covariance of where the unit's projector images it.
+// BundleResult::points_in_world), the pixel where the unit's projector images it and that
+// pixel's derivative by the unit's own parameters (BundleUncertainty::unit_columns).
 struct PredictedSample {
   int point = -1;
-  Eigen::Matrix2d px_covariance = Eigen::Matrix2d::Zero();  // px^2
+  Eigen::Vector2d projector_px = Eigen::Vector2d::Zero();
+  Eigen::MatrixXd jacobian;  // 2 x unit_columns[unit].size(), px per parameter unit
+};
+
+// The bundle's covariance of every free unit parameter (points folded out, scaled by the
+// measured noise; cluster_uncertainty.h) and, per unit, the samples it is carried through.
+struct BundleUncertainty {
+  Eigen::MatrixXd covariance;
+  std::vector<std::string> column_names;            // "unit 3 focal fx", ...
+  std::map<NodeId, std::vector<int>> unit_columns;  // its pose, projector intrinsics, distortion
+  std::map<NodeId, std::vector<PredictedSample>> samples;
 };
 
 struct BundleResult {
@@ -112,7 +119,7 @@ struct BundleResult {
   std::vector<Eigen::Vector3d> points_in_world;  // tracks used
   std::vector<int> point_track;                  // index into the input tracks
   BundleReport report;
-  std::map<NodeId, std::vector<PredictedSample>> predicted;  // when estimated
+  std::optional<BundleUncertainty> uncertainty;  // when estimated
 };
 
 // A surface the points must lie on (the registered model): point `point` (index into

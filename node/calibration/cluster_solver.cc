@@ -203,7 +203,8 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
   std::vector<Eigen::Vector3d> points = bundle->points_in_world;
   // The prediction of the bundle whose points and poses the solution keeps.
   BundleReport predicting = bundle->report;
-  std::map<NodeId, std::vector<PredictedSample>> predicted = bundle->predicted;
+  std::optional<BundleUncertainty> uncertainty = bundle->uncertainty;
+  bool scale_from_model = false;
 
   // The root projector's centre (the world origin) is above the table.
   Expected<TableFit> table = FitTable(points, options.plane, Eigen::Vector3d::Zero());
@@ -294,6 +295,7 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
         for (auto& [id, pose] : projector_from_world) pose.translation *= k;
         for (auto& [id, unit] : units) unit.projector_from_camera.translation *= k;
         out.scale_correction = k;
+        scale_from_model = true;
         table = FitTable(points, options.plane, Eigen::Vector3d::Zero());
         if (!table.ok()) return DegenerateError("table plane: " + table.status().message());
         to_table(*table);
@@ -331,7 +333,7 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
         if (second.ok()) {
           out.model_bundle = second->report;
           predicting = second->report;
-          predicted = second->predicted;
+          uncertainty = second->uncertainty;
           units = second->units;
           projector_from_world = second->projector_from_world;
           points = second->points_in_world;
@@ -378,7 +380,11 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
     out.calibrations[id] = SolvedUnitCalibration(
         id, unit, out.table_from_world * projector_from_world.at(id).Inverse(), out);
   }
-  PredictOnTable(predicting, predicted, out.points_in_table_m, &out.calibrations);
+  if (uncertainty) {
+    TablePredictionOptions prediction;
+    prediction.scale_follows_the_model = scale_from_model;
+    PredictOnTable(predicting, *uncertainty, out.points_in_table_m, &out.calibrations, prediction);
+  }
   if (!predicting.uncertainty_note.empty()) {
     out.notes.push_back("predicted error: " + predicting.uncertainty_note);
   }

@@ -76,23 +76,15 @@ std::string DescribeField(const std::vector<Eigen::Vector2d>& px,
   return top.second + ", " + Percent(top.first / total) + " of it";
 }
 
-struct UnitColumns {
-  std::vector<int> columns;        // into the reduced information
-  std::vector<std::string> names;  // one per column
-  std::vector<double*> blocks;     // pose, projector k, projector d (those with columns)
-  std::vector<int> block_offset;   // first index into `columns` of each block
-};
-
 }  // namespace
 
-Status PredictUnitErrors(const ceres::Problem& problem,
-                         const std::map<NodeId, UnitParameterBlocks>& units,
-                         std::span<double* const> points,
-                         const std::vector<ObservationBlock>& observations,
-                         const BundleOptions& options, BundleReport* report,
-                         std::map<NodeId, std::vector<PredictedSample>>* predicted) {
+Expected<BundleUncertainty> EstimateUncertainty(const ceres::Problem& problem,
+                                                const std::map<NodeId, UnitParameterBlocks>& units,
+                                                std::span<double* const> points,
+                                                const std::vector<ObservationBlock>& observations,
+                                                const BundleOptions& options,
+                                                BundleReport* report) {
   std::vector<double*> kept;
-  // Column names for the undetermined directions.
   std::map<const double*, std::pair<NodeId, const char* const*>> names;
   for (const auto& [id, u] : units) {
     const std::pair<double*, const char* const*> blocks[] = {{u.pose, kPoseNames},
@@ -126,14 +118,16 @@ Status PredictUnitErrors(const ceres::Problem& problem,
   }
   const double sigma2 = sum_sq / redundancy;
   report->sigma_px = std::sqrt(sigma2) * options.observation_sigma_px;
-  const MarginalCovariance marginal = InvertInformation(info->information, sigma2);
+  MarginalCovariance marginal = InvertInformation(info->information, sigma2);
 
-  std::vector<std::string> column_name(parameters);
+  BundleUncertainty out;
+  out.column_names.resize(parameters);
   for (const auto& [block, column] : info->column) {
     const auto& [id, n] = names.at(block);
     const bool camera = block == units.at(id).camera_k || block == units.at(id).camera_d;
     for (int i = 0; i < info->size.at(block); ++i) {
-      column_name[column + i] = "unit " + std::to_string(id) + (camera ? " camera " : " ") + n[i];
+      out.column_names[column + i] =
+          "unit " + std::to_string(id) + (camera ? " camera " : " ") + n[i];
     }
   }
   if (!marginal.undetermined.empty()) {
@@ -146,98 +140,81 @@ Status PredictUnitErrors(const ceres::Problem& problem,
                 [&](int a, int b) { return std::abs(v[a]) > std::abs(v[b]); });
       text << " (";
       for (int k = 0; k < std::min(3, parameters); ++k) {
-        text << (k ? ", " : "") << column_name[order[k]];
+        text << (k ? ", " : "") << out.column_names[order[k]];
       }
       text << ")";
     }
     report->undetermined = text.str();
   }
+  out.covariance = std::move(marginal.covariance);
 
   for (const auto& [id, u] : units) {
-    UnitColumns cols;
-    const std::pair<double*, const char* const*> blocks[] = {
-        {u.pose, kPoseNames}, {u.projector_k, kIntrinsicNames}, {u.projector_d, kDistortionNames}};
-    for (const auto& [block, n] : blocks) {
+    std::vector<double*> blocks;
+    std::vector<int> offsets, columns;
+    for (double* block : {u.pose, u.projector_k, u.projector_d}) {
       const auto c = info->column.find(block);
       if (c == info->column.end()) continue;
-      cols.blocks.push_back(block);
-      cols.block_offset.push_back(static_cast<int>(cols.columns.size()));
-      for (int i = 0; i < info->size.at(block); ++i) {
-        cols.columns.push_back(c->second + i);
-        cols.names.push_back(n[i]);
-      }
+      blocks.push_back(block);
+      offsets.push_back(static_cast<int>(columns.size()));
+      for (int i = 0; i < info->size.at(block); ++i) columns.push_back(c->second + i);
     }
-    const int k = static_cast<int>(cols.columns.size());
     std::vector<const ObservationBlock*> own;
     for (const ObservationBlock& o : observations) {
       if (!o.camera && o.unit == id) own.push_back(&o);
     }
-    if (k == 0 || own.empty()) continue;
-    Eigen::MatrixXd c(k, k);
-    for (int a = 0; a < k; ++a)
-      for (int b = 0; b < k; ++b) c(a, b) = marginal.covariance(cols.columns[a], cols.columns[b]);
+    if (columns.empty() || own.empty()) continue;
+    const int k = static_cast<int>(columns.size());
+    out.unit_columns[id] = columns;
     const size_t step = std::max<size_t>(1, own.size() / std::max(1, options.uncertainty_samples));
-    std::vector<PredictedSample>& samples = (*predicted)[id];
-    std::vector<Eigen::MatrixXd> jacobians;
-    std::vector<Eigen::Vector2d> pixels;
-    Eigen::MatrixXd metric = Eigen::MatrixXd::Zero(k, k);
+    std::vector<PredictedSample>& samples = out.samples[id];
     for (size_t i = 0; i < own.size(); i += step) {
       const ObservationBlock& o = *own[i];
       std::vector<double*> in_block;
       problem.GetParameterBlocksForResidualBlock(o.id, &in_block);
       std::vector<RowMajor> jac(in_block.size());
       std::vector<double*> pointers(in_block.size(), nullptr);
+      std::vector<int> where(in_block.size(), -1);
       for (size_t b = 0; b < in_block.size(); ++b) {
-        if (std::find(cols.blocks.begin(), cols.blocks.end(), in_block[b]) == cols.blocks.end())
-          continue;
+        const auto at = std::find(blocks.begin(), blocks.end(), in_block[b]);
+        if (at == blocks.end()) continue;
+        where[b] = offsets[static_cast<size_t>(at - blocks.begin())];
         jac[b].resize(2, problem.ParameterBlockTangentSize(in_block[b]));
         pointers[b] = jac[b].data();
       }
       double cost = 0.0, v[2];
       if (!problem.EvaluateResidualBlock(o.id, false, &cost, v, pointers.data())) continue;
-      Eigen::MatrixXd j(2, k);
-      for (size_t b = 0; b < in_block.size(); ++b) {
-        if (!pointers[b]) continue;
-        const size_t which = static_cast<size_t>(
-            std::find(cols.blocks.begin(), cols.blocks.end(), in_block[b]) - cols.blocks.begin());
-        j.middleCols(cols.block_offset[which], jac[b].cols()) =
-            jac[b] * options.observation_sigma_px;  // un-whitened: px per unit parameter
-      }
       PredictedSample s;
       s.point = o.point;
-      s.px_covariance = j * c * j.transpose();
-      samples.push_back(s);
-      metric += j.transpose() * j;
-      jacobians.push_back(j);
-      pixels.push_back(o.projector_px);
+      s.projector_px = o.projector_px;
+      s.jacobian = Eigen::MatrixXd::Zero(2, k);
+      for (size_t b = 0; b < in_block.size(); ++b) {
+        if (where[b] < 0) continue;
+        // Un-whitened: px per unit of the parameter.
+        s.jacobian.middleCols(where[b], jac[b].cols()) = jac[b] * options.observation_sigma_px;
+      }
+      samples.push_back(std::move(s));
     }
-    if (samples.empty()) continue;
-    metric /= static_cast<double>(samples.size());
-    // The direction carrying most of the pixel variance: C^1/2 M C^1/2's largest eigenvector.
-    const Eigen::MatrixXd root = SqrtPsd(c);
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(root * metric * root);
-    const double total = eig.eigenvalues().cwiseMax(0.0).sum();
-    UnitBundleReport& unit = report->units[id];
-    unit.predicted_rms_px = std::sqrt(total);
-    if (!(total > 0)) continue;
-    const Eigen::VectorXd direction = root * eig.eigenvectors().col(k - 1);
-    unit.weak_share = std::clamp(eig.eigenvalues()[k - 1] / total, 0.0, 1.0);
-    std::vector<Eigen::Vector2d> field;
-    for (const Eigen::MatrixXd& j : jacobians) field.push_back(j * direction);
-    // The parameters moving it most (by their share of the pixel motion), names merged.
-    std::map<std::string, double> by_name;
-    for (int p = 0; p < k; ++p) {
-      by_name[cols.names[p]] += std::abs(direction[p]) * std::sqrt(metric(p, p));
-    }
-    std::vector<std::pair<double, std::string>> ranked;
-    for (const auto& [name, w] : by_name) ranked.push_back({w, name});
-    std::sort(ranked.rbegin(), ranked.rend());
-    std::string movers = ranked[0].second;
-    if (ranked.size() > 1 && ranked[1].first > 0.3 * ranked[0].first)
-      movers += " with " + ranked[1].second;
-    unit.weak_direction = DescribeField(pixels, field) + ": " + movers;
   }
-  return OkStatus();
+  return out;
+}
+
+double BundleGaugeRms_px(const BundleUncertainty& uncertainty, NodeId unit) {
+  const auto columns = uncertainty.unit_columns.find(unit);
+  const auto samples = uncertainty.samples.find(unit);
+  if (columns == uncertainty.unit_columns.end() || samples == uncertainty.samples.end() ||
+      samples->second.empty()) {
+    return -1.0;
+  }
+  const std::vector<int>& cols = columns->second;
+  const int k = static_cast<int>(cols.size());
+  Eigen::MatrixXd c(k, k);
+  for (int a = 0; a < k; ++a)
+    for (int b = 0; b < k; ++b) c(a, b) = uncertainty.covariance(cols[a], cols[b]);
+  double sum = 0.0;
+  for (const PredictedSample& s : samples->second) {
+    sum += (s.jacobian * c * s.jacobian.transpose()).trace();
+  }
+  return std::sqrt(sum / static_cast<double>(samples->second.size()));
 }
 
 Status TablePredictionOptions::Check() const {
@@ -247,59 +224,142 @@ Status TablePredictionOptions::Check() const {
   return OkStatus();
 }
 
-void PredictOnTable(const BundleReport& report,
-                    const std::map<NodeId, std::vector<PredictedSample>>& predicted,
+namespace {
+
+// One sample carried to the table.
+struct TableSample {
+  NodeId unit = kInvalidNodeId;
+  const PredictedSample* sample = nullptr;
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();  // table frame, m
+  Eigen::Matrix<double, 3, 2> landing;              // m per px
+  Eigen::Matrix<double, 2, 3> landing_inverse;      // px per m (pseudo-inverse)
+};
+
+std::optional<TableSample> ToTable(NodeId id, const PredictedSample& s,
+                                   const UnitCalibration& calibration,
+                                   const std::vector<Eigen::Vector3d>& points_in_table_m,
+                                   double max_height_m) {
+  if (s.point < 0 || s.point >= static_cast<int>(points_in_table_m.size())) return std::nullopt;
+  const Eigen::Vector3d& x = points_in_table_m[s.point];
+  if (std::abs(x.z()) > max_height_m) return std::nullopt;
+  const Rigid3d& table_from_projector = *calibration.table_from_projector;
+  const CameraModel& projector = calibration.projector;
+  const std::optional<Eigen::Vector2d> u = projector.Project(table_from_projector.Inverse() * x);
+  if (!u) return std::nullopt;
+  // Where pixels about u land on the plane z = x.z (table frame).
+  constexpr double kStep_px = 0.5;
+  auto land = [&](const Eigen::Vector2d& pixel) -> std::optional<Eigen::Vector3d> {
+    Expected<Eigen::Vector3d> ray = projector.Unproject(pixel);
+    if (!ray.ok()) return std::nullopt;
+    const Eigen::Vector3d d = table_from_projector.rotation * *ray;
+    const Eigen::Vector3d& origin = table_from_projector.translation;
+    if (std::abs(d.z()) < 1e-9) return std::nullopt;
+    const double t = (x.z() - origin.z()) / d.z();
+    if (!(t > 0)) return std::nullopt;
+    return origin + t * d;
+  };
+  const auto p0 = land(*u), px = land(*u + Eigen::Vector2d(kStep_px, 0)),
+             py = land(*u + Eigen::Vector2d(0, kStep_px));
+  if (!p0 || !px || !py) return std::nullopt;
+  TableSample t;
+  t.unit = id;
+  t.sample = &s;
+  t.point = x;
+  t.landing.col(0) = (*px - *p0) / kStep_px;
+  t.landing.col(1) = (*py - *p0) / kStep_px;
+  const Eigen::Matrix2d ata = t.landing.transpose() * t.landing;
+  if (!(std::abs(ata.determinant()) > 0)) return std::nullopt;
+  t.landing_inverse = ata.inverse() * t.landing.transpose();
+  return t;
+}
+
+}  // namespace
+
+void PredictOnTable(const BundleReport& report, const BundleUncertainty& uncertainty,
                     const std::vector<Eigen::Vector3d>& points_in_table_m,
                     std::map<NodeId, UnitCalibration>* calibrations,
                     const TablePredictionOptions& options) {
-  for (auto& [id, calibration] : *calibrations) {
-    const auto unit = report.units.find(id);
-    const auto samples = predicted.find(id);
-    if (unit == report.units.end() || unit->second.predicted_rms_px < 0 ||
-        samples == predicted.end() || !calibration.table_from_projector) {
-      continue;
+  std::vector<TableSample> table;
+  for (const auto& [id, samples] : uncertainty.samples) {
+    const auto c = calibrations->find(id);
+    if (c == calibrations->end() || !c->second.table_from_projector) continue;
+    for (const PredictedSample& s : samples) {
+      std::optional<TableSample> t =
+          ToTable(id, s, c->second, points_in_table_m, options.max_height_m);
+      if (t) table.push_back(*t);
     }
+  }
+  const int n = static_cast<int>(table.size());
+  const int p = static_cast<int>(uncertainty.covariance.rows());
+  if (n == 0 || p == 0) return;
+  // L: landing displacement per parameter; M: the site's motion (translation, rotation about
+  // the samples' centre, and scale about it when the model set the scale).
+  const int motions = options.scale_follows_the_model ? 7 : 6;
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (const TableSample& t : table) centre += t.point / n;
+  Eigen::MatrixXd l = Eigen::MatrixXd::Zero(3 * n, p), m = Eigen::MatrixXd::Zero(3 * n, motions);
+  for (int i = 0; i < n; ++i) {
+    const TableSample& t = table[i];
+    const std::vector<int>& cols = uncertainty.unit_columns.at(t.unit);
+    const Eigen::MatrixXd lj = t.landing * t.sample->jacobian;
+    for (size_t k = 0; k < cols.size(); ++k) l.block(3 * i, cols[k], 3, 1) = lj.col(k);
+    const Eigen::Vector3d r = t.point - centre;
+    m.block<3, 3>(3 * i, 0).setIdentity();
+    Eigen::Matrix3d cross;
+    cross << 0, r.z(), -r.y(), -r.z(), 0, r.x(), r.y(), -r.x(), 0;  // w x r = cross * w
+    m.block<3, 3>(3 * i, 3) = cross;
+    if (motions == 7) m.block<3, 1>(3 * i, 6) = r;
+  }
+  const Eigen::MatrixXd e = l - m * (m.transpose() * m).ldlt().solve(m.transpose() * l);
+  const Eigen::MatrixXd& c = uncertainty.covariance;
+  const Eigen::MatrixXd root = SqrtPsd(c);
+
+  std::map<NodeId, std::vector<int>> by_unit;
+  for (int i = 0; i < n; ++i) by_unit[table[i].unit].push_back(i);
+  for (const auto& [id, rows] : by_unit) {
+    const int count = static_cast<int>(rows.size());
+    if (count < options.min_table_samples) continue;
+    double sum_m2 = 0.0, sum_px2 = 0.0;
+    Eigen::MatrixXd metric = Eigen::MatrixXd::Zero(p, p);
+    for (int i : rows) {
+      const Eigen::MatrixXd ei = e.middleRows(3 * i, 3);
+      const Eigen::Matrix3d spread = ei * c * ei.transpose();
+      sum_m2 += spread.trace();
+      sum_px2 += (table[i].landing_inverse * spread * table[i].landing_inverse.transpose()).trace();
+      const Eigen::MatrixXd epx = table[i].landing_inverse * ei;
+      metric += epx.transpose() * epx;
+    }
+    metric /= count;
     PredictedErrorRecord record;
-    record.rms_px = unit->second.predicted_rms_px;
+    record.rms_mm = std::sqrt(sum_m2 / count) * 1e3;
+    record.rms_px = std::sqrt(sum_px2 / count);
+    record.samples = count;
     record.sigma_px = report.sigma_px;
-    record.weak_direction = unit->second.weak_direction;
-    record.weak_share = unit->second.weak_share;
     record.undetermined = report.undetermined;
-    const Rigid3d& table_from_projector = *calibration.table_from_projector;
-    const Rigid3d projector_from_table = table_from_projector.Inverse();
-    const CameraModel& projector = calibration.projector;
-    double sum_sq_m2 = 0.0;
-    int n = 0;
-    for (const PredictedSample& s : samples->second) {
-      if (s.point < 0 || s.point >= static_cast<int>(points_in_table_m.size())) continue;
-      const Eigen::Vector3d& x = points_in_table_m[s.point];
-      if (std::abs(x.z()) > options.max_height_m) continue;
-      const std::optional<Eigen::Vector2d> u = projector.Project(projector_from_table * x);
-      if (!u) continue;
-      // Where pixels about u land on the plane z = x.z (table frame).
-      constexpr double kStep_px = 0.5;
-      auto land = [&](const Eigen::Vector2d& pixel) -> std::optional<Eigen::Vector3d> {
-        Expected<Eigen::Vector3d> ray = projector.Unproject(pixel);
-        if (!ray.ok()) return std::nullopt;
-        const Eigen::Vector3d d = table_from_projector.rotation * *ray;
-        const Eigen::Vector3d& origin = table_from_projector.translation;
-        if (std::abs(d.z()) < 1e-9) return std::nullopt;
-        const double t = (x.z() - origin.z()) / d.z();
-        if (!(t > 0)) return std::nullopt;
-        return origin + t * d;
-      };
-      const auto p0 = land(*u), px = land(*u + Eigen::Vector2d(kStep_px, 0)),
-                 py = land(*u + Eigen::Vector2d(0, kStep_px));
-      if (!p0 || !px || !py) continue;
-      Eigen::Matrix<double, 3, 2> a;
-      a.col(0) = (*px - *p0) / kStep_px;
-      a.col(1) = (*py - *p0) / kStep_px;
-      sum_sq_m2 += (a * s.px_covariance * a.transpose()).trace();
-      ++n;
+    // The direction carrying most of the pixel variance: C^1/2 N C^1/2's largest eigenvector.
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(root * metric * root);
+    const double total = eig.eigenvalues().cwiseMax(0.0).sum();
+    if (total > 0) {
+      const Eigen::VectorXd direction = root * eig.eigenvectors().col(p - 1);
+      record.weak_share = std::clamp(eig.eigenvalues()[p - 1] / total, 0.0, 1.0);
+      std::vector<Eigen::Vector2d> pixels, field;
+      for (int i : rows) {
+        pixels.push_back(table[i].sample->projector_px);
+        field.push_back(table[i].landing_inverse * e.middleRows(3 * i, 3) * direction);
+      }
+      std::map<std::string, double> by_name;
+      for (int q = 0; q < p; ++q) {
+        by_name[uncertainty.column_names[q]] += std::abs(direction[q]) * std::sqrt(metric(q, q));
+      }
+      std::vector<std::pair<double, std::string>> ranked;
+      for (const auto& [name, w] : by_name) ranked.push_back({w, name});
+      std::sort(ranked.rbegin(), ranked.rend());
+      std::string movers = ranked[0].second;
+      if (ranked.size() > 1 && ranked[1].first > 0.3 * ranked[0].first)
+        movers += " with " + ranked[1].second;
+      record.weak_direction = DescribeField(pixels, field) + ": " + movers;
     }
-    record.samples = n;
-    if (n >= options.min_table_samples) record.rms_mm = std::sqrt(sum_sq_m2 / n) * 1e3;
-    calibration.predicted_error = record;
+    (*calibrations)[id].predicted_error = record;
   }
 }
 

@@ -489,7 +489,7 @@ Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservati
   // 5. The joint refinement with every cell on the plane z = 0 of the table frame.
   std::map<NodeId, UnitModel> units = observations.units;
   BundleReport predicting;
-  std::map<NodeId, std::vector<PredictedSample>> predicted;
+  std::optional<BundleUncertainty> uncertainty;
   if (options.refine) {
     BundleResult previous;
     previous.units = observations.units;
@@ -532,7 +532,7 @@ Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservati
       out.bundle = refined->report;
       out.bundle.termination = "planar, refined: " + refined->report.termination;
       predicting = refined->report;
-      predicted = refined->predicted;
+      uncertainty = refined->uncertainty;
     }
   }
 
@@ -558,7 +558,9 @@ Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservati
   for (const auto& [id, pose] : projector_from_table) {
     out.calibrations[id] = SolvedUnitCalibration(id, units.at(id), pose.Inverse(), out);
   }
-  PredictOnTable(predicting, predicted, out.points_in_table_m, &out.calibrations);
+  if (uncertainty) {
+    PredictOnTable(predicting, *uncertainty, out.points_in_table_m, &out.calibrations);
+  }
   out.time_s = ThreadCpuSeconds() - cpu_start;
   out.bundle.solve_time_s = out.time_s;
   return out;
