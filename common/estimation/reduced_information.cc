@@ -43,9 +43,10 @@ Status Evaluate(const ceres::Problem& problem, ceres::ResidualBlockId id,
 
 }  // namespace
 
-Expected<ReducedInformation> ComputeReducedInformation(const ceres::Problem& problem,
-                                                       std::span<double* const> kept,
-                                                       std::span<double* const> eliminated) {
+Expected<ReducedInformation> ComputeReducedInformation(
+    const ceres::Problem& problem, std::span<double* const> kept,
+    std::span<double* const> eliminated,
+    const std::function<double(ceres::ResidualBlockId)>& true_variance) {
   ReducedInformation out;
   // Tangent sizes of every free block either kept or eliminated.
   std::map<const double*, int> tangent;
@@ -74,22 +75,25 @@ Expected<ReducedInformation> ComputeReducedInformation(const ceres::Problem& pro
   }
   out.information = Eigen::MatrixXd::Zero(columns, columns);
   Eigen::MatrixXd& s = out.information;
+  const bool sandwich = static_cast<bool>(true_variance);
+  if (sandwich) out.gradient_covariance = Eigen::MatrixXd::Zero(columns, columns);
+  Eigen::MatrixXd& n_cov = out.gradient_covariance;
 
   std::set<ceres::ResidualBlockId> done;
-  BlockJacobian j;
+  BlockJacobian j;  // residual blocks on kept blocks only
   // Adds J_a^T J_b of the kept blocks of j to S.
-  auto add_kept = [&](const BlockJacobian& bj) -> Status {
+  // Adds J_a^T J_b of the kept blocks of bj to `to`, times `weight`.
+  auto add_kept = [&](const BlockJacobian& bj, Eigen::MatrixXd* to, double weight) {
     for (size_t a = 0; a < bj.blocks.size(); ++a) {
       const auto ca = out.column.find(bj.blocks[a]);
       if (ca == out.column.end()) continue;
       for (size_t b = 0; b < bj.blocks.size(); ++b) {
         const auto cb = out.column.find(bj.blocks[b]);
         if (cb == out.column.end()) continue;
-        s.block(ca->second, cb->second, bj.jacobians[a].cols(), bj.jacobians[b].cols()) +=
-            bj.jacobians[a].transpose() * bj.jacobians[b];
+        to->block(ca->second, cb->second, bj.jacobians[a].cols(), bj.jacobians[b].cols()) +=
+            weight * bj.jacobians[a].transpose() * bj.jacobians[b];
       }
     }
-    return OkStatus();
   };
   auto check_blocks = [&](const BlockJacobian& bj, const double* allowed_eliminated) -> Status {
     for (size_t b = 0; b < bj.blocks.size(); ++b) {
@@ -115,21 +119,24 @@ Expected<ReducedInformation> ComputeReducedInformation(const ceres::Problem& pro
     const int n = tangent.at(x);
     Eigen::MatrixXd v = Eigen::MatrixXd::Zero(n, n);
     std::map<const double*, Eigen::MatrixXd> w;  // kept block -> J_x^T J_block
-    for (ceres::ResidualBlockId id : ids) {
-      ST_RETURN_IF_ERROR(Evaluate(problem, id, tangent, &j));
-      ST_RETURN_IF_ERROR(check_blocks(j, x));
-      ST_RETURN_IF_ERROR(add_kept(j));
-      const size_t xi =
-          static_cast<size_t>(std::find(j.blocks.begin(), j.blocks.end(), x) - j.blocks.begin());
-      const RowMajor& jx = j.jacobians[xi];
+    std::vector<BlockJacobian> rows(ids.size());
+    std::vector<size_t> x_index(ids.size());
+    for (size_t r = 0; r < ids.size(); ++r) {
+      BlockJacobian& row = rows[r];
+      ST_RETURN_IF_ERROR(Evaluate(problem, ids[r], tangent, &row));
+      ST_RETURN_IF_ERROR(check_blocks(row, x));
+      add_kept(row, &s, 1.0);
+      x_index[r] = static_cast<size_t>(std::find(row.blocks.begin(), row.blocks.end(), x) -
+                                       row.blocks.begin());
+      const RowMajor& jx = row.jacobians[x_index[r]];
       v += jx.transpose() * jx;
-      for (size_t b = 0; b < j.blocks.size(); ++b) {
-        if (!out.column.count(j.blocks[b])) continue;
-        Eigen::MatrixXd& wb = w[j.blocks[b]];
-        if (wb.size() == 0) wb = Eigen::MatrixXd::Zero(n, j.jacobians[b].cols());
-        wb += jx.transpose() * j.jacobians[b];
+      for (size_t b = 0; b < row.blocks.size(); ++b) {
+        if (!out.column.count(row.blocks[b])) continue;
+        Eigen::MatrixXd& wb = w[row.blocks[b]];
+        if (wb.size() == 0) wb = Eigen::MatrixXd::Zero(n, row.jacobians[b].cols());
+        wb += jx.transpose() * row.jacobians[b];
       }
-      done.insert(id);
+      done.insert(ids[r]);
       ++out.residual_blocks;
     }
     // V^-1 by an eigen-decomposition: a point seen along one ray only (V of rank 2) has no
@@ -149,6 +156,28 @@ Expected<ReducedInformation> ComputeReducedInformation(const ceres::Problem& pro
         s.block(out.column.at(a), out.column.at(b), wa.cols(), wb.cols()) -= vw.transpose() * wb;
       }
     }
+    if (sandwich) {
+      // K = J_u - J_x V^-1 W per residual block, over the kept blocks this point touches.
+      for (size_t r = 0; r < rows.size(); ++r) {
+        const double d = true_variance(ids[r]);
+        if (d == 0.0) continue;
+        const BlockJacobian& row = rows[r];
+        const RowMajor& jx = row.jacobians[x_index[r]];
+        std::vector<std::pair<int, Eigen::MatrixXd>> k;  // column, K's columns for that block
+        for (const auto& [b, wb] : w) {
+          Eigen::MatrixXd kb = -jx * (v_inv * wb);
+          for (size_t q = 0; q < row.blocks.size(); ++q) {
+            if (row.blocks[q] == b) kb += row.jacobians[q];
+          }
+          k.push_back({out.column.at(b), std::move(kb)});
+        }
+        for (const auto& [ca, ka] : k) {
+          for (const auto& [cb, kb] : k) {
+            n_cov.block(ca, cb, ka.cols(), kb.cols()) += d * ka.transpose() * kb;
+          }
+        }
+      }
+    }
     ++out.eliminated_blocks;
   }
   // Residual blocks on kept blocks only (priors).
@@ -158,10 +187,21 @@ Expected<ReducedInformation> ComputeReducedInformation(const ceres::Problem& pro
     if (done.count(id)) continue;
     ST_RETURN_IF_ERROR(Evaluate(problem, id, tangent, &j));
     ST_RETURN_IF_ERROR(check_blocks(j, nullptr));
-    ST_RETURN_IF_ERROR(add_kept(j));
+    add_kept(j, &s, 1.0);
+    if (sandwich) add_kept(j, &n_cov, true_variance(id));
     ++out.residual_blocks;
   }
   s = 0.5 * (s + s.transpose()).eval();
+  if (sandwich) n_cov = 0.5 * (n_cov + n_cov.transpose()).eval();
+  return out;
+}
+
+MarginalCovariance SandwichCovariance(const ReducedInformation& reduced, double rank_tolerance) {
+  MarginalCovariance out = InvertInformation(reduced.information, 1.0, rank_tolerance);
+  if (reduced.gradient_covariance.rows() == out.covariance.rows()) {
+    out.covariance = out.covariance * reduced.gradient_covariance * out.covariance;
+    out.covariance = 0.5 * (out.covariance + out.covariance.transpose()).eval();
+  }
   return out;
 }
 

@@ -16,23 +16,27 @@
 // kept columns its residuals touch.
 #pragma once
 
+#include <functional>
 #include <map>
 #include <span>
 #include <string>
 #include <vector>
 
+#include <ceres/problem.h>
 #include <Eigen/Core>
 
 #include "common/base/status.h"
 
-namespace ceres {
-class Problem;
-}
-
 namespace sandtable {
 
+// When the solve's weights are not the noise's (observations known to be exact whitened like
+// the others), the estimate's covariance is the sandwich S^-1 N S^-1, with N the covariance of
+// the reduced gradient: per eliminated block, K = J_u - J_x V^-1 W over its residuals, and
+// N = sum K^T D K, D = the true variance of each whitened residual (1 where the weights are
+// right). `true_variance(id)` gives D for a residual block.
 struct ReducedInformation {
-  Eigen::MatrixXd information;  // P x P, symmetric: S above
+  Eigen::MatrixXd information;          // P x P, symmetric: S above
+  Eigen::MatrixXd gradient_covariance;  // P x P: N above (when true_variance was given)
   // First column and tangent size of each kept block that has columns (not constant, in the
   // problem); kept blocks without columns are absent.
   std::map<const double*, int> column;
@@ -41,9 +45,10 @@ struct ReducedInformation {
   int residual_blocks = 0;
 };
 
-Expected<ReducedInformation> ComputeReducedInformation(const ceres::Problem& problem,
-                                                       std::span<double* const> kept,
-                                                       std::span<double* const> eliminated);
+Expected<ReducedInformation> ComputeReducedInformation(
+    const ceres::Problem& problem, std::span<double* const> kept,
+    std::span<double* const> eliminated,
+    const std::function<double(ceres::ResidualBlockId)>& true_variance = nullptr);
 
 struct MarginalCovariance {
   Eigen::MatrixXd covariance;  // P x P, same columns as the information
@@ -52,6 +57,11 @@ struct MarginalCovariance {
   // parameters' own units. The covariance above excludes them (a pseudo-inverse).
   std::vector<Eigen::VectorXd> undetermined;
 };
+
+// S^+ N S^+ (the pseudo-inverse of InvertInformation with sigma2 = 1, same undetermined
+// directions): the covariance of an estimate weighted otherwise than its noise.
+MarginalCovariance SandwichCovariance(const ReducedInformation& reduced,
+                                      double rank_tolerance = 1e-10);
 
 // sigma2: the variance factor (1 for residuals whitened by their true sigmas; the measured
 // (residual sum of squares) / (redundancy) to take the noise from the data).

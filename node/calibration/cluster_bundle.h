@@ -65,6 +65,9 @@ struct BundleOptions {
   // cluster_uncertainty.h): one Jacobian evaluation of every residual after the last round.
   bool estimate_uncertainty = true;
   int uncertainty_samples = 200;  // per unit: its projector observations, evenly spaced
+  // The tracks' projector pixels are exact (grid nodes, projector_grid.h): the noise is all in
+  // the camera pixels. The solve weights both alike; the covariance accounts for the difference.
+  bool projector_px_exact = true;
   // Units held entirely (pose, mount, intrinsics, distortion: no priors), e.g. the calibrated
   // units a joining unit is fitted against; with any held unit no other pose is held.
   std::set<NodeId> held_units;
@@ -86,10 +89,10 @@ struct BundleReport {
   double initial_rms_px = 0.0, final_rms_px = 0.0;  // all observations, px
   double solve_time_s = 0.0;                        // thread CPU time
   std::map<NodeId, UnitBundleReport> units;
-  // The noise the prediction scales by: observation residual rms corrected for the degrees of
-  // freedom (px); 0 when not predicted. `undetermined`: the directions the data do not fix
-  // (left to the gauge: the held root pose, the table frame, the model's placement), in words;
-  // `uncertainty_note`: why nothing was predicted, when so.
+  // The camera pixels' noise the prediction uses, from the observation residuals corrected for
+  // the degrees of freedom (px); 0 when not predicted. `undetermined`: the directions the data do
+  // not fix (left to the gauge: the held root pose, the table frame, the model's placement), in
+  // words; `uncertainty_note`: why nothing was predicted, when so.
   double sigma_px = 0.0;
   std::string undetermined;
   std::string uncertainty_note;

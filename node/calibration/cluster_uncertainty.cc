@@ -4,6 +4,7 @@
 #include <cmath>
 #include <sstream>
 #include <string>
+#include <unordered_map>
 #include <utility>
 
 #include <ceres/ceres.h>
@@ -98,27 +99,46 @@ Expected<BundleUncertainty> EstimateUncertainty(const ceres::Problem& problem,
       names[block] = {id, n};
     }
   }
-  Expected<ReducedInformation> info = ComputeReducedInformation(problem, kept, points);
-  if (!info.ok()) return info.status();
-  const int parameters = static_cast<int>(info->information.rows());
-
-  // The noise from the data (whitened residuals, so sigma2 = 1 means observation_sigma_px).
+  // The noise from the data. The whitened residuals' sum of squares over the redundancy is the
+  // variance factor when every observation is as noisy as its weight says; when the projector
+  // pixels are exact (grid nodes), their rows carry no noise and the cameras' carry all of it:
+  // E[RSS] = sum (1 - h_ii) d_i with d = 0 on projector rows; with the leverage h spread evenly
+  // over the rows, d_camera = RSS / redundancy x rows / camera rows.
   double sum_sq = 0.0;
-  int residuals = 0;
+  int rows = 0, camera_rows = 0;
   for (const ObservationBlock& o : observations) {
     double cost = 0.0, v[2];
     problem.EvaluateResidualBlock(o.id, false, &cost, v, nullptr);
     sum_sq += v[0] * v[0] + v[1] * v[1];
-    residuals += 2;
+    rows += 2;
+    if (o.camera) camera_rows += 2;
   }
-  const int redundancy = residuals - 3 * info->eliminated_blocks - parameters;
-  if (redundancy <= 0) {
-    return DegenerateError("uncertainty: " + std::to_string(residuals) + " residuals for " +
-                           std::to_string(3 * info->eliminated_blocks + parameters) + " unknowns");
+  int unknowns = 3 * static_cast<int>(points.size());
+  for (double* block : kept) {
+    if (problem.HasParameterBlock(block) && !problem.IsParameterBlockConstant(block))
+      unknowns += problem.ParameterBlockTangentSize(block);
   }
-  const double sigma2 = sum_sq / redundancy;
-  report->sigma_px = std::sqrt(sigma2) * options.observation_sigma_px;
-  MarginalCovariance marginal = InvertInformation(info->information, sigma2);
+  const int redundancy = rows - unknowns;
+  if (redundancy <= 0 || camera_rows == 0) {
+    return DegenerateError("uncertainty: " + std::to_string(rows) + " residuals for " +
+                           std::to_string(unknowns) + " unknowns");
+  }
+  const double factor = sum_sq / redundancy;
+  const double camera_variance = options.projector_px_exact ? factor * rows / camera_rows : factor;
+  const double projector_variance = options.projector_px_exact ? 0.0 : factor;
+  std::unordered_map<ceres::ResidualBlockId, double> variance;
+  for (const ObservationBlock& o : observations) {
+    variance[o.id] = o.camera ? camera_variance : projector_variance;
+  }
+  report->sigma_px = std::sqrt(camera_variance) * options.observation_sigma_px;
+  Expected<ReducedInformation> info =
+      ComputeReducedInformation(problem, kept, points, [&](ceres::ResidualBlockId id) {
+        const auto it = variance.find(id);
+        return it == variance.end() ? 1.0 : it->second;  // priors, surface: as weighted
+      });
+  if (!info.ok()) return info.status();
+  const int parameters = static_cast<int>(info->information.rows());
+  MarginalCovariance marginal = SandwichCovariance(*info);
 
   BundleUncertainty out;
   out.column_names.resize(parameters);
@@ -230,9 +250,10 @@ namespace {
 struct TableSample {
   NodeId unit = kInvalidNodeId;
   const PredictedSample* sample = nullptr;
-  Eigen::Vector3d point = Eigen::Vector3d::Zero();  // table frame, m
-  Eigen::Matrix<double, 3, 2> landing;              // m per px
-  Eigen::Matrix<double, 2, 3> landing_inverse;      // px per m (pseudo-inverse)
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();   // table frame, m
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();  // its projector's centre, table frame
+  Eigen::Matrix<double, 3, 2> landing;               // m per px
+  Eigen::Matrix<double, 2, 3> landing_inverse;       // px per m (pseudo-inverse)
 };
 
 std::optional<TableSample> ToTable(NodeId id, const PredictedSample& s,
@@ -265,6 +286,7 @@ std::optional<TableSample> ToTable(NodeId id, const PredictedSample& s,
   t.unit = id;
   t.sample = &s;
   t.point = x;
+  t.centre = table_from_projector.translation;
   t.landing.col(0) = (*px - *p0) / kStep_px;
   t.landing.col(1) = (*py - *p0) / kStep_px;
   const Eigen::Matrix2d ata = t.landing.transpose() * t.landing;
@@ -303,12 +325,19 @@ void PredictOnTable(const BundleReport& report, const BundleUncertainty& uncerta
     const std::vector<int>& cols = uncertainty.unit_columns.at(t.unit);
     const Eigen::MatrixXd lj = t.landing * t.sample->jacobian;
     for (size_t k = 0; k < cols.size(); ++k) l.block(3 * i, cols[k], 3, 1) = lj.col(k);
+    // The motion moves the surface point by D = G g; the unit's ray through it then lands
+    // D_n d / d_n away (d: the ray's direction, n = z) while the point itself moved by D: the
+    // error it makes is (d n^T / d_n - I) D, in the plane. (A motion off the plane becomes an
+    // in-plane error along each unit's own ray.)
     const Eigen::Vector3d r = t.point - centre;
-    m.block<3, 3>(3 * i, 0).setIdentity();
-    Eigen::Matrix3d cross;
-    cross << 0, r.z(), -r.y(), -r.z(), 0, r.x(), r.y(), -r.x(), 0;  // w x r = cross * w
-    m.block<3, 3>(3 * i, 3) = cross;
-    if (motions == 7) m.block<3, 1>(3 * i, 6) = r;
+    Eigen::Matrix<double, 3, 7> g = Eigen::Matrix<double, 3, 7>::Zero();
+    g.block<3, 3>(0, 0).setIdentity();
+    g.block<3, 3>(0, 3) << 0, r.z(), -r.y(), -r.z(), 0, r.x(), r.y(), -r.x(), 0;  // w x r
+    g.block<3, 1>(0, 6) = r;
+    const Eigen::Vector3d d = (t.point - t.centre).normalized();
+    Eigen::Matrix3d along_ray = Eigen::Matrix3d::Zero();
+    if (std::abs(d.z()) > 1e-9) along_ray.col(2) = d / d.z();
+    m.middleRows(3 * i, 3) = ((along_ray - Eigen::Matrix3d::Identity()) * g).leftCols(motions);
   }
   const Eigen::MatrixXd e = l - m * (m.transpose() * m).ldlt().solve(m.transpose() * l);
   const Eigen::MatrixXd& c = uncertainty.covariance;

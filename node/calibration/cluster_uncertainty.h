@@ -21,8 +21,11 @@
 //    model is placed on the scanned points: a motion of the whole solution (poses and points
 //    together: a rigid motion, and a scale when the model set the scale) moves the placement
 //    with it and costs nothing. So the rigid (and scale) motion that best explains all units'
-//    landing displacements is taken out: E = (I - M (M^T M)^-1 M^T) L, M_s the motion's effect
-//    at the sample's point. The placement's own error is not in the figure.
+//    landing displacements is taken out: E = (I - M (M^T M)^-1 M^T) L, M_s the error that
+//    motion makes at the sample for this unit: (d n^T / d_n - I) G(x), G the motion's
+//    displacement of the point x, d the unit's ray through x, n the table's normal (a motion
+//    off the table lands each unit's ray elsewhere along its own direction). The placement's
+//    own error is not in the figure.
 //  - per unit: rms over its samples of sqrt(trace(E_s C E_s^T)) -> rms_mm, and the same in
 //    its projector's pixels (A_s's pseudo-inverse) -> rms_px; the eigen-direction of C weighted
 //    by its E_s carrying most of its variance -> weak_direction (what it does to the unit's

@@ -1,5 +1,6 @@
 #include "common/estimation/reduced_information.h"
 
+#include <map>
 #include <memory>
 #include <random>
 #include <vector>
@@ -46,7 +47,8 @@ struct ToyProblem {
   std::vector<double> a = std::vector<double>(2, 0.1), b = std::vector<double>(3, -0.2);
   std::vector<std::vector<double>> p = std::vector<std::vector<double>>(kPoints, {0, 0, 0});
   ceres::Problem problem;
-  Eigen::MatrixXd jacobian;  // rows: residuals; columns: a, b, p_0 ... p_5
+  Eigen::MatrixXd jacobian;                 // rows: residuals; columns: a, b, p_0 ... p_5
+  std::vector<ceres::ResidualBlockId> ids;  // in the order of the rows, 2 rows each
 
   explicit ToyProblem(uint64_t seed) {
     std::mt19937_64 rng(seed);
@@ -69,15 +71,16 @@ struct ToyProblem {
     for (int i = 0; i < kPoints; ++i) {
       const Eigen::MatrixXd ma = random(2, 2), pa = random(2, 3), mb = random(2, 3),
                             pb = random(2, 3);
-      problem.AddResidualBlock(new LinearCost({ma, pa}, random(2, 1)), nullptr, a.data(),
-                               p[i].data());
-      problem.AddResidualBlock(new LinearCost({mb, pb}, random(2, 1)), nullptr, b.data(),
-                               p[i].data());
+      ids.push_back(problem.AddResidualBlock(new LinearCost({ma, pa}, random(2, 1)), nullptr,
+                                             a.data(), p[i].data()));
+      ids.push_back(problem.AddResidualBlock(new LinearCost({mb, pb}, random(2, 1)), nullptr,
+                                             b.data(), p[i].data()));
       add_rows({{0, ma}, {5 + 3 * i, pa}});
       add_rows({{2, mb}, {5 + 3 * i, pb}});
     }
     const Eigen::MatrixXd prior = Eigen::MatrixXd::Identity(2, 2);
-    problem.AddResidualBlock(new LinearCost({prior}, Eigen::VectorXd::Zero(2)), nullptr, a.data());
+    ids.push_back(problem.AddResidualBlock(new LinearCost({prior}, Eigen::VectorXd::Zero(2)),
+                                           nullptr, a.data()));
     add_rows({{0, prior}});
     jacobian.resize(static_cast<int>(rows.size()), columns);
     for (size_t r = 0; r < rows.size(); ++r) jacobian.row(static_cast<int>(r)) = rows[r];
@@ -105,6 +108,36 @@ TEST(ReducedInformation, MatchesTheFullInverseOfTheNormalEquations) {
   const double scale = expected.cwiseAbs().maxCoeff();
   EXPECT_LT((marginal.covariance - sigma2 * expected).cwiseAbs().maxCoeff(),
             kExactTolerance * scale * sigma2);
+}
+
+// Weighted otherwise than their noise: the residuals on a exact (variance 0), those on b twice
+// as noisy as weighted, the prior as weighted. The estimate's covariance is the sandwich
+// H^-1 J^T D J H^-1 of the full problem.
+TEST(ReducedInformation, TheSandwichMatchesTheFullProblemsOne) {
+  ToyProblem toy(13);
+  std::map<ceres::ResidualBlockId, double> variance;
+  Eigen::VectorXd d(toy.jacobian.rows());
+  for (size_t i = 0; i < toy.ids.size(); ++i) {
+    const bool prior = i + 1 == toy.ids.size();
+    const double v = prior ? 1.0 : (i % 2 == 0 ? 0.0 : 2.0);
+    variance[toy.ids[i]] = v;
+    d.segment(2 * static_cast<int>(i), 2).setConstant(v);
+  }
+  const std::vector<double*> kept = {toy.a.data(), toy.b.data()};
+  Expected<ReducedInformation> reduced = ComputeReducedInformation(
+      toy.problem, kept, toy.points(), [&](ceres::ResidualBlockId id) { return variance.at(id); });
+  ASSERT_TRUE(reduced.ok()) << reduced.status().message();
+  const Eigen::MatrixXd h_inv = (toy.jacobian.transpose() * toy.jacobian).inverse();
+  const Eigen::MatrixXd full =
+      h_inv * toy.jacobian.transpose() * d.asDiagonal() * toy.jacobian * h_inv;
+  const Eigen::MatrixXd expected = full.topLeftCorner(5, 5);
+  const MarginalCovariance sandwich = SandwichCovariance(*reduced);
+  EXPECT_LT((sandwich.covariance - expected).cwiseAbs().maxCoeff(),
+            kExactTolerance * expected.cwiseAbs().maxCoeff());
+  // Not the plain inverse: the weights are wrong here.
+  const MarginalCovariance plain = InvertInformation(reduced->information, 1.0);
+  EXPECT_GT((plain.covariance - expected).cwiseAbs().maxCoeff(),
+            0.01 * expected.cwiseAbs().maxCoeff());
 }
 
 TEST(ReducedInformation, AHeldBlockHasNoColumnsAndConditionsTheRest) {

@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include "common/estimation/umeyama.h"
 #include "node/calibration/cluster_bundle.h"
 #include "node/calibration/cluster_uncertainty.h"
 
@@ -22,6 +23,10 @@ constexpr double kNoise_px = 0.1;
 // Predicted and observed rms agree within this factor either way (30 draws of a handful of
 // dominant directions: the observed rms itself scatters by ~15 %).
 constexpr double kAgreementFactor = 1.5;
+// The table prediction takes out the site motion that best explains the units' landing
+// errors; the lab's placement is fitted to the points instead, which leaves more: observed
+// above predicted by up to ~1.6x on this site's oblique units (measured), bounded here by 2x.
+constexpr double kPlacementAgreementFactor = 2.0;
 constexpr int kMinObservations = 100;
 constexpr int kMaxSkippedDraws = 3;
 constexpr double kTablePredictionFactor = 3.0;  // mm vs px x footprint scale, see below
@@ -72,12 +77,16 @@ std::vector<Eigen::Vector3d> MakePoints(std::mt19937_64& rng) {
 
 struct Draw {
   node::ClusterObservations observations;
-  std::map<NodeId, Rigid3d> projector_from_world;  // truth, world = the root projector's frame
+  std::vector<Eigen::Vector3d> track_point_in_table;  // per track, its true point
+  std::map<NodeId, Rigid3d> projector_from_world;     // truth, world = the root projector's frame
 };
 
 // Factory values about the truth with the bundle's prior sigmas; observations with noise.
+// With options.projector_px_exact the projector pixels are exact (the pipeline's grid nodes)
+// and only the cameras' carry noise.
 Draw MakeDraw(const std::vector<TrueUnit>& units, const std::vector<Eigen::Vector3d>& points,
               const node::BundleOptions& options, std::mt19937_64& rng) {
+  const double projector_noise_px = options.projector_px_exact ? 0.0 : kNoise_px;
   std::normal_distribution<double> g(0.0, 1.0);
   Draw d;
   const Rigid3d root_from_table = units[0].table_from_projector.Inverse();
@@ -112,7 +121,7 @@ Draw MakeDraw(const std::vector<TrueUnit>& units, const std::vector<Eigen::Vecto
       if (!up || !p.model.projector.InImage(*up)) continue;
       node::Track t;
       t.projector_unit = p.id;
-      t.projector_px = *up + kNoise_px * Eigen::Vector2d(g(rng), g(rng));
+      t.projector_px = *up + projector_noise_px * Eigen::Vector2d(g(rng), g(rng));
       for (const TrueUnit& c : units) {
         const Rigid3d camera_from_world =
             c.model.projector_from_camera.Inverse() * d.projector_from_world.at(c.id);
@@ -120,7 +129,10 @@ Draw MakeDraw(const std::vector<TrueUnit>& units, const std::vector<Eigen::Vecto
         if (!uc || !c.model.camera.InImage(*uc)) continue;
         t.cameras.push_back({c.id, *uc + kNoise_px * Eigen::Vector2d(g(rng), g(rng))});
       }
-      if (!t.cameras.empty()) d.observations.tracks.push_back(t);
+      if (!t.cameras.empty()) {
+        d.observations.tracks.push_back(t);
+        d.track_point_in_table.push_back(x_in_table);
+      }
     }
   }
   return d;
@@ -132,6 +144,7 @@ TEST(ClusterUncertainty, PredictsTheSpreadOfTheSolvedProjectors) {
   const std::vector<Eigen::Vector3d> points = MakePoints(rng);
   node::BundleOptions options;
   options.observation_sigma_px = kNoise_px;
+  options.projector_px_exact = false;
   std::map<NodeId, double> observed_sq, predicted_sq;
   std::map<NodeId, int> observed_n;
   for (int draw = 0; draw < kDraws; ++draw) {
@@ -177,6 +190,7 @@ TEST(ClusterUncertainty, CarriesThePredictionToTheTable) {
   const std::vector<Eigen::Vector3d> points = MakePoints(rng);
   node::BundleOptions options;
   options.observation_sigma_px = kNoise_px;
+  options.projector_px_exact = false;
   const Draw d = MakeDraw(units, points, options, rng);
   Expected<node::BundleResult> solved =
       node::AdjustCluster(d.observations, d.projector_from_world, 1, options);
@@ -210,14 +224,17 @@ TEST(ClusterUncertainty, CarriesThePredictionToTheTable) {
 }
 
 // The errors the lab measures are relative to where the model is placed on the scanned points:
-// the table prediction takes the site's common motion out. Against the truth, with that motion
-// (rigid and scale, fitted over every unit's table points) taken out the same way.
+// the table prediction takes the site's common motion out. Against the truth measured as the
+// lab does, with the model placed on the solved points. Exact
+// projector pixels and noisy camera pixels, as the pipeline's grid nodes give them: the solve
+// weights both alike, the prediction (a sandwich covariance) knows better.
 TEST(ClusterUncertainty, PredictsTheTableErrorLeftAfterTheSitesCommonMotion) {
   std::mt19937_64 rng(23);
   const std::vector<TrueUnit> units = MakeSite();
   const std::vector<Eigen::Vector3d> points = MakePoints(rng);
   node::BundleOptions options;
   options.observation_sigma_px = kNoise_px;
+  options.projector_px_exact = true;  // as the pipeline's grid nodes
   std::map<NodeId, double> observed_sq, predicted_sq;
   std::map<NodeId, int> observed_n, predicted_n;
   const Rigid3d table_from_world = units[0].table_from_projector;
@@ -254,42 +271,30 @@ TEST(ClusterUncertainty, PredictsTheTableErrorLeftAfterTheSitesCommonMotion) {
     // ~15 mm off the true table here; the block stands 120 mm up.
     prediction.max_height_m = 0.05;
     node::PredictOnTable(solved->report, *solved->uncertainty, in_table, &calibrations, prediction);
-    // Observed: where each unit's estimated pixel for a table point truly lands, minus the
-    // point; the common similarity motion fitted over all of them taken out.
-    std::vector<std::pair<NodeId, Eigen::Vector3d>> at;  // unit, point
-    std::vector<Eigen::Vector3d> error;
+    // Observed, as the lab measures it: the model placed on the solved points (a similarity
+    // from the true points to the solved ones, as the model registration fits the model to the
+    // scan and the model's scale corrects the site's); each unit's pixel for a table point
+    // where the nodes believe it stands, landed through the true projector, minus the point.
+    std::vector<Eigen::Vector3d> truth_points;
+    for (int t : solved->point_track) truth_points.push_back(d.track_point_in_table[t]);
+    Expected<SimilarityFitReport> placement = FitSimilarityUmeyama(truth_points, in_table);
+    ASSERT_TRUE(placement.ok()) << placement.status().message();
     for (const TrueUnit& u : units) {
       const CameraModel& est = calibrations[u.id].projector;
       const Rigid3d projector_from_table_est = calibrations[u.id].table_from_projector->Inverse();
       for (const Eigen::Vector3d& x : points) {
         if (x.z() != 0.0) continue;
-        const auto u_hat = est.Project(projector_from_table_est * x);
+        const auto u_hat =
+            est.Project(projector_from_table_est * (placement->target_from_source * x));
         if (!u_hat || !u.model.projector.InImage(*u_hat)) continue;
         Expected<Eigen::Vector3d> ray = u.model.projector.Unproject(*u_hat);
         if (!ray.ok()) continue;
         const Eigen::Vector3d dir = u.table_from_projector.rotation * *ray;
         const Eigen::Vector3d& o = u.table_from_projector.translation;
         const Eigen::Vector3d hit = o + (-o.z() / dir.z()) * dir;
-        at.push_back({u.id, x});
-        error.push_back(hit - x);
+        observed_sq[u.id] += (hit - x).squaredNorm();
+        ++observed_n[u.id];
       }
-    }
-    const int n = static_cast<int>(error.size());
-    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-    for (const auto& a : at) centre += a.second / n;
-    Eigen::MatrixXd m(3 * n, 7);
-    Eigen::VectorXd b(3 * n);
-    for (int i = 0; i < n; ++i) {
-      const Eigen::Vector3d r = at[i].second - centre;
-      m.block<3, 3>(3 * i, 0).setIdentity();
-      m.block<3, 3>(3 * i, 3) << 0, r.z(), -r.y(), -r.z(), 0, r.x(), r.y(), -r.x(), 0;
-      m.block<3, 1>(3 * i, 6) = r;
-      b.segment<3>(3 * i) = error[i];
-    }
-    const Eigen::VectorXd left = b - m * (m.transpose() * m).ldlt().solve(m.transpose() * b);
-    for (int i = 0; i < n; ++i) {
-      observed_sq[at[i].first] += left.segment<3>(3 * i).squaredNorm();
-      ++observed_n[at[i].first];
     }
     for (const TrueUnit& u : units) {
       ASSERT_TRUE(calibrations[u.id].predicted_error) << "draw " << draw << " unit " << u.id;
@@ -305,7 +310,7 @@ TEST(ClusterUncertainty, PredictsTheTableErrorLeftAfterTheSitesCommonMotion) {
     const double observed = std::sqrt(observed_sq[u.id] / observed_n[u.id]) * 1e3;
     std::cout << "unit " << u.id << ": predicted " << predicted << " mm on the table, observed "
               << observed << " mm over " << kDraws - skipped << " draws\n";
-    EXPECT_LT(observed, kAgreementFactor * predicted) << "unit " << u.id;
+    EXPECT_LT(observed, kPlacementAgreementFactor * predicted) << "unit " << u.id;
     EXPECT_GT(observed, predicted / kAgreementFactor) << "unit " << u.id;
   }
 }
@@ -316,6 +321,7 @@ TEST(ClusterUncertainty, ASiteHeldOnlyToAPlaneNamesWhatItDoesNotFix) {
   const std::vector<Eigen::Vector3d> points = MakePoints(rng);
   node::BundleOptions options;
   options.observation_sigma_px = kNoise_px;
+  options.projector_px_exact = false;
   const Draw d = MakeDraw(units, points, options, rng);
   // A warm start that ties every point to the table plane and holds no pose (the planar
   // path's refinement): sliding or turning the whole site on the plane changes nothing.
