@@ -138,6 +138,20 @@ Draw MakeDraw(const std::vector<TrueUnit>& units, const std::vector<Eigen::Vecto
   return d;
 }
 
+// A solution's points and each unit's solved projector and pose in the true table frame.
+void InTable(const node::BundleResult& solved, const Rigid3d& table_from_world,
+             std::vector<Eigen::Vector3d>* points_in_table,
+             std::map<NodeId, UnitCalibration>* calibrations) {
+  for (const Eigen::Vector3d& p : solved.points_in_world) {
+    points_in_table->push_back(table_from_world * p);
+  }
+  for (const auto& [id, unit] : solved.units) {
+    UnitCalibration& c = (*calibrations)[id];
+    c.projector = unit.projector;
+    c.table_from_projector = table_from_world * solved.projector_from_world.at(id).Inverse();
+  }
+}
+
 TEST(ClusterUncertainty, PredictsTheSpreadOfTheSolvedProjectors) {
   std::mt19937_64 rng(17);
   const std::vector<TrueUnit> units = MakeSite();
@@ -198,14 +212,8 @@ TEST(ClusterUncertainty, CarriesThePredictionToTheTable) {
   // The solution's points in the true table frame, and each unit's solved pose there.
   const Rigid3d table_from_world = units[0].table_from_projector;
   std::vector<Eigen::Vector3d> in_table;
-  for (const Eigen::Vector3d& p : solved->points_in_world) in_table.push_back(table_from_world * p);
   std::map<NodeId, UnitCalibration> calibrations;
-  for (const TrueUnit& u : units) {
-    UnitCalibration c;
-    c.projector = solved->units.at(u.id).projector;
-    c.table_from_projector = table_from_world * solved->projector_from_world.at(u.id).Inverse();
-    calibrations[u.id] = c;
-  }
+  InTable(*solved, table_from_world, &in_table, &calibrations);
   ASSERT_TRUE(solved->uncertainty);
   node::TablePredictionOptions prediction;
   prediction.max_height_m = 0.05;  // as in the test above
@@ -257,14 +265,8 @@ TEST(ClusterUncertainty, PredictsTheTableErrorLeftAfterTheSitesCommonMotion) {
       continue;
     }
     std::vector<Eigen::Vector3d> in_table;
-    for (const Eigen::Vector3d& p : solved->points_in_world)
-      in_table.push_back(table_from_world * p);
     std::map<NodeId, UnitCalibration> calibrations;
-    for (const TrueUnit& u : units) {
-      calibrations[u.id].projector = solved->units.at(u.id).projector;
-      calibrations[u.id].table_from_projector =
-          table_from_world * solved->projector_from_world.at(u.id).Inverse();
-    }
+    InTable(*solved, table_from_world, &in_table, &calibrations);
     node::TablePredictionOptions prediction;
     prediction.scale_follows_the_model = true;
     // The solution's scale is the mounts' (about 1 % off), so its table points stand up to
