@@ -355,6 +355,7 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
         final_fit->structure_fraction = found->structure_fraction;
         final_fit->by_outline = found->by_outline;
         final_fit->scale = scale;
+        final_fit->relief_scale = found->relief_scale;
         out.model = *final_fit;
       } else {
         out.notes.push_back(final_fit.status().message());

@@ -28,13 +28,23 @@ constexpr double kMinAxisRatio = 1.05;
 // Placements kept for the caller to choose from: those whose ICP pairs reach this fraction of
 // the best one's (a city's regular blocks fit the table equally well at several places).
 constexpr double kCandidateInlierRatio = 0.9;
+// A relief (heights' scale over the plan's) this many standard errors from 1 is real.
+constexpr double kReliefSignificance = 3.0;
 
 // model_from_table as s R p + t.
+// model = s R (H p) + t, where H stretches the scan's x and y (table frame) by `a` about
+// `pivot` and leaves z: the relief's scale against the plan's (1 for a similarity).
 struct Similarity {
   double s = 1.0;
   Eigen::Matrix3d r = Eigen::Matrix3d::Identity();
   Eigen::Vector3d t = Eigen::Vector3d::Zero();
-  Eigen::Vector3d Apply(const Eigen::Vector3d& p) const { return s * (r * p) + t; }
+  double a = 1.0;
+  Eigen::Vector3d pivot = Eigen::Vector3d::Zero();
+  Eigen::Vector3d Stretch(const Eigen::Vector3d& p) const {
+    if (a == 1.0) return p;
+    return {pivot.x() + a * (p.x() - pivot.x()), pivot.y() + a * (p.y() - pivot.y()), p.z()};
+  }
+  Eigen::Vector3d Apply(const Eigen::Vector3d& p) const { return s * (r * Stretch(p)) + t; }
 };
 
 struct Grid {
@@ -175,15 +185,25 @@ struct IcpOutcome {
   Similarity model_from_table;
   double rms_m = 0;
   int inliers = 0;
+  // With the relief free: its standard error from the last step's normal equations (the
+  // residuals' rms as their sigma).
+  double relief_sigma = 0;
 };
 
 // The registration an ICP outcome gives: table = (1/s) R^T (model - t), i.e. the rigid part of
 // the inverse with the scale taken out.
 ModelRegistration FromIcp(const IcpOutcome& icp, int points_fitted) {
   ModelRegistration out;
-  out.scale = 1.0 / icp.model_from_table.s;
-  const Eigen::Matrix3d rt = icp.model_from_table.r.transpose();
-  out.table_from_model = Rigid3d(rt, -rt * icp.model_from_table.t);
+  // The plan's scale: a scan whose relief reads taller or flatter than its plan (a downward
+  // rig's focal length traded against its distance) is rescaled by its plan, which is what
+  // places each projector's image on the table.
+  const Similarity& x = icp.model_from_table;
+  out.scale = 1.0 / (x.s * x.a);
+  out.relief_scale = x.a;
+  // The similarity of the plan's scale that agrees with the fit at the pivot.
+  const Eigen::Vector3d t = x.t + x.s * (1.0 - x.a) * (x.r * x.pivot);
+  const Eigen::Matrix3d rt = x.r.transpose();
+  out.table_from_model = Rigid3d(rt, -rt * t);
   out.rms_m = icp.rms_m;
   out.inliers = icp.inliers;
   out.points = points_fitted;
@@ -194,7 +214,7 @@ ModelRegistration FromIcp(const IcpOutcome& icp, int points_fitted) {
 
 static IcpOutcome RunIcp(const PointTree& tree, const ModelSurface& surface,
                          std::span<const Eigen::Vector3d> scan, Similarity x, bool scale_free,
-                         int iterations, double final_distance_m) {
+                         int iterations, double final_distance_m, bool plan_free = false) {
   IcpOutcome out;
   const int n = static_cast<int>(scan.size());
   for (int it = 0; it < iterations; ++it) {
@@ -212,8 +232,14 @@ static IcpOutcome RunIcp(const PointTree& tree, const ModelSurface& surface,
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (int i = 0; i < n; ++i) centre += x.Apply(scan[i]);
     centre /= std::max(1, n);
-    Eigen::Matrix<double, 7, 7> a = Eigen::Matrix<double, 7, 7>::Zero();
-    Eigen::Matrix<double, 7, 1> b = Eigen::Matrix<double, 7, 1>::Zero();
+    if (it == 0 && plan_free) {
+      x.pivot = Eigen::Vector3d::Zero();
+      for (int i = 0; i < n; ++i) x.pivot += scan[i];
+      x.pivot /= std::max(1, n);
+    }
+    const Eigen::Matrix3d sr = x.s * x.r;
+    Eigen::Matrix<double, 8, 8> a = Eigen::Matrix<double, 8, 8>::Zero();
+    Eigen::Matrix<double, 8, 1> b = Eigen::Matrix<double, 8, 1>::Zero();
     double sum_sq = 0;
     int inliers = 0;
     for (int i = 0; i < n; ++i) {
@@ -225,10 +251,16 @@ static IcpOutcome RunIcp(const PointTree& tree, const ModelSurface& surface,
       const Eigen::Vector3d& nq = surface.normals[k];
       const double r = nq.dot(p - q);
       if (std::abs(r) > plane_gate) continue;
-      Eigen::Matrix<double, 7, 1> j;
+      Eigen::Matrix<double, 8, 1> j;
       j.head<3>() = p.cross(nq);
       j.segment<3>(3) = nq;
       j[6] = scale_free ? nq.dot(p - centre) : 0.0;
+      if (plan_free) {
+        const Eigen::Vector3d h = x.Stretch(scan[i]) - x.pivot;
+        j[7] = nq.dot(sr * Eigen::Vector3d(h.x(), h.y(), 0.0));
+      } else {
+        j[7] = 0.0;
+      }
       a += j * j.transpose();
       b -= j * r;
       sum_sq += r * r;
@@ -238,11 +270,16 @@ static IcpOutcome RunIcp(const PointTree& tree, const ModelSurface& surface,
     out.rms_m = inliers ? std::sqrt(sum_sq / inliers) : std::numeric_limits<double>::infinity();
     if (inliers < 10) break;
     if (!scale_free) a(6, 6) = 1.0;
+    if (!plan_free) a(7, 7) = 1.0;
+    if (plan_free) {
+      const Eigen::Matrix<double, 8, 8> inverse = a.inverse();
+      out.relief_sigma = std::sqrt(std::max(0.0, inverse(7, 7)) * sum_sq / inliers);
+    }
     // Damping: a direction the points do not determine (x, y, yaw and scale on a flat scan)
     // stays where it is instead of taking a step of noise over nothing (a scan of a flat table
     // sent the scale to -1e163 without it).
     a.diagonal().array() += kIcpDamping * inliers;
-    const Eigen::Matrix<double, 7, 1> d = a.ldlt().solve(b);
+    const Eigen::Matrix<double, 8, 1> d = a.ldlt().solve(b);
     if (!d.allFinite()) break;
     const Eigen::Vector3d w = d.head<3>();
     const Eigen::Matrix3d rw = w.norm() > 0
@@ -250,15 +287,36 @@ static IcpOutcome RunIcp(const PointTree& tree, const ModelSurface& surface,
                                    : Eigen::Matrix3d::Identity();
     const double ds = scale_free ? d[6] : 0.0;
     x.s *= (1.0 + ds);
+    if (plan_free) x.a *= (1.0 + d[7]);
     x.r = rw * x.r;
     x.t = rw * ((1.0 + ds) * (x.t - centre) + centre) + d.segment<3>(3);
     Eigen::JacobiSVD<Eigen::Matrix3d> svd(x.r, Eigen::ComputeFullU | Eigen::ComputeFullV);
     x.r = svd.matrixU() * svd.matrixV().transpose();
     // Converged: the step moves no point by more than ~1e-8 m (rotation in rad, metres).
-    if (it >= 8 && d.head<6>().norm() < 1e-7 && std::abs(d[6]) < 1e-7) break;
+    if (it >= 8 && d.head<6>().norm() < 1e-7 && std::abs(d[6]) < 1e-7 && std::abs(d[7]) < 1e-7) {
+      break;
+    }
   }
   out.model_from_table = x;
   return out;
+}
+
+// The scale-free fit: with scale_from_plan, the relief free too, kept only where it differs
+// from the plan's scale by more than kReliefSignificance standard errors (else the one scale
+// of the similarity, which every point sets, is the better estimate; the plan's alone rests
+// on the few walls a camera looking down sees).
+static IcpOutcome RunScaleFreeIcp(const PointTree& tree, const ModelSurface& surface,
+                                  std::span<const Eigen::Vector3d> scan, const Similarity& x,
+                                  bool scale_free, bool scale_from_plan, int iterations,
+                                  double final_distance_m) {
+  if (scale_free && scale_from_plan) {
+    IcpOutcome relief =
+        RunIcp(tree, surface, scan, x, true, iterations, final_distance_m, /*plan_free=*/true);
+    if (std::abs(relief.model_from_table.a - 1.0) > kReliefSignificance * relief.relief_sigma) {
+      return relief;
+    }
+  }
+  return RunIcp(tree, surface, scan, x, scale_free, iterations, final_distance_m);
 }
 
 Expected<ModelRegistration> ModelMatcher::Refine(std::span<const Eigen::Vector3d> scan,
@@ -274,8 +332,9 @@ Expected<ModelRegistration> ModelMatcher::Refine(std::span<const Eigen::Vector3d
   x.r = model_from_table.RotationMatrix();
   x.t = model_from_table.translation;
   const std::vector<Eigen::Vector3d> points = Subsample(scan, kMaxIcpPoints);
-  IcpOutcome icp = RunIcp(*tree_, surface_, points, x, scale_free, options_.icp_iterations,
-                          options_.icp_max_distance_m);
+  IcpOutcome icp =
+      RunScaleFreeIcp(*tree_, surface_, points, x, scale_free, options_.scale_from_plan,
+                      options_.icp_iterations, options_.icp_max_distance_m);
   return FromIcp(icp, static_cast<int>(points.size()));
 }
 
@@ -538,9 +597,9 @@ Expected<std::vector<ModelRegistration>> ModelMatcher::RegisterCandidates(
     // the coarse ICP left them, for the caller to Refine() only if it gets to them.
     ModelRegistration r;
     if (out.empty()) {
-      const IcpOutcome fine =
-          RunIcp(*tree_, surface_, points, icp.model_from_table, options_.estimate_scale,
-                 options_.icp_iterations, options_.icp_max_distance_m);
+      const IcpOutcome fine = RunScaleFreeIcp(*tree_, surface_, points, icp.model_from_table,
+                                              options_.estimate_scale, options_.scale_from_plan,
+                                              options_.icp_iterations, options_.icp_max_distance_m);
       r = FromIcp(fine, static_cast<int>(points.size()));
     } else {
       r = FromIcp(icp, static_cast<int>(subsample.size()));

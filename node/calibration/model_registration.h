@@ -15,9 +15,12 @@
 //   3. Each candidate is refined by point-to-plane ICP (model surface sampled every
 //      sample_spacing_m, a nanoflann k-d tree; pairs farther than icp_max_distance_m are
 //      dropped), first with a scale factor free (estimate_scale: the model is metric, the scan's
-//      scale is only as good as the units' mount baselines), then rigid. The candidate with the
-//      lowest trimmed rms wins.
-// Output: table_from_model (rigid), scale (scan length / model length), rms, inlier counts.
+//      scale is only as good as the units' mount baselines), then rigid. With scale_from_plan
+//      the scale has two parts, the plan's (x, y) and the relief's (z) over it: a rig looking
+//      down from afar reads heights off by more than its plan, and the plan is what places
+//      each projector's image on the table. The candidate with the lowest trimmed rms wins.
+// Output: table_from_model (rigid), scale (the plan's: scan length / model length),
+// relief_scale (the scan's heights over its plan, 1 without scale_from_plan), rms, inliers.
 // Flat scan and flat model (under 0.5 % of the points above structure_height_m each): placed by
 // outlines instead (RegisterByOutline): the scan's points and the model's top become masks
 // (4 mm cells, gaps closed), whose area centroids and major axes give x, y and yaw; scale 1.
@@ -54,6 +57,10 @@ struct ModelRegistrationOptions {
   double icp_max_distance_m = 0.01;
   double min_inlier_fraction = 0.5;
   bool estimate_scale = true;
+  // With estimate_scale: the relief's scale free against the plan's, and the plan's taken as
+  // the scan's (a scan's heights are off by more than its plan where the rig looks down from
+  // afar: focal length and distance trade against each other).
+  bool scale_from_plan = true;
   int min_points = 100;
   Status Check() const;
 };
@@ -61,6 +68,7 @@ struct ModelRegistrationOptions {
 struct ModelRegistration {
   Rigid3d table_from_model;
   double scale = 1.0;           // scan = scale * (table_from_model * model), before rescaling
+  double relief_scale = 1.0;    // the scan's heights over its plan's scale (scale_from_plan)
   double rms_m = 0.0;           // point-to-plane rms of the inliers, final (rigid) fit
   int inliers = 0, points = 0;  // of the scan points fitted (at most 5 000, evenly subsampled)
   double coarse_score = 0.0;    // fraction of the best correlation's possible agreement

@@ -17,6 +17,9 @@ constexpr double kAngleTolerance_deg = 0.05;
 // A flat table placed by its outline: the outline's mask quantisation (4 mm cells, 12 mm points).
 constexpr double kOutlinePlacement_mm = 1.0;
 constexpr double kOutlineAngle_deg = 0.1;
+// The plan's scale from a scan 2 % taller than its plan; the heights' scale over the plan's.
+constexpr double kPlanScaleTolerance = 5e-4;
+constexpr double kReliefScaleTolerance = 2e-3;
 constexpr double kPi = 3.14159265358979323846;
 
 Scene SandtableScene(uint64_t seed) {
@@ -27,18 +30,21 @@ Scene SandtableScene(uint64_t seed) {
 
 // A scan: surface samples of `scene` seen from above (z-facing or walls), in a disc of radius
 // `radius_m` about `centre`, in the table frame x_table = table_from_model * x_model, with
-// Gaussian noise of sigma_m per axis.
+// Gaussian noise of sigma_m per axis; of the walls (normal under 45 degrees from the table) one
+// point in `wall_stride` (a camera looking down sees few).
 std::vector<Eigen::Vector3d> Scan(const Scene& scene, const Rigid3d& table_from_model,
                                   const Eigen::Vector2d& centre, double radius_m, double sigma_m,
-                                  uint64_t seed) {
+                                  uint64_t seed, int wall_stride = 1) {
   const ModelSurface surface = SampleModelSurface(scene, 0.004);
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> n(0.0, sigma_m);
   std::vector<Eigen::Vector3d> out;
+  int walls = 0;
   for (size_t i = 0; i < surface.points_m.size(); ++i) {
     const Eigen::Vector3d& p = surface.points_m[i];
     if ((p.head<2>() - centre).norm() > radius_m) continue;
     if (surface.normals[i].z() < -0.1) continue;  // faces down: never seen from above
+    if (surface.normals[i].z() < 0.7 && (walls++ % wall_stride) != 0) continue;
     out.push_back(table_from_model * p + Eigen::Vector3d(n(rng), n(rng), n(rng)));
   }
   return out;
@@ -74,6 +80,34 @@ TEST(ModelRegistration, RecoversTheScanScale) {
   Expected<ModelRegistration> found = RegisterModel(scene, scan);
   ASSERT_TRUE(found.ok()) << found.status().ToString();
   EXPECT_NEAR(found->scale, scale, 2e-4);
+}
+
+// A rig looking down from afar trades focal length against distance: its scan's heights read
+// taller than its plan. The scale is the plan's (what puts each projector's image on the table),
+// the heights' own reported beside it; before, the buildings' roofs and the table (normals
+// along z) set the one scale, and the plan stayed off by the relief's error.
+TEST(ModelRegistration, TakesThePlansScaleWhereTheReliefReadsTaller) {
+  const Scene scene = SandtableScene(1);
+  const Rigid3d table_from_model(
+      Eigen::AngleAxisd(25.0 * kPi / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
+      Eigen::Vector3d(-0.1, 0.3, 0.0));
+  constexpr int kWallStride = 10;  // looking down: one wall point in ten
+  std::vector<Eigen::Vector3d> scan =
+      Scan(scene, table_from_model, Eigen::Vector2d(0.0, 0.0), 0.6, 0.0003, 4, kWallStride);
+  const double plan_scale = 1.006;
+  const double relief = 1.02;  // heights 2 % taller than the plan
+  for (Eigen::Vector3d& p : scan) {
+    p.z() *= relief;
+    p *= plan_scale;
+  }
+  Expected<ModelRegistration> found = RegisterModel(scene, scan);
+  ASSERT_TRUE(found.ok()) << found.status().ToString();
+  EXPECT_NEAR(found->scale, plan_scale, kPlanScaleTolerance);
+  EXPECT_NEAR(found->relief_scale, relief, kReliefScaleTolerance);
+  // The placement in the plan: the model's origin lands where the scan puts it.
+  const Eigen::Vector3d origin = found->table_from_model.translation * found->scale;
+  EXPECT_LT((origin.head<2>() - plan_scale * table_from_model.translation.head<2>()).norm() * 1e3,
+            kPlacementTolerance_mm);
 }
 
 TEST(ModelRegistration, RefusesAModelThatIsNotOnTheTable) {
