@@ -4,6 +4,8 @@
 // configuration: frames per projector, modeled projection time, compute time, registration
 // error (site, table, buildings), model placement error.
 //   self_calibration_sweep --site sandtable-3 --scene sandtable [--quick] [--out FILE.csv]
+//   self_calibration_sweep --site grid-2 --scene city --resolution-scale 0.5 --quick
+//   self_calibration_sweep --site random:4 --scene random:4 --seed 4 --quick
 // Diagnostics on stderr (environment): SANDTABLE_CORRESPONDENCE_TRUTH=1 prints, per projector
 // and camera, the grid correspondences against the world's truth (mean and rms, px);
 // SANDTABLE_ERROR_BREAKDOWN=1 the registration error per unit split into its mean and the rest.
@@ -16,6 +18,7 @@
 
 #include "common/cli/command_line.h"
 #include "common/scene/procedural_scene.h"
+#include "common/scene/random_scene.h"
 #include "sim/site/site_presets.h"
 #include "tests/testing/self_calibration_sim.h"
 
@@ -44,6 +47,9 @@ int main(int argc, char** argv) {
   app.add_option("--out", out_path, "CSV file (default: stdout only)");
   app.add_option("--seed", seed, "seed");
   app.add_flag("--quick", quick, "the default configuration only");
+  double resolution_scale = 1.0;
+  app.add_option("--resolution-scale", resolution_scale,
+                 "every projector and camera at this share of its resolution (the lab's scale)");
   int max_iterations = 0, grid_step = 0;
   double function_tolerance = 0, factory_error_scale = 1.0, prior_scale = 1.0;
   bool no_noise = false, model_refinement = false, log_progress = false;
@@ -52,6 +58,8 @@ int main(int argc, char** argv) {
   app.add_option("--factory-error-scale", factory_error_scale, "scale the factory errors");
   app.add_option("--prior-scale", prior_scale, "scale the refinement's prior sigmas");
   app.add_flag("--no-noise", no_noise, "captures without noise");
+  bool plan_scale_off = false;
+  app.add_flag("--no-plan-scale", plan_scale_off, "the model's scale from plan and relief alike");
   app.add_option("--max-iterations", max_iterations, "override: refinement iterations per round");
   app.add_option("--grid-step", grid_step, "override: projector grid step, px");
   app.add_option("--function-tolerance", function_tolerance, "override: Ceres function tolerance");
@@ -63,14 +71,30 @@ int main(int argc, char** argv) {
     std::cerr << site.status().ToString() << "\n";
     return 2;
   }
-  Expected<ScenePreset> preset = ParseScenePreset(scene_name);
-  if (!preset.ok()) {
-    std::cerr << preset.status().ToString() << "\n";
+  if (Status scaled = sim::ScaleSiteResolution(resolution_scale, &*site); !scaled.ok()) {
+    std::cerr << "--resolution-scale: " << scaled.ToString() << "\n";
     return 2;
   }
-  ProceduralSceneOptions scene_options;
-  scene_options.preset = *preset;
-  Expected<ProceduralScene> scene = MakeProceduralScene(scene_options);
+  Expected<ProceduralScene> scene = ProceduralScene{};
+  if (std::optional<uint64_t> scene_seed = ParseRandomSeedName(scene_name)) {
+    RandomSceneOptions random_options;
+    random_options.seed = *scene_seed;
+    Expected<RandomScene> random = MakeRandomScene(random_options);
+    if (!random.ok()) {
+      std::cerr << random.status().ToString() << "\n";
+      return 2;
+    }
+    scene = std::move(random->scene);
+  } else {
+    Expected<ScenePreset> preset = ParseScenePreset(scene_name);
+    if (!preset.ok()) {
+      std::cerr << preset.status().ToString() << "\n";
+      return 2;
+    }
+    ProceduralSceneOptions scene_options;
+    scene_options.preset = *preset;
+    scene = MakeProceduralScene(scene_options);
+  }
   if (!scene.ok()) {
     std::cerr << scene.status().ToString() << "\n";
     return 2;
@@ -91,6 +115,7 @@ int main(int argc, char** argv) {
   base.options.noise = !no_noise;
   base.options.solve.bundle.log_progress = log_progress;
   base.options.solve.refine_with_model = model_refinement;
+  base.options.solve.model.scale_from_plan = !plan_scale_off;
   {
     auto& e = base.options.factory_error;
     e.focal_relative_sigma *= factory_error_scale;
@@ -153,6 +178,10 @@ int main(int argc, char** argv) {
     c.options.solve.bundle.free_k3 = true;
     configs.push_back(c);
     c = base;
+    c.name = "scale_from_plan_off";
+    c.options.solve.model.scale_from_plan = false;
+    configs.push_back(c);
+    c = base;
     c.name = "no_model_scale";
     c.options.solve.scale_from_model = false;
     configs.push_back(c);
@@ -189,6 +218,17 @@ int main(int argc, char** argv) {
                   r->metric_true_model.site.buildings.rms_mm);
     std::cout << line << std::endl;
     if (csv) csv << line << "\n";
+    for (const auto& [id, c] : r->solution.calibrations) {
+      if (!c.predicted_error) continue;
+      const PredictedErrorRecord& e = *c.predicted_error;
+      std::cerr << "  unit " << id << " predicted " << e.rms_px << " px, " << e.rms_mm
+                << " mm (sigma " << e.sigma_px << " px; " << e.weak_direction << ", "
+                << e.weak_share << ")\n";
+    }
+    if (r->solution.model) {
+      std::cerr << "  model scale " << r->solution.model->scale << ", relief "
+                << r->solution.model->relief_scale << "\n";
+    }
     for (const std::string& note : r->solution.notes) std::cerr << "  note: " << note << "\n";
     for (const auto& [stage, s] : r->solution.stage_time_s) {
       std::cerr << "  " << stage << ": " << s << " s\n";

@@ -87,6 +87,37 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
       result.decode_cpu_s += ThreadCpuSeconds() - t0;
       if (!points.ok()) return points.status();
       by_camera[c] = std::move(*points);
+      if (getenv("SANDTABLE_TRUE_CORRESPONDENCES")) {
+        // Diagnostic: each kept node's camera position replaced by the true one (the projector
+        // ray of the node to the surface, seen by the true camera unless occluded), so that a
+        // solve from these isolates what the decoding's errors do.
+        const sim::UnitSpec* cu = site.FindUnit(c);
+        const Rigid3d table_from_camera =
+            cu->projector.table_from_projector * cu->camera->projector_from_camera;
+        const Rigid3d camera_from_table = table_from_camera.Inverse();
+        std::vector<ProjectorGridPoint> exact;
+        for (ProjectorGridPoint gp : by_camera[c]) {
+          Expected<Eigen::Vector3d> ray =
+              p.projector.model.Unproject(gp.projector_px.cast<double>());
+          if (!ray.ok()) continue;
+          Expected<sim::SurfaceTruth> hit =
+              world.TruthAlongRay(p.projector.table_from_projector.translation,
+                                  p.projector.table_from_projector.rotation * *ray);
+          if (!hit.ok()) continue;
+          const Eigen::Vector3d in_camera = camera_from_table * hit->point_in_table_m;
+          std::optional<Eigen::Vector2d> px = cu->camera->model.Project(in_camera);
+          if (!px) continue;
+          const Eigen::Vector3d to_point = hit->point_in_table_m - table_from_camera.translation;
+          Expected<sim::SurfaceTruth> seen =
+              world.TruthAlongRay(table_from_camera.translation, to_point.normalized());
+          if (!seen.ok() || (seen->point_in_table_m - hit->point_in_table_m).norm() > 1e-4) {
+            continue;
+          }
+          gp.camera_px = px->cast<float>();
+          exact.push_back(gp);
+        }
+        by_camera[c] = std::move(exact);
+      }
       if (getenv("SANDTABLE_CORRESPONDENCE_TRUTH")) {
         // Diagnostic: the true projector pixel of the surface point each camera position sees.
         const sim::UnitSpec* cu = site.FindUnit(c);
@@ -211,6 +242,36 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
     }
     Expected<sim::RegistrationReport> own = sim::MeasureRegistration(world, true_model, metric);
     if (own.ok()) result.metric_true_model = *own;
+  }
+  if (getenv("SANDTABLE_PARAMETER_TRUTH")) {
+    Expected<sim::ModelPlacementError> placement =
+        sim::MeasureModelPlacement(world, estimates, options.model_from_table.Inverse(),
+                                   options.model_from_table * scene.Bounds().center());
+    if (!placement.ok()) return placement.status();
+    // Diagnostic: each unit's solved parameters against the truth (the pose in the true
+    // table frame through the nodes' table frame's best fit to the truth).
+    for (const auto& [id, c] : result.solution.calibrations) {
+      const sim::UnitSpec* u = site.FindUnit(id);
+      const CameraModel& tp = u->projector.model;
+      const CameraModel& tc = u->camera->model;
+      const Rigid3d pose = placement->true_table_from_estimated_table * *c.table_from_projector;
+      const Rigid3d& truth = u->projector.table_from_projector;
+      const Rigid3d mount = c.projector_from_camera * u->camera->projector_from_camera.Inverse();
+      const Eigen::AngleAxisd turn(truth.rotation.inverse() * pose.rotation);
+      const Eigen::Vector3d dp = pose.translation - truth.translation;
+      fprintf(stderr,
+              "unit %u: projector f %+.4f%% %+.4f%% c (%+.2f, %+.2f) px k1 %+.4f | camera f "
+              "%+.4f%% c (%+.2f, %+.2f) px k1 %+.4f | mount %.2f mm %.3f deg | position "
+              "(%+.2f, %+.2f, %+.2f) mm turn %.3f deg\n",
+              id, 100 * (c.projector.fx_px / tp.fx_px - 1),
+              100 * (c.projector.fy_px / tp.fy_px - 1), c.projector.cx_px - tp.cx_px,
+              c.projector.cy_px - tp.cy_px, c.projector.distortion.k1 - tp.distortion.k1,
+              100 * (c.camera.fx_px / tc.fx_px - 1), c.camera.cx_px - tc.cx_px,
+              c.camera.cy_px - tc.cy_px, c.camera.distortion.k1 - tc.distortion.k1,
+              1000 * mount.translation.norm(),
+              Eigen::AngleAxisd(mount.rotation).angle() * 180 / M_PI, 1000 * dp.x(), 1000 * dp.y(),
+              1000 * dp.z(), turn.angle() * 180 / M_PI);
+    }
   }
   return result;
 }
