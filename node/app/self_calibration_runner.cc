@@ -927,6 +927,7 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
       report["model"] = {{"found", true},
                          {"table_from_model", io::RigidToJson(s.model->table_from_model)},
                          {"scale", s.model->scale},
+                         {"relief_scale", s.model->relief_scale},
                          {"scale_correction", s.scale_correction},
                          {"rms_mm", s.model->rms_m * 1e3},
                          {"inliers", s.model->inliers},

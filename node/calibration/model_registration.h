@@ -16,9 +16,8 @@
 //      sample_spacing_m, a nanoflann k-d tree; pairs farther than icp_max_distance_m are
 //      dropped), first with a scale factor free (estimate_scale: the model is metric, the scan's
 //      scale is only as good as the units' mount baselines), then rigid. With scale_from_plan
-//      the scale has two parts, the plan's (x, y) and the relief's (z) over it: a rig looking
-//      down from afar reads heights off by more than its plan, and the plan is what places
-//      each projector's image on the table. The candidate with the lowest trimmed rms wins.
+//      (off by default) the scale has two parts, the plan's (x, y) and the relief's (z) over
+//      it. The candidate with the lowest trimmed rms wins.
 // Output: table_from_model (rigid), scale (the plan's: scan length / model length),
 // relief_scale (the scan's heights over its plan, 1 without scale_from_plan), rms, inliers.
 // Flat scan and flat model (under 0.5 % of the points above structure_height_m each): placed by
@@ -58,9 +57,12 @@ struct ModelRegistrationOptions {
   double min_inlier_fraction = 0.5;
   bool estimate_scale = true;
   // With estimate_scale: the relief's scale free against the plan's, and the plan's taken as
-  // the scan's (a scan's heights are off by more than its plan where the rig looks down from
-  // afar: focal length and distance trade against each other).
-  bool scale_from_plan = true;
+  // the scan's where the relief differs from it by more than 3 standard errors (a rig looking
+  // down from afar trades focal length against distance, which puts the heights off by more
+  // than the plan). Off: with exact correspondences it places the projectors better, with
+  // decoded ones the free relief takes up other errors of the scan and the plan's scale is
+  // worse (docs/results.md, "The model's scale: plan and relief").
+  bool scale_from_plan = false;
   int min_points = 100;
   Status Check() const;
 };

@@ -526,7 +526,11 @@ std::string LabReportMarkdown(const LabResult& r) {
       if (m.value("found", false)) {
         md << "\nModel found on the scanned surface: rms " << Fixed(m.value("rms_mm", 0.0), 3)
            << " mm over " << m.value("inliers", 0) << " of " << m.value("points", 0)
-           << " points; scale of the scan " << Fixed(m.value("scale", 1.0), 5) << ".";
+           << " points; scale of the scan " << Fixed(m.value("scale", 1.0), 5);
+        if (m.value("relief_scale", 1.0) != 1.0) {
+          md << " in plan, its heights " << Fixed(m.value("relief_scale", 1.0), 5) << " times that";
+        }
+        md << ".";
         if (r.model_offset_measured) {
           md << " Placement against the truth: **" << Fixed(r.model_offset_mm, 3) << " mm, "
              << Fixed(r.model_offset_deg, 4) << " deg**.";

@@ -58,8 +58,9 @@ int main(int argc, char** argv) {
   app.add_option("--factory-error-scale", factory_error_scale, "scale the factory errors");
   app.add_option("--prior-scale", prior_scale, "scale the refinement's prior sigmas");
   app.add_flag("--no-noise", no_noise, "captures without noise");
-  bool plan_scale_off = false;
-  app.add_flag("--no-plan-scale", plan_scale_off, "the model's scale from plan and relief alike");
+  bool plan_scale = false;
+  app.add_flag("--plan-scale", plan_scale,
+               "the model's scale from the plan, the relief free (scale_from_plan)");
   app.add_option("--max-iterations", max_iterations, "override: refinement iterations per round");
   app.add_option("--grid-step", grid_step, "override: projector grid step, px");
   app.add_option("--function-tolerance", function_tolerance, "override: Ceres function tolerance");
@@ -115,7 +116,7 @@ int main(int argc, char** argv) {
   base.options.noise = !no_noise;
   base.options.solve.bundle.log_progress = log_progress;
   base.options.solve.refine_with_model = model_refinement;
-  base.options.solve.model.scale_from_plan = !plan_scale_off;
+  base.options.solve.model.scale_from_plan = plan_scale;
   {
     auto& e = base.options.factory_error;
     e.focal_relative_sigma *= factory_error_scale;
@@ -178,8 +179,8 @@ int main(int argc, char** argv) {
     c.options.solve.bundle.free_k3 = true;
     configs.push_back(c);
     c = base;
-    c.name = "scale_from_plan_off";
-    c.options.solve.model.scale_from_plan = false;
+    c.name = "scale_from_plan";
+    c.options.solve.model.scale_from_plan = true;
     configs.push_back(c);
     c = base;
     c.name = "no_model_scale";

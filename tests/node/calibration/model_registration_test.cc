@@ -83,9 +83,9 @@ TEST(ModelRegistration, RecoversTheScanScale) {
 }
 
 // A rig looking down from afar trades focal length against distance: its scan's heights read
-// taller than its plan. The scale is the plan's (what puts each projector's image on the table),
-// the heights' own reported beside it; before, the buildings' roofs and the table (normals
-// along z) set the one scale, and the plan stayed off by the relief's error.
+// taller than its plan. With scale_from_plan the scale is the plan's, the heights' own reported
+// beside it; with one scale, the buildings' roofs and the table (normals along z) set it and
+// the plan stays off by the relief's error.
 TEST(ModelRegistration, TakesThePlansScaleWhereTheReliefReadsTaller) {
   const Scene scene = SandtableScene(1);
   const Rigid3d table_from_model(
@@ -100,7 +100,9 @@ TEST(ModelRegistration, TakesThePlansScaleWhereTheReliefReadsTaller) {
     p.z() *= relief;
     p *= plan_scale;
   }
-  Expected<ModelRegistration> found = RegisterModel(scene, scan);
+  ModelRegistrationOptions options;
+  options.scale_from_plan = true;
+  Expected<ModelRegistration> found = RegisterModel(scene, scan, options);
   ASSERT_TRUE(found.ok()) << found.status().ToString();
   EXPECT_NEAR(found->scale, plan_scale, kPlanScaleTolerance);
   EXPECT_NEAR(found->relief_scale, relief, kReliefScaleTolerance);
