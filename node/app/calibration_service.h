@@ -1,10 +1,10 @@
-// CalibrationService: the calibration a node holds, and its export.
+// The calibration a node holds at start, and its export.
 //
 // A node starts from its factory calibration (camera and projector intrinsics,
-// projector_from_camera: the unit file of common/io/unit_calibration_file.h). Registered in a
-// site, the calibration also holds table_from_projector and table_from_model; until
-// structured-light self-calibration exists, the lab's TEST MODE hands the node its true pose
-// (LoadTruePose: the only place where truth reaches a node), labelled source
+// projector_from_camera: the unit file of common/io/unit_calibration_file.h); registered in a
+// site (self-calibration, node/app/self_calibration_service.h) it also holds
+// table_from_projector and table_from_model. The lab's TEST MODE hands a node its true pose
+// instead (LoadTruePose: the only place where truth reaches a node), labelled source
 // "factory+true_pose" in everything exported.
 // Export: <dir>/unit-<id>.json (the unit file, format sandtable.unit_calibration) and
 // <dir>/unit-<id>.yaml (OpenCV YAML: projector intrinsics, R and T model -> projector), each

@@ -113,6 +113,16 @@ void BlendService::SetSiteMpcdi(std::shared_ptr<const MpcdiSite> site, std::stri
   site_mpcdi_path_ = std::move(path);
 }
 
+void BlendService::HoldSiteMpcdiWrites() { ++mpcdi_holds_; }
+
+void BlendService::ReleaseSiteMpcdiWrites(NodeRuntime& node) {
+  if (mpcdi_holds_ > 0) --mpcdi_holds_;
+  if (mpcdi_holds_ == 0 && !mpcdi_writing_ && mpcdi_dirty_ && site_mpcdi_ &&
+      !site_mpcdi_path_.empty()) {
+    WriteSiteMpcdi(mpcdi_latest_, node);
+  }
+}
+
 void BlendService::TakeAlpha(NodeId unit, int width_px, int height_px, std::string values,
                              NodeRuntime& node) {
   if (!site_mpcdi_ || site_mpcdi_path_.empty()) return;
@@ -134,7 +144,9 @@ void BlendService::TakeAlpha(NodeId unit, int width_px, int height_px, std::stri
   alpha.gamma_embedded = 1.0;
   region->alpha = std::move(alpha);
   mpcdi_dirty_ = true;
-  if (!mpcdi_writing_) WriteSiteMpcdi(unit, node);  // else: written again after the one in flight
+  mpcdi_latest_ = unit;
+  if (!mpcdi_writing_ && mpcdi_holds_ == 0)
+    WriteSiteMpcdi(unit, node);  // else: written again after the one in flight
 }
 
 void BlendService::TakeAlphaPng(NodeId unit, int width_px, int height_px, std::string png,
@@ -186,7 +198,7 @@ void BlendService::WriteSiteMpcdi(NodeId latest, NodeRuntime& node) {
           print_({{"blend", id_}, {"mpcdi", site_mpcdi_path_}, {"alpha_from", latest}});
         }
         // Alphas that came in meanwhile: once more, with what the site holds now.
-        if (mpcdi_dirty_) WriteSiteMpcdi(latest, node);
+        if (mpcdi_dirty_ && mpcdi_holds_ == 0) WriteSiteMpcdi(mpcdi_latest_, node);
       });
 }
 

@@ -114,6 +114,10 @@ class BlendService : public NodeService {
   // The runner only: the site's MPCDI export (its regions "unit-<id>"), rewritten at `path` with
   // each region's alpha map as the masks come in.
   void SetSiteMpcdi(std::shared_ptr<const MpcdiSite> site, std::string path);
+  // While another writer has the site's MPCDI file in hand (the node's export of the round, on
+  // a worker): alpha maps are kept and written once it is released.
+  void HoldSiteMpcdiWrites();
+  void ReleaseSiteMpcdiWrites(NodeRuntime& node);
 
   // Shares and alpha maps refused so far (malformed, or fitting nothing here).
   uint64_t bad_messages() const { return bad_shares_; }
@@ -172,6 +176,8 @@ class BlendService : public NodeService {
   std::shared_ptr<MpcdiSite> site_mpcdi_;  // the runner's export, with the alphas received
   std::string site_mpcdi_path_;
   bool mpcdi_writing_ = false, mpcdi_dirty_ = false;
+  NodeId mpcdi_latest_ = kInvalidNodeId;  // the unit whose alpha map came in last
+  int mpcdi_holds_ = 0;                   // HoldSiteMpcdiWrites() not yet released
   struct PendingAlpha {
     int width_px = 0, height_px = 0;
     std::string png;     // 8-bit grey PNG, for another node as runner
