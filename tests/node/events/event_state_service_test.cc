@@ -160,7 +160,10 @@ TEST_F(EventStateServiceTest, TimelineClockGivesTheCoordinatorsMediaTime) {
   // host both are the same steady clock, so the estimated offset is ~0.
   std::optional<double> media = events_.MediaTimeAt(*node_, later_ns);
   ASSERT_TRUE(media.has_value());
-  EXPECT_NEAR(*media, 11.0, kMediaTolerance_s);
+  // Within the offset estimate's own bound (a loaded machine's round trips widen it), times
+  // the rate.
+  const double bound_s = node_->clock_offset()->error_bound_s;
+  EXPECT_NEAR(*media, 11.0, kMediaTolerance_s + 2.0 * bound_s) << "offset bound " << bound_s;
   // Clamped at the end.
   EXPECT_NEAR(*events_.MediaTimeAt(*node_, sample_ns + 1'000'000'000'000), 100.0, 1e-9);
 }
