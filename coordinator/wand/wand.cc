@@ -1,5 +1,7 @@
 #include "coordinator/wand/wand.h"
 
+#include <cmath>
+
 #include "proto/convert.h"
 
 namespace sandtable::coordinator {
@@ -38,6 +40,16 @@ wire::Cursor ToWire(const CursorState& cursor, int64_t sample_time_ns) {
   out.set_button_pressed(cursor.button_pressed);
   out.set_sensor_index(cursor.sensor_index);
   return out;
+}
+
+Status WandOptions::Check() const {
+  if (!tip_in_sensor_m.allFinite() || !ray_in_sensor.allFinite() || !(ray_in_sensor.norm() > 0.0)) {
+    return InvalidArgumentError("wand: tip and ray finite, the ray non-zero");
+  }
+  if (!(max_distance_m > 0.0) || !std::isfinite(max_distance_m)) {
+    return InvalidArgumentError("wand: max_distance_m must be finite and > 0");
+  }
+  return OkStatus();
 }
 
 }  // namespace sandtable::coordinator

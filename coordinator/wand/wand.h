@@ -23,6 +23,7 @@ struct WandOptions {
   Eigen::Vector3d tip_in_sensor_m = Eigen::Vector3d::Zero();
   Eigen::Vector3d ray_in_sensor = Eigen::Vector3d::UnitX();
   double max_distance_m = 10.0;
+  Status Check() const;
 };
 
 struct CursorState {

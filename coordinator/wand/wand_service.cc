@@ -31,9 +31,8 @@ Status WandServiceOptions::Check() const {
   if (!(scene_half_extent_m > 0.0) || !std::isfinite(scene_half_extent_m)) {
     return InvalidArgumentError("WandServiceOptions: scene_half_extent_m must be finite and > 0");
   }
-  if (!(wand.ray_in_sensor.norm() > 0.0)) {
-    return InvalidArgumentError("WandServiceOptions: wand.ray_in_sensor must be non-zero");
-  }
+  if (Status w = wand.Check(); !w.ok())
+    return InvalidArgumentError("WandServiceOptions: " + w.message());
   return OkStatus();
 }
 

@@ -67,7 +67,7 @@ Expected<std::unique_ptr<NodeApp>> NodeApp::Create(NodeConfig config, LineSink o
   ST_RETURN_IF_ERROR(app->LoadInputs());
   ST_RETURN_IF_ERROR(app->OpenProjector());
   ST_RETURN_IF_ERROR(app->StartRenderLoop());
-  app->MakeServices();
+  ST_RETURN_IF_ERROR(app->MakeServices());
   return app;
 }
 
@@ -188,12 +188,13 @@ Status NodeApp::StartRenderLoop() {
   return OkStatus();
 }
 
-void NodeApp::MakeServices() {
+Status NodeApp::MakeServices() {
   runtime_ = std::make_unique<NodeRuntime>(options_);
   runtime_->AddService(&events_);
   if (render_loop_) {
     RenderServiceOptions render_service_options;
     render_service_options.sun = config_.sun;
+    ST_RETURN_IF_ERROR(render_service_options.Check());
     render_service_ =
         std::make_unique<RenderService>(&events_, render_loop_.get(), render_service_options, out_);
     runtime_->AddService(render_service_.get());
@@ -206,10 +207,12 @@ void NodeApp::MakeServices() {
     blend_options.blend.edge_soft_min_face_m2 = config_.blend_soft_face_m2;
     blend_options.export_dir = config_.export_dir;
     blend_options.black_match = config_.black_match;
+    ST_RETURN_IF_ERROR(blend_options.Check());
     blend_ = std::make_unique<BlendService>(model_, render_loop_.get(), blend_options, out_);
     runtime_->AddService(blend_.get());
   }
   MakeSelfCalibration();
+  return OkStatus();
 }
 
 // Self-calibration (structured light with the neighbours) when the unit has its factory

@@ -92,7 +92,7 @@ class NodeApp {
   Status LoadInputs();
   Status OpenProjector();
   Status StartRenderLoop();
-  void MakeServices();
+  Status MakeServices();
   void MakeSelfCalibration();
   void OpenCamera(const std::atomic<bool>& stop);
   Status ExportHeldCalibration();

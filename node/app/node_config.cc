@@ -180,6 +180,7 @@ Status NodeConfig::Check() const {
   if (!Within(blend_edge_soft_mm, 0.0, 100.0)) return Bad("--blend-edge-soft-mm must be 0-100");
   if (!Within(blend_soft_face_m2, 0.0, 1e6)) return Bad("--blend-soft-face-m2 must be 0-1e6");
   if (Status sun_ok = sun.Check(); !sun_ok.ok()) return Bad("--sun-*: " + sun_ok.message());
+  if (Status sc = SelfCalibration().Check(); !sc.ok()) return Bad(sc.message());
   const std::string projector =
       projector_spec.empty() && !world.empty() ? "world:" + world : projector_spec;
   const std::string camera = camera_spec.empty() && !world.empty() ? "world:" + world : camera_spec;

@@ -855,4 +855,30 @@ Status SelfCalibrationService::OnStep(NodeRuntime& node) {
   return OkStatus();
 }
 
+Status SelfCalibrationOptions::Check() const {
+  ST_RETURN_IF_ERROR(plan.Check());
+  ST_RETURN_IF_ERROR(solve.Check());
+  ST_RETURN_IF_ERROR(check.Check());
+  ST_RETURN_IF_ERROR(planar.Check());
+  if (settle.count() < 0 || expect_wait.count() < 0 || step_timeout.count() <= 0 ||
+      member_grace.count() < 0 || step_retry.count() <= 0) {
+    return InvalidArgumentError(
+        "self-calibration: settle, expect_wait, member_grace >= 0; step_timeout, step_retry > 0");
+  }
+  if (expected_units < 0 || !(frame_period_s > 0.0) || !(capture_latency_s >= 0.0) ||
+      !(neighbour_resolution_factor >= 1.0) || grid_step_px < 1 || lit_threshold < 1 ||
+      lit_threshold > 255 || min_lit_pixels < 1 || mask_margin_px < 0 || min_overlap_pixels < 0) {
+    return InvalidArgumentError(
+        "self-calibration: expected_units >= 0; frame period > 0; capture latency >= 0; "
+        "neighbour_resolution_factor >= 1; grid step, lit pixels >= 1; lit_threshold 1-255; "
+        "margins and overlaps >= 0");
+  }
+  for (int level : response_levels) {
+    if (level < 1 || level > 254) {
+      return InvalidArgumentError("self-calibration: response_levels must be in 1..254");
+    }
+  }
+  return OkStatus();
+}
+
 }  // namespace sandtable::node

@@ -92,6 +92,7 @@ struct SelfCalibrationOptions {
   enum class Path { kAuto, kFull };
   Path path = Path::kAuto;
   PlanarSolveOptions planar;
+  Status Check() const;
 };
 
 // What a node holds once a round ends, and the figures the lab reports.

@@ -726,4 +726,18 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
       });
 }
 
+Status BlendServiceOptions::Check() const {
+  ST_RETURN_IF_ERROR(blend.Check());
+  if (peer_silence.count() <= 0 || ask_again.count() <= 0 || ask_again_max < ask_again ||
+      alpha_quiet.count() < 0) {
+    return InvalidArgumentError(
+        "blend service: peer_silence, ask_again > 0; ask_again_max >= ask_again; alpha_quiet "
+        ">= 0");
+  }
+  if (!(max_lift >= 0.0 && max_lift <= 1.0)) {
+    return InvalidArgumentError("blend service: max_lift must be in [0, 1]");
+  }
+  return OkStatus();
+}
+
 }  // namespace sandtable::node

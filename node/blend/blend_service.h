@@ -80,6 +80,7 @@ struct BlendServiceOptions {
   // level the unit's camera measured (calibration.projector_response).
   bool black_match = false;
   double max_lift = 0.05;
+  Status Check() const;
 };
 
 // BlendShare <-> DistanceField (the field's grid checked against its projector).

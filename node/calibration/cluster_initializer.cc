@@ -12,6 +12,7 @@ Expected<LocalGeometry> EstimateLocalGeometry(const UnitModel& self,
                                               const std::map<NodeId, CameraModel>& cameras,
                                               const std::vector<Track>& tracks_of_self,
                                               const LocalGeometryOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
   LocalGeometry out;
   out.unit = self.unit;
   out.tracks = static_cast<int>(tracks_of_self.size());
@@ -117,6 +118,15 @@ std::map<NodeId, Rigid3d> ChainProjectorPoses(NodeId root, const std::map<NodeId
     }
   }
   return projector_from_world;
+}
+
+Status LocalGeometryOptions::Check() const {
+  if (min_shared_points < 6 || !(min_triangulation_angle_deg > 0.0) ||
+      !(max_triangulation_rms_px > 0.0) || !(resection_loss_scale_px > 0.0)) {
+    return InvalidArgumentError(
+        "local geometry: min_shared_points >= 6; angle, rms and loss scale > 0");
+  }
+  return OkStatus();
 }
 
 }  // namespace sandtable::node

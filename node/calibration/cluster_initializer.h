@@ -31,6 +31,7 @@ struct LocalGeometryOptions {
   // to ~5 px on sandtable-3), the bundle adjustment then takes it to ~0.02 px.
   double max_triangulation_rms_px = 10.0;
   double resection_loss_scale_px = 1.0;
+  Status Check() const;
 };
 
 struct RelativePose {

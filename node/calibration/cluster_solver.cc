@@ -139,6 +139,7 @@ std::vector<NodeId> ResectStarvedUnits(const ClusterObservations& observations,
 Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& observations,
                                        const std::map<NodeId, LocalGeometry>& local,
                                        const Scene* model, const ClusterSolveOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
   const double cpu_start = ThreadCpuSeconds();
   ClusterSolution out;
   const std::map<NodeId, Rigid3d> initial = ChainProjectorPoses(root, observations.units, local);
@@ -391,6 +392,24 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
   }
   out.time_s = ThreadCpuSeconds() - cpu_start;
   return out;
+}
+
+Status ClusterSolveOptions::Check() const {
+  ST_RETURN_IF_ERROR(bundle.Check());
+  ST_RETURN_IF_ERROR(plane.Check());
+  ST_RETURN_IF_ERROR(model.Check());
+  ST_RETURN_IF_ERROR(changes.Check());
+  if (bundle_passes < 1 || !(bundle_pass_gain >= 0.0) ||
+      !(bundle_starved_share >= 0.0 && bundle_starved_share <= 1.0) || model_candidates < 1 ||
+      !(max_scale_correction >= 0.0 && max_scale_correction < 1.0) ||
+      !(model_surface_sigma_m > 0.0) || !(model_surface_max_distance_m > 0.0) ||
+      !(planar_threshold_mm >= 0.0)) {
+    return InvalidArgumentError(
+        "cluster solve: bundle_passes, model_candidates >= 1; gain >= 0; starved share in "
+        "[0, 1]; max_scale_correction in [0, 1); surface sigma and distance > 0; planar "
+        "threshold >= 0");
+  }
+  return OkStatus();
 }
 
 }  // namespace sandtable::node

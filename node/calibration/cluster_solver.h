@@ -60,6 +60,7 @@ struct ClusterSolveOptions {
   // Planar site: every scanned point within this of the table plane (mm).
   double planar_threshold_mm = 5.0;
   ClusterSolveOptions() { plane.inlier_threshold_m = 0.003; }
+  Status Check() const;
 };
 
 struct ClusterSolution {

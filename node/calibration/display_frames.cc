@@ -57,6 +57,7 @@ Expected<cv::Mat> TableGridFrame(const UnitCalibration& calibration, double spac
 
 Expected<cv::Mat> JoinBlankMask(const UnitCalibration& calibration, const Scene* model,
                                 const cv::Mat& camera_mask, const JoinBlankOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
   if (!calibration.table_from_projector) {
     return InvalidArgumentError("blank mask: the calibration has no table_from_projector");
   }
@@ -96,6 +97,13 @@ Expected<cv::Mat> JoinBlankMask(const UnitCalibration& calibration, const Scene*
       mask, mask,
       cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * radius + 1, 2 * radius + 1)));
   return mask;
+}
+
+Status JoinBlankOptions::Check() const {
+  if (sample_step_px < 1 || margin_px < 0) {
+    return InvalidArgumentError("join blank: sample_step_px >= 1, margin_px >= 0");
+  }
+  return OkStatus();
 }
 
 }  // namespace sandtable::node

@@ -32,6 +32,7 @@ Expected<cv::Mat> TableGridFrame(const UnitCalibration& calibration, double spac
 struct JoinBlankOptions {
   int sample_step_px = 2;
   int margin_px = 12;
+  Status Check() const;
 };
 
 Expected<cv::Mat> JoinBlankMask(const UnitCalibration& calibration, const Scene* model,

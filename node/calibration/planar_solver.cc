@@ -199,6 +199,7 @@ Expected<PlanarityProbe> ProbePlanarity(const UnitModel& self,
 Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservations& observations,
                                              const Scene* model,
                                              const PlanarSolveOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
   const double cpu_start = ThreadCpuSeconds();
   double stage_start = cpu_start;
   ClusterSolution out;
@@ -564,6 +565,18 @@ Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservati
   out.time_s = ThreadCpuSeconds() - cpu_start;
   out.bundle.solve_time_s = out.time_s;
   return out;
+}
+
+Status PlanarSolveOptions::Check() const {
+  ST_RETURN_IF_ERROR(planarity.Check());
+  ST_RETURN_IF_ERROR(model.Check());
+  ST_RETURN_IF_ERROR(changes.Check());
+  ST_RETURN_IF_ERROR(bundle.Check());
+  if (min_shared_cells < 3 || !(resection_loss_scale_px > 0.0) || !(surface_sigma_m > 0.0)) {
+    return InvalidArgumentError(
+        "planar solve: min_shared_cells >= 3; resection loss scale and surface sigma > 0");
+  }
+  return OkStatus();
 }
 
 }  // namespace sandtable::node

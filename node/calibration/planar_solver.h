@@ -90,6 +90,7 @@ struct PlanarSolveOptions {
   bool refine = true;
   BundleOptions bundle;
   double surface_sigma_m = 0.0001;
+  Status Check() const;
 };
 
 Expected<ClusterSolution> SolvePlanarCluster(NodeId root, const ClusterObservations& observations,

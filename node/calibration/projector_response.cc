@@ -11,6 +11,7 @@ Expected<ProjectorResponse> FitProjectorResponse(const cv::Mat& black, const cv:
                                                  const std::vector<std::pair<int, cv::Mat>>& greys,
                                                  const cv::Mat& lit,
                                                  const ProjectorResponseOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
   auto fits = [&](const cv::Mat& m) { return m.type() == CV_8UC1 && m.size() == white.size(); };
   if (white.empty() || !fits(black) || !fits(white) || (!muted.empty() && !fits(muted)) ||
       (!lit.empty() && !fits(lit))) {
@@ -85,6 +86,15 @@ Expected<ProjectorResponse> FitProjectorResponse(const cv::Mat& black, const cv:
     out.black_level = std::max(0.0, sum_difference(black, muted) / over_muted);
   }
   return out;
+}
+
+Status ProjectorResponseOptions::Check() const {
+  if (saturation_dn < 1 || saturation_dn > 255 || min_signal_dn < 1 ||
+      min_signal_dn >= saturation_dn || min_pixels < 1) {
+    return InvalidArgumentError(
+        "projector response: 0 < min_signal_dn < saturation_dn <= 255, min_pixels >= 1");
+  }
+  return OkStatus();
 }
 
 }  // namespace sandtable::node

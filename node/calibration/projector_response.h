@@ -27,6 +27,7 @@ struct ProjectorResponseOptions {
   int saturation_dn = 250;  // 8-bit captures: a white pixel at or above this is left out
   int min_signal_dn = 16;   // white - black at least this
   int min_pixels = 500;
+  Status Check() const;
 };
 
 struct ProjectorResponse {

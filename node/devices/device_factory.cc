@@ -111,6 +111,7 @@ Expected<DeviceSpec> ParseCameraSpec(std::string_view spec) {
 
 Expected<std::unique_ptr<ProjectorOutput>> MakeProjectorOutput(std::string_view spec,
                                                                const DeviceOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
   Expected<DeviceSpec> parsed = ParseProjectorSpec(spec);
   if (!parsed.ok()) return parsed.status();
   if (parsed->kind == DeviceSpec::Kind::kWorld) {
@@ -141,6 +142,7 @@ Expected<std::unique_ptr<ProjectorOutput>> MakeProjectorOutput(std::string_view 
 
 Expected<std::unique_ptr<CameraInput>> MakeCameraInput(std::string_view spec,
                                                        const DeviceOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
   Expected<DeviceSpec> parsed = ParseCameraSpec(spec);
   if (!parsed.ok()) return parsed.status();
   switch (parsed->kind) {
@@ -172,6 +174,22 @@ Expected<std::unique_ptr<CameraInput>> MakeCameraInput(std::string_view spec,
       break;  // not a camera kind (ParseCameraSpec never returns it)
   }
   return InternalError("camera '" + std::string(spec) + "': unhandled kind");
+}
+
+Status DeviceOptions::Check() const {
+  auto positive = [](const std::optional<cv::Size>& s) {
+    return !s || (s->width > 0 && s->height > 0);
+  };
+  if (!positive(projector_size_px) || !positive(camera_size_px)) {
+    return InvalidArgumentError("devices: projector and camera sizes must be positive");
+  }
+  if (camera_bit_depth && (*camera_bit_depth < 1 || *camera_bit_depth > 16)) {
+    return InvalidArgumentError("devices: camera_bit_depth must be 1-16");
+  }
+  if (world_connect_timeout.count() <= 0 || world_reply_timeout.count() <= 0) {
+    return InvalidArgumentError("devices: world timeouts must be > 0");
+  }
+  return OkStatus();
 }
 
 }  // namespace sandtable::node

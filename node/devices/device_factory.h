@@ -43,6 +43,7 @@ struct DeviceOptions {
   std::chrono::milliseconds world_connect_timeout{2000};
   std::chrono::milliseconds world_reply_timeout{60000};
   std::optional<net::CurveKeyPair> world_curve;  // world: connect with CURVE (site keys)
+  Status Check() const;
 };
 
 // A parsed spec (exposed for tests and for --help texts).

@@ -22,6 +22,7 @@ DeviceClock::time_point FromNs(int64_t ns) {
 Expected<std::unique_ptr<WorldCameraInput>> WorldCameraInput::Create(
     std::shared_ptr<WorldLink> link, const WorldCameraOptions& options) {
   if (!link) return InvalidArgumentError("world camera: no world link");
+  ST_RETURN_IF_ERROR(options.Check());
   if (options.camera_id == kInvalidCameraId) {
     return InvalidArgumentError("world camera: invalid camera id");
   }
@@ -130,6 +131,16 @@ Expected<CapturedFrame> WorldCameraInput::Capture(Seconds exposure) {
   frame->index = ++captures_;
   ST_LOG(kDebug) << description() << ": capture " << frame->index;
   return frame;
+}
+
+Status WorldCameraOptions::Check() const {
+  if (size_px && (size_px->width <= 0 || size_px->height <= 0)) {
+    return InvalidArgumentError("world camera: size_px must be positive");
+  }
+  if (bit_depth && (*bit_depth < 1 || *bit_depth > 16)) {
+    return InvalidArgumentError("world camera: bit_depth must be 1-16");
+  }
+  return OkStatus();
 }
 
 }  // namespace sandtable::node

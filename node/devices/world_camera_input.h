@@ -26,6 +26,7 @@ struct WorldCameraOptions {
   CameraId camera_id = kInvalidCameraId;  // the unit's id in the site (today its node id)
   std::optional<cv::Size> size_px;        // the unit's factory camera size; probed if absent
   std::optional<int> bit_depth;           // 1..16; probed if absent
+  Status Check() const;
 };
 
 class WorldCameraInput : public CameraInput {

@@ -109,4 +109,14 @@ std::vector<OverlayVertex> BuildOverlay(const RenderContent& content,
   return out;
 }
 
+Status OverlayOptions::Check() const {
+  if (!(lift_m >= 0.0) || !std::isfinite(lift_m)) {
+    return InvalidArgumentError("overlay: lift_m must be finite and >= 0");
+  }
+  if (round_segments < 3 || round_segments > 256) {
+    return InvalidArgumentError("overlay: round_segments must be 3-256");
+  }
+  return OkStatus();
+}
+
 }  // namespace sandtable::node

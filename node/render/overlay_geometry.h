@@ -13,6 +13,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "common/base/status.h"
 #include "node/render/render_content.h"
 
 namespace sandtable::node {
@@ -25,6 +26,7 @@ struct OverlayVertex {
 struct OverlayOptions {
   double lift_m = 0.015;
   int round_segments = 12;  // per cap, joint disc and marker
+  Status Check() const;
 };
 
 // Appends the triangles (3 vertices each) of everything in `content` as seen from a projector

@@ -102,4 +102,12 @@ nlohmann::json RenderService::SummaryJson(NodeId id) const {
           {"context", s.context}};
 }
 
+Status RenderServiceOptions::Check() const {
+  ST_RETURN_IF_ERROR(sun.Check());
+  if (summary_period.count() <= 0) {
+    return InvalidArgumentError("render service: summary_period must be > 0");
+  }
+  return OkStatus();
+}
+
 }  // namespace sandtable::node

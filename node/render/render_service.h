@@ -28,6 +28,7 @@ namespace sandtable::node {
 struct RenderServiceOptions {
   SunOptions sun;
   std::chrono::milliseconds summary_period{2000};
+  Status Check() const;
 };
 
 class RenderService : public NodeService {

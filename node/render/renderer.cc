@@ -443,6 +443,7 @@ const char* PassName(Pass pass) {
 }
 
 Status RendererOptions::Check() const {
+  ST_RETURN_IF_ERROR(overlay.Check());
   if (shadow_map_px < 16 || shadow_map_px > 16384) {
     return InvalidArgumentError("renderer: shadow_map_px must be in 16..16384");
   }
