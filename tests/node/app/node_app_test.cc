@@ -14,6 +14,10 @@
 
 #include "common/cli/command_line.h"
 #include "node/app/node_config.h"
+#include "node/calibration/cluster_initializer.h"
+#include "node/calibration/display_frames.h"
+#include "node/calibration/projector_response.h"
+#include "node/render/overlay_geometry.h"
 
 namespace sandtable::node {
 namespace {
@@ -135,6 +139,51 @@ TEST(NodeConfig, CheckNamesWhatIsWrong) {
     EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << k.names;
     EXPECT_NE(s.message().find(k.names), std::string::npos) << s.message();
   }
+}
+
+// Every options struct the node is made of: its defaults check, one bad value does not.
+TEST(NodeOptionsCheck, DefaultsPassAndABadValueFails) {
+  EXPECT_TRUE(SelfCalibrationOptions{}.Check().ok()) << SelfCalibrationOptions{}.Check().ToString();
+  EXPECT_TRUE(ClusterSolveOptions{}.Check().ok());
+  EXPECT_TRUE(PlanarSolveOptions{}.Check().ok());
+  EXPECT_TRUE(LocalGeometryOptions{}.Check().ok());
+  EXPECT_TRUE(ProjectorResponseOptions{}.Check().ok());
+  EXPECT_TRUE(JoinBlankOptions{}.Check().ok());
+  EXPECT_TRUE(BlendServiceOptions{}.Check().ok());
+  EXPECT_TRUE(RenderServiceOptions{}.Check().ok());
+  EXPECT_TRUE(OverlayOptions{}.Check().ok());
+  EXPECT_TRUE(DeviceOptions{}.Check().ok());
+
+  SelfCalibrationOptions sc;
+  sc.lit_threshold = 0;
+  EXPECT_EQ(sc.Check().code(), StatusCode::kInvalidArgument);
+  sc = {};
+  sc.solve.max_scale_correction = 1.5;  // a nested struct's error reaches the top
+  EXPECT_EQ(sc.Check().code(), StatusCode::kInvalidArgument);
+  PlanarSolveOptions planar;
+  planar.min_shared_cells = 0;
+  EXPECT_FALSE(planar.Check().ok());
+  LocalGeometryOptions local;
+  local.max_triangulation_rms_px = 0;
+  EXPECT_FALSE(local.Check().ok());
+  ProjectorResponseOptions response;
+  response.min_signal_dn = 255;
+  EXPECT_FALSE(response.Check().ok());
+  JoinBlankOptions blank;
+  blank.sample_step_px = 0;
+  EXPECT_FALSE(blank.Check().ok());
+  BlendServiceOptions blend;
+  blend.ask_again_max = std::chrono::milliseconds(100);  // under ask_again
+  EXPECT_FALSE(blend.Check().ok());
+  RenderServiceOptions render;
+  render.summary_period = std::chrono::milliseconds(0);
+  EXPECT_FALSE(render.Check().ok());
+  OverlayOptions overlay;
+  overlay.round_segments = 2;
+  EXPECT_FALSE(overlay.Check().ok());
+  DeviceOptions devices;
+  devices.camera_bit_depth = 20;
+  EXPECT_FALSE(devices.Check().ok());
 }
 
 TEST(NodeApp, RefusesABadFactoryFileNamingTheFlag) {
