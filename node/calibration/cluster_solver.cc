@@ -284,6 +284,16 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
         }
       }
     }
+    // A placement that needs the model scaled by more than max_scale_correction is not this
+    // model in metres: its buildings would be drawn at the wrong size and place, so neither its
+    // placement nor its scale is used.
+    if (found.ok() && options.scale_from_model &&
+        !(std::abs(found->scale - 1.0) <= options.max_scale_correction)) {
+      found = NotFoundError("model registration: the best placement needs the model at scale " +
+                            std::to_string(found->scale) + ", more than " +
+                            std::to_string(std::lround(options.max_scale_correction * 100)) +
+                            " % from 1: not this model in metres; not placed");
+    }
     if (!found.ok()) {
       out.notes.push_back(found.status().message());
     } else {
@@ -303,9 +313,6 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
         Expected<ModelRegistration> refined =
             matcher->Refine(out.points_in_table_m, found->table_from_model, false);
         if (refined.ok()) table_from_model = refined->table_from_model;
-      } else if (options.scale_from_model) {
-        out.notes.push_back("model scale " + std::to_string(scale) +
-                            " is too far from 1 to apply; the mounts' scale is kept");
       }
       if (options.refine_with_model && table_from_model) {
         // Second refinement: the points tied to the model's surface.

@@ -46,8 +46,9 @@ struct ClusterSolveOptions {
   // Placements of the model judged by the change report (ModelMatcher::RegisterCandidates).
   int model_candidates = 3;
   bool scale_from_model = true;
-  // A model scale further than this from 1 is not applied (the model is then probably not
-  // in metres): noted, and the mounts' scale is kept. 10 %: straight-down rigs over a mostly
+  // A placement that needs the model scaled further than this from 1 is refused (the model is
+  // then not in metres, or not what stands there): noted, the model not placed, the mounts'
+  // scale kept. 10 %: straight-down rigs over a mostly
   // flat city leave the scan's scale ~7 % off (grid-4: 0.926), which the model corrects
   // (209 -> 2.9 mm rms); a model that is not the scanned scene is caught by the change report.
   double max_scale_correction = 0.10;
