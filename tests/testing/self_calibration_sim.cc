@@ -1,5 +1,6 @@
 #include "tests/testing/self_calibration_sim.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "common/base/thread_cpu_time.h"
@@ -271,7 +272,16 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
               1000 * mount.translation.norm(),
               Eigen::AngleAxisd(mount.rotation).angle() * 180 / M_PI, 1000 * dp.x(), 1000 * dp.y(),
               1000 * dp.z(), turn.angle() * 180 / M_PI);
+      // The nodes' table plane against the true table: their up directions in this unit's
+      // projector frame (independent of how the lab relates the two table frames).
+      const Eigen::Vector3d up_est =
+          c.table_from_projector->rotation.inverse() * Eigen::Vector3d::UnitZ();
+      const Eigen::Vector3d up_true = truth.rotation.inverse() * Eigen::Vector3d::UnitZ();
+      fprintf(stderr, "unit %u: table plane tilt against the true table %.3f deg\n", id,
+              std::acos(std::clamp(up_est.dot(up_true), -1.0, 1.0)) * 180 / M_PI);
     }
+    fprintf(stderr, "frame relation: %d pixel pairs, fit rms %.2f mm\n", placement->pairs,
+            placement->frame_fit_rms_mm);
   }
   return result;
 }
