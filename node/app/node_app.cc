@@ -124,9 +124,8 @@ Status NodeApp::LoadInputs() {
     if (!loaded.ok()) return FlagError("--model", loaded.status());
     model_ = std::make_shared<const Scene>(std::move(*loaded));
   }
-  projector_spec_ =
-      c.projector_spec.empty() && !c.world.empty() ? "world:" + c.world : c.projector_spec;
-  camera_spec_ = c.camera_spec.empty() && !c.world.empty() ? "world:" + c.world : c.camera_spec;
+  projector_spec_ = c.ProjectorSpec();
+  camera_spec_ = c.CameraSpec();
   auto kind = [](const std::string& spec) {
     return spec.empty() ? std::string("none") : spec.substr(0, spec.find(':'));
   };

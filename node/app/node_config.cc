@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <map>
+#include <sstream>
 
 #include "common/cli/command_line.h"
 #include "node/devices/device_factory.h"
@@ -11,9 +12,45 @@ namespace {
 
 Status Bad(const std::string& why) { return InvalidArgumentError(why); }
 
+// A flag's range: checked as it parses (and shown in --help) and again by NodeConfig::Check,
+// which a configuration file's values go through too.
 template <typename T>
-bool Within(T v, T lo, T hi) {
-  return v >= lo && v <= hi;
+struct Limit {
+  const char* flag;
+  T lo, hi;
+};
+constexpr Limit<int> kHeartbeatMs{"--heartbeat-ms", 1, 60000};
+constexpr Limit<int> kWorkers{"--workers", 1, 64};
+constexpr Limit<double> kDropShare{"--fault-drop-share", 0.0, 1.0};
+constexpr Limit<double> kCorruptShare{"--fault-corrupt-share", 0.0, 1.0};
+constexpr Limit<int> kExpectUnits{"--expect-units", 0, 4096};
+constexpr Limit<int> kGridStepPx{"--grid-step-px", 4, 256};
+constexpr Limit<int> kPhaseSteps{"--phase-steps", 3, 64};
+constexpr Limit<double> kGrayCellPx{"--gray-cell-px", 0.5, 64.0};
+constexpr Limit<int> kBundleIterations{"--bundle-iterations", 1, 1000};
+constexpr Limit<double> kSunStartH{"--sun-start-h", 0.0, 24.0};
+constexpr Limit<double> kSunHoursPerS{"--sun-hours-per-s", 0.0, 3600.0};
+constexpr Limit<double> kRenderMaxFps{"--render-max-fps", 0.1, 1000.0};
+constexpr Limit<int> kBlendStepPx{"--blend-step-px", 1, 64};
+constexpr Limit<double> kBlendFillLimit{"--blend-fill-limit", 1.0, 100.0};
+constexpr Limit<double> kBlendEdgeSoftMm{"--blend-edge-soft-mm", 0.0, 100.0};
+constexpr Limit<double> kBlendSoftFaceM2{"--blend-soft-face-m2", 0.0, 1e6};
+
+CLI::Validator Validator(const Limit<int>& l) { return cli::Integer(l.lo, l.hi); }
+CLI::Validator Validator(const Limit<double>& l) { return CLI::Range(l.lo, l.hi); }
+
+template <typename T>
+Status InRange(const Limit<T>& l, T v) {
+  if (v >= l.lo && v <= l.hi) return OkStatus();
+  std::ostringstream out;
+  out << l.flag << " must be in [" << l.lo << ", " << l.hi << "]";
+  return Bad(out.str());
+}
+
+// Adds `limit.flag` writing into `value`, checked against the limit.
+template <typename T>
+void AddLimited(CLI::App& app, const Limit<T>& limit, T& value, const std::string& help) {
+  app.add_option(limit.flag, value, help)->check(Validator(limit));
 }
 
 template <typename E>
@@ -41,16 +78,12 @@ void AddSiteFlags(CLI::App& app, NodeConfig& c) {
                  "site CURVE key file (sandtable-coordinator "
                  "--generate-curve-keys)")
       ->check(CLI::ExistingFile);
-  app.add_option("--heartbeat-ms", c.heartbeat_ms, "heartbeat period in ms")
-      ->check(cli::Integer(1, 60000));
-  app.add_option("--workers", c.worker_threads, "worker threads for long work")
-      ->check(cli::Integer(1, 64));
-  app.add_option("--fault-drop-share", c.faults.drop_share,
-                 "LAB CHAOS ONLY: drop this share of the messages the node sends")
-      ->check(CLI::Range(0.0, 1.0));
-  app.add_option("--fault-corrupt-share", c.faults.corrupt_share,
-                 "LAB CHAOS ONLY: corrupt this share of the messages the node sends")
-      ->check(CLI::Range(0.0, 1.0));
+  AddLimited(app, kHeartbeatMs, c.heartbeat_ms, "heartbeat period in ms");
+  AddLimited(app, kWorkers, c.worker_threads, "worker threads for long work");
+  AddLimited(app, kDropShare, c.faults.drop_share,
+             "LAB CHAOS ONLY: drop this share of the messages the node sends");
+  AddLimited(app, kCorruptShare, c.faults.corrupt_share,
+             "LAB CHAOS ONLY: corrupt this share of the messages the node sends");
   app.add_option("--fault-seed", c.faults.seed, "seed of the injected faults");
 }
 
@@ -82,29 +115,24 @@ void AddUnitFlags(CLI::App& app, NodeConfig& c) {
 
 // The knobs `sandtable-lab sweep` turns (docs/lab.md, "Sweep"): run time against error.
 void AddCalibrationFlags(CLI::App& app, NodeConfig& c) {
-  app.add_option("--expect-units", c.expected_units,
-                 "self-calibration: the site's number of units; the first round waits (at most "
-                 "3 min) until that many are members")
-      ->check(cli::Integer(0, 4096));
+  AddLimited(app, kExpectUnits, c.expected_units,
+             "self-calibration: the site's number of units; the first round waits (at most "
+             "3 min) until that many are members");
   AddEnum<SelfCalibrationOptions::Path>(
       app, "--calibration-path", c.calibration_path,
       {{"auto", SelfCalibrationOptions::Path::kAuto},
        {"full", SelfCalibrationOptions::Path::kFull}},
       "self-calibration: auto (the planar path when every footprint is planar) or full");
-  app.add_option("--grid-step-px", c.grid_step_px,
-                 "self-calibration: projector grid spacing of the correspondences, px")
-      ->check(cli::Integer(4, 256));
-  app.add_option("--phase-steps", c.phase_steps,
-                 "self-calibration: phase-shift steps per direction (fewer: fewer frames, more "
-                 "projector-gamma ripple)")
-      ->check(cli::Integer(3, 64));
-  app.add_option("--gray-cell-px", c.gray_cell_px,
-                 "self-calibration: the finest Gray cell projected covers at least this many "
-                 "camera px (larger: fewer Gray frames)")
-      ->check(CLI::Range(0.5, 64.0));
-  app.add_option("--bundle-iterations", c.bundle_iterations,
-                 "self-calibration: joint refinement iterations per round at most")
-      ->check(cli::Integer(1, 1000));
+  AddLimited(app, kGridStepPx, c.grid_step_px,
+             "self-calibration: projector grid spacing of the correspondences, px");
+  AddLimited(app, kPhaseSteps, c.phase_steps,
+             "self-calibration: phase-shift steps per direction (fewer: fewer frames, more "
+             "projector-gamma ripple)");
+  AddLimited(app, kGrayCellPx, c.gray_cell_px,
+             "self-calibration: the finest Gray cell projected covers at least this many "
+             "camera px (larger: fewer Gray frames)");
+  AddLimited(app, kBundleIterations, c.bundle_iterations,
+             "self-calibration: joint refinement iterations per round at most");
   AddEnum<BundleFree>(app, "--bundle-free", c.bundle_free,
                       {{"all", BundleFree::kAll}, {"poses", BundleFree::kPoses}},
                       "self-calibration: what the joint refinement frees: all (poses, mounts, "
@@ -121,30 +149,23 @@ void AddShowFlags(CLI::App& app, NodeConfig& c) {
       ->check(CLI::ExistingFile);
   AddEnum<bool>(app, "--sun", c.sun.enabled, {{"on", true}, {"off", false}},
                 "the virtual sun's light and shadows");
-  app.add_option("--sun-start-h", c.sun.start_hour, "time of day at media time 0, h")
-      ->check(CLI::Range(0.0, 24.0));
-  app.add_option("--sun-hours-per-s", c.sun.hours_per_media_s, "hours of the day per media second")
-      ->check(CLI::Range(0.0, 3600.0));
-  app.add_option("--render-max-fps", c.render_max_fps, "frames a second at most")
-      ->check(CLI::Range(0.1, 1000.0));
+  AddLimited(app, kSunStartH, c.sun.start_hour, "time of day at media time 0, h");
+  AddLimited(app, kSunHoursPerS, c.sun.hours_per_media_s, "hours of the day per media second");
+  AddLimited(app, kRenderMaxFps, c.render_max_fps, "frames a second at most");
   app.add_option("--render-log", c.render_log_path,
                  "CSV of every shown frame: steady ns, media time (the lab's skew)");
   AddEnum<bool>(app, "--blend", c.blend, {{"on", true}, {"off", false}},
                 "blend with the overlapping units (with a show): on, or off (no mask)");
-  app.add_option("--blend-step-px", c.blend_step_px, "the blend's distance field grid step, px")
-      ->check(cli::Integer(1, 64));
-  app.add_option("--blend-fill-limit", c.blend_fill_limit,
-                 "past the correction limit the others make up a projector's shortfall, each at "
-                 "most this many times its share (1: it clips alone)")
-      ->check(CLI::Range(1.0, 100.0));
-  app.add_option("--blend-edge-soft-mm", c.blend_edge_soft_mm,
-                 "within this distance of its edge a projector's alpha leaves 0 with zero slope "
-                 "(0: Algorithm 1's plain distance), mm")
-      ->check(CLI::Range(0.0, 100.0));
-  app.add_option("--blend-soft-face-m2", c.blend_soft_face_m2,
-                 "the blend's face-area threshold: soft edges (--blend-edge-soft-mm) only on "
-                 "planar faces of at least this area, m^2 (0: every face)")
-      ->check(CLI::Range(0.0, 1e6));
+  AddLimited(app, kBlendStepPx, c.blend_step_px, "the blend's distance field grid step, px");
+  AddLimited(app, kBlendFillLimit, c.blend_fill_limit,
+             "past the correction limit the others make up a projector's shortfall, each at "
+             "most this many times its share (1: it clips alone)");
+  AddLimited(app, kBlendEdgeSoftMm, c.blend_edge_soft_mm,
+             "within this distance of its edge a projector's alpha leaves 0 with zero slope "
+             "(0: Algorithm 1's plain distance), mm");
+  AddLimited(app, kBlendSoftFaceM2, c.blend_soft_face_m2,
+             "the blend's face-area threshold: soft edges (--blend-edge-soft-mm) only on "
+             "planar faces of at least this area, m^2 (0: every face)");
   AddEnum<bool>(app, "--black-match", c.black_match, {{"on", true}, {"off", false}},
                 "raise the black where fewer projectors overlap to the site's highest (needs "
                 "the black level measured in self-calibration): on or off");
@@ -164,26 +185,22 @@ Status NodeConfig::Check() const {
   if (!saved_calibration_path.empty() && factory_path.empty()) {
     return Bad("--saved-calibration needs --factory");
   }
-  if (!Within(heartbeat_ms, 1, 60000)) return Bad("--heartbeat-ms must be 1-60000");
-  if (!Within(worker_threads, 1, 64)) return Bad("--workers must be 1-64");
-  if (!Within(faults.drop_share, 0.0, 1.0) || !Within(faults.corrupt_share, 0.0, 1.0)) {
-    return Bad("--fault-drop-share and --fault-corrupt-share must be 0-1");
+  for (const Status& s :
+       {InRange(kHeartbeatMs, heartbeat_ms), InRange(kWorkers, worker_threads),
+        InRange(kDropShare, faults.drop_share), InRange(kCorruptShare, faults.corrupt_share),
+        InRange(kExpectUnits, expected_units), InRange(kGridStepPx, grid_step_px),
+        InRange(kPhaseSteps, phase_steps), InRange(kGrayCellPx, gray_cell_px),
+        InRange(kBundleIterations, bundle_iterations), InRange(kRenderMaxFps, render_max_fps),
+        InRange(kSunStartH, sun.start_hour), InRange(kSunHoursPerS, sun.hours_per_media_s),
+        InRange(kBlendStepPx, blend_step_px), InRange(kBlendFillLimit, blend_fill_limit),
+        InRange(kBlendEdgeSoftMm, blend_edge_soft_mm),
+        InRange(kBlendSoftFaceM2, blend_soft_face_m2)}) {
+    if (!s.ok()) return s;
   }
-  if (!Within(grid_step_px, 4, 256)) return Bad("--grid-step-px must be 4-256");
-  if (!Within(expected_units, 0, 4096)) return Bad("--expect-units must be 0-4096");
-  if (!Within(phase_steps, 3, 64)) return Bad("--phase-steps must be 3-64");
-  if (!Within(gray_cell_px, 0.5, 64.0)) return Bad("--gray-cell-px must be 0.5-64");
-  if (!Within(bundle_iterations, 1, 1000)) return Bad("--bundle-iterations must be 1-1000");
-  if (!Within(render_max_fps, 0.1, 1000.0)) return Bad("--render-max-fps must be 0.1-1000");
-  if (!Within(blend_step_px, 1, 64)) return Bad("--blend-step-px must be 1-64");
-  if (!Within(blend_fill_limit, 1.0, 100.0)) return Bad("--blend-fill-limit must be 1-100");
-  if (!Within(blend_edge_soft_mm, 0.0, 100.0)) return Bad("--blend-edge-soft-mm must be 0-100");
-  if (!Within(blend_soft_face_m2, 0.0, 1e6)) return Bad("--blend-soft-face-m2 must be 0-1e6");
   if (Status sun_ok = sun.Check(); !sun_ok.ok()) return Bad("--sun-*: " + sun_ok.message());
   if (Status sc = SelfCalibration().Check(); !sc.ok()) return Bad(sc.message());
-  const std::string projector =
-      projector_spec.empty() && !world.empty() ? "world:" + world : projector_spec;
-  const std::string camera = camera_spec.empty() && !world.empty() ? "world:" + world : camera_spec;
+  const std::string projector = ProjectorSpec();
+  const std::string camera = CameraSpec();
   if (!projector.empty()) {
     if (Expected<DeviceSpec> p = ParseProjectorSpec(projector); !p.ok()) {
       return Bad("--projector: " + p.status().message());
@@ -195,6 +212,14 @@ Status NodeConfig::Check() const {
     }
   }
   return OkStatus();
+}
+
+std::string NodeConfig::ProjectorSpec() const {
+  return projector_spec.empty() && !world.empty() ? "world:" + world : projector_spec;
+}
+
+std::string NodeConfig::CameraSpec() const {
+  return camera_spec.empty() && !world.empty() ? "world:" + world : camera_spec;
 }
 
 NodeOptions NodeConfig::RuntimeOptions() const {

@@ -73,6 +73,9 @@ struct NodeConfig {
   // device spec that does not parse, a file flag that needs another.
   Status Check() const;
 
+  // The devices' specs, --world applied (empty: none).
+  std::string ProjectorSpec() const;
+  std::string CameraSpec() const;
   // The runtime's options (heartbeat-derived timeouts at least 5 periods; CURVE keys not read:
   // NodeApp reads them).
   NodeOptions RuntimeOptions() const;

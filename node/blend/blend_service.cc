@@ -119,7 +119,7 @@ void BlendService::ReleaseSiteMpcdiWrites(NodeRuntime& node) {
   if (mpcdi_holds_ > 0) --mpcdi_holds_;
   if (mpcdi_holds_ == 0 && !mpcdi_writing_ && mpcdi_dirty_ && site_mpcdi_ &&
       !site_mpcdi_path_.empty()) {
-    WriteSiteMpcdi(mpcdi_latest_, node);
+    WriteSiteMpcdi(node);
   }
 }
 
@@ -146,7 +146,7 @@ void BlendService::TakeAlpha(NodeId unit, int width_px, int height_px, std::stri
   mpcdi_dirty_ = true;
   mpcdi_latest_ = unit;
   if (!mpcdi_writing_ && mpcdi_holds_ == 0)
-    WriteSiteMpcdi(unit, node);  // else: written again after the one in flight
+    WriteSiteMpcdi(node);  // else: written again after the one in flight
 }
 
 void BlendService::TakeAlphaPng(NodeId unit, int width_px, int height_px, std::string png,
@@ -185,7 +185,8 @@ void BlendService::TakeAlphaPng(NodeId unit, int width_px, int height_px, std::s
       });
 }
 
-void BlendService::WriteSiteMpcdi(NodeId latest, NodeRuntime& node) {
+void BlendService::WriteSiteMpcdi(NodeRuntime& node) {
+  const NodeId latest = mpcdi_latest_;
   mpcdi_writing_ = true;
   mpcdi_dirty_ = false;
   node.workers().Run<Status>(
@@ -198,7 +199,7 @@ void BlendService::WriteSiteMpcdi(NodeId latest, NodeRuntime& node) {
           print_({{"blend", id_}, {"mpcdi", site_mpcdi_path_}, {"alpha_from", latest}});
         }
         // Alphas that came in meanwhile: once more, with what the site holds now.
-        if (mpcdi_dirty_ && mpcdi_holds_ == 0) WriteSiteMpcdi(mpcdi_latest_, node);
+        if (mpcdi_dirty_ && mpcdi_holds_ == 0) WriteSiteMpcdi(node);
       });
 }
 

@@ -136,8 +136,9 @@ class BlendService : public NodeService {
   // The same from a PNG (BlendAlpha.png), decoded on a worker; a PNG whose header states
   // another size, or that does not decode to an 8-bit grey image of it, is dropped.
   void TakeAlphaPng(NodeId unit, int width_px, int height_px, std::string png, NodeRuntime& node);
-  void WriteSiteMpcdi(NodeId latest, NodeRuntime& node);  // on a worker; repeats while dirty
-  void SendAlpha(NodeRuntime& node);                      // the pending mask to the runner
+  // On a worker; repeats while dirty; its line names mpcdi_latest_.
+  void WriteSiteMpcdi(NodeRuntime& node);
+  void SendAlpha(NodeRuntime& node);  // the pending mask to the runner
 
   RenderLoop* loop_;
   BlendServiceOptions options_;

@@ -299,7 +299,7 @@ Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& o
     } else {
       double scale = found->scale;
       std::optional<Rigid3d> table_from_model = found->table_from_model;
-      if (options.scale_from_model && std::abs(scale - 1.0) <= options.max_scale_correction) {
+      if (options.scale_from_model) {  // within max_scale_correction: refused above otherwise
         // Lengths / scale: points, projector translations, mount translations.
         const double k = 1.0 / scale;
         for (Eigen::Vector3d& p : points) p *= k;
