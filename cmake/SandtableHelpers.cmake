@@ -65,3 +65,31 @@ function(sandtable_add_window_test name)
   set_tests_properties(${name} PROPERTIES LABELS window TIMEOUT 120
     WORKING_DIRECTORY ${PROJECT_SOURCE_DIR})
 endfunction()
+
+# sandtable_embed_text(<target> HEADER <path under the build tree> NAMESPACE <ns>
+#                      FILES <name>=<source file> ...)
+#   Generates HEADER (included as "<path>") holding each file's text as `<name>[]`, rebuilt when
+#   a file changes, and makes <target> depend on it (cmake/EmbedText.cmake).
+function(sandtable_embed_text target)
+  cmake_parse_arguments(ARG "" "HEADER;NAMESPACE" "FILES" ${ARGN})
+  set(output ${PROJECT_BINARY_DIR}/${ARG_HEADER})
+  set(inputs "")
+  set(depends "")
+  foreach(pair IN LISTS ARG_FILES)
+    string(FIND "${pair}" "=" at)
+    math(EXPR from "${at} + 1")
+    string(SUBSTRING "${pair}" 0 ${at} name)
+    string(SUBSTRING "${pair}" ${from} -1 file)
+    get_filename_component(file "${file}" ABSOLUTE BASE_DIR ${CMAKE_CURRENT_SOURCE_DIR})
+    list(APPEND inputs "${name}=${file}")
+    list(APPEND depends "${file}")
+  endforeach()
+  string(REPLACE ";" "|" inputs_arg "${inputs}")
+  add_custom_command(OUTPUT ${output}
+    COMMAND ${CMAKE_COMMAND} -DOUTPUT=${output} -DNAMESPACE=${ARG_NAMESPACE}
+      "-DINPUTS=${inputs_arg}" -P ${PROJECT_SOURCE_DIR}/cmake/EmbedText.cmake
+    DEPENDS ${depends} ${PROJECT_SOURCE_DIR}/cmake/EmbedText.cmake
+    COMMENT "Embedding ${ARG_HEADER}"
+    VERBATIM)
+  target_sources(${target} PRIVATE ${output})
+endfunction()

@@ -51,6 +51,7 @@
 #include "common/base/status.h"
 #include "common/scene/scene.h"
 #include "node/render/gl_context.h"
+#include "node/render/gl_objects.h"
 #include "node/render/overlay_geometry.h"
 #include "node/render/projector_view.h"
 #include "node/render/render_content.h"
@@ -116,7 +117,7 @@ class Renderer {
   // for the old view, or for the blend before). Memory: one texture of the output's size each
   // (8 MB at 1280x800 with a pre-warp, 4 MB without).
   Status PrepareMask(uint64_t key, const cv::Mat& mask);
-  bool HasPreparedMask(uint64_t key) const { return prepared_.count(key) > 0; }
+  bool HasPreparedMask(uint64_t key) const;
   // NOT_FOUND when no mask is prepared under `key`.
   Status UseMask(uint64_t key);
   void ClearPreparedMasks();
@@ -137,9 +138,9 @@ class Renderer {
   Expected<double> RenderFloor();
 
  private:
-  Renderer(GlContext* context, const RendererOptions& options)
-      : context_(context), options_(options) {}
+  Renderer(GlContext* context, const RendererOptions& options);
   Status Init(const Scene& scene);
+  void InitMaterials(const Scene& scene);
   Status DrawScene(const RenderContent& content, unsigned int target, bool fold, FrameStats* stats);
   // Adds lit_texture_ to the output framebuffer as a second draw buffer, or takes it away.
   Status AttachLitTarget(bool attach);
@@ -162,7 +163,7 @@ class Renderer {
   float LiftGamma() const;  // the exponent the shaders add the lift under
   Expected<unsigned int> Variant(ProgramKind kind, int mode, bool textured, bool sun, bool masked,
                                  bool distort, bool packed = false);
-  // A group's encoded base colour and texture (an index into textures_, -1: none); white
+  // A group's encoded base colour and texture (an index into the scene's textures, -1: none); white
   // without a material.
   std::pair<Eigen::Vector4d, int> GroupMaterial(const Group& g) const;
   Status DrawShadow(const Eigen::Vector3d& sun);
@@ -183,7 +184,11 @@ class Renderer {
   Status DrawWarp(unsigned int image, bool distort);
   Status DrawPattern(const RenderContent& content);
   Status EnsureIdealTarget();
-  void UploadTexels(unsigned int* texture, const cv::Mat& texels);
+  struct GlResources;  // every GL object the renderer owns (renderer_internal.h)
+  struct SurfaceTarget;
+  struct PreparedMask;
+  // `texels` into `*texture`, made when there is none yet.
+  void UploadTexels(GlTexture* texture, const cv::Mat& texels);
 
   struct Group {
     int first_vertex = 0, vertex_count = 0;
@@ -203,58 +208,29 @@ class Renderer {
   double tessellation_px_ = 0.0;
   std::vector<Eigen::Vector4d> material_colours_;
   std::vector<int> material_textures_;
-  std::vector<unsigned int> textures_;
-  unsigned int shadow_program_ = 0, blit_program_ = 0;
-  std::map<int, unsigned int> variants_;
-  unsigned int scene_vao_ = 0, scene_vbo_ = 0, overlay_vao_ = 0, overlay_vbo_ = 0;
-  unsigned int shadow_vao_ = 0, shadow_vbo_ = 0;
-  unsigned int empty_vao_ = 0;
-  unsigned int shadow_fbo_ = 0, shadow_texture_ = 0;
-  unsigned int ideal_fbo_ = 0, ideal_colour_ = 0, ideal_depth_ = 0;
-  unsigned int output_depth_ = 0;
-  // The surface cache (the layout is at kSurfaceFragment in renderer.cc): the ideal one (geometry
-  // RGBA32UI, colour RGBA8, depth) drawn by the scene pass, the output one (geometry: the packed
-  // texel) by the warp pass.
-  struct SurfaceTarget {
-    unsigned int fbo = 0, geometry = 0, colour = 0, depth = 0;
-  };
-  SurfaceTarget surface_, ideal_surface_;
-  bool surface_valid_ = false;  // surface_ holds the model for view_
+  std::unique_ptr<GlResources> gl_;
+  bool surface_valid_ = false;  // the surface cache holds the model for view_
   int surface_groups_drawn_ = 0, surface_groups_culled_ = 0, surface_triangles_ = 0;
-  // The sun's light on each face (R32F, kFaceRowTexels a row; face f at (f % ..., f / ...)),
-  // drawn from the faces' normals (RGB32F, same layout) when the sun moves.
+  // The faces' tables (GlResources::face_normals, face_light): this many faces a row.
   static constexpr int kFaceRowTexels = 4096;
   bool deferred_ = false;  // options_.deferred, and the model's faces fit the tables
-  unsigned int face_normals_ = 0, face_light_ = 0, face_light_fbo_ = 0;
   cv::Size face_table_size_;
-  std::optional<Eigen::Vector3d> face_light_sun_;  // the sun of face_light_
+  std::optional<Eigen::Vector3d> face_light_sun_;  // the sun the faces' light was drawn for
   bool last_deferred_ = false;  // the last frame was deferred (Rewarp re-lights it)
   bool last_sun_ = false;       // ... lit by the sun (face light x shadow)
   float last_light_ = 1.0f;     // ... or by this factor
   bool last_overlay_ = false;   // ... with an overlay
-  // The last deferred frame before the mask (RGBA8, output pixels), written by the light pass and
-  // the overlay as a second target while lit_attached_: Rewarp masks it again in one pass.
-  unsigned int lit_texture_ = 0;
-  bool lit_attached_ = false;
-  bool last_lit_kept_ = false;  // lit_texture_ holds the last frame
+  bool lit_attached_ = false;   // the lit texture is the output's second target
+  bool last_lit_kept_ = false;  // the lit texture holds the last frame
   // The warp pass's inputs: with an unfolded pre-warp (packed_warp_) one RGBA texture of
   // (source x, y, mask factor, lift) per output pixel, one fetch a pixel; otherwise the mask alone
   // (RG). Texels are 16-bit normalized (32-bit floats for a float target) in GL row order, kept
   // between masks: a new mask is written into them in place and uploaded.
-  unsigned int warp_texture_ = 0, mask_texture_ = 0, pattern_texture_ = 0;
   cv::Mat warp_texels_;  // source (GL texture coordinates of the ideal image; 0 or -1: none), mask
   cv::Mat mask_rows_;    // factor (encoded; linear for a float target), lift (linear)
   bool packed_warp_ = false;
   bool mask_in_warp_texels_ = false;  // the current mask lives in warp_texels_, not mask_rows_
-  struct PreparedMask {
-    unsigned int texture = 0;  // packed (with the warp's source) when packed, else the mask alone
-    bool packed = false;
-    bool has_lift = false;
-    cv::Mat rows;  // the mask's texels (factor, lift), GL row order, as mask_rows_ holds them
-  };
-  std::map<uint64_t, PreparedMask> prepared_;
-  std::vector<unsigned int> retired_textures_;  // replaced by UseMask; deleted off its path
-  cv::Mat prepared_scratch_;                    // the packed texels of the mask being prepared
+  cv::Mat prepared_scratch_;          // the packed texels of the mask being prepared
   // After UseMask: the current mask's texels, not yet copied back into warp_texels_ or
   // mask_rows_ (only SetView reads them; SetMask rewrites them whole).
   cv::Mat used_mask_rows_;
@@ -263,7 +239,6 @@ class Renderer {
   // encoded, GL row order. Returns whether it carries a lift.
   bool EncodeMask(const cv::Mat& mask, cv::Mat* texels, int stride, int offset) const;
   void SyncUsedMaskRows();
-  unsigned int floor_texture_ = 0;
   bool has_view_ = false, has_mask_ = false;
   bool last_warped_ = false;  // the ideal image holds the last frame (see CanRewarp)
   bool has_lift_ = false;     // the mask carries a black-level lift (SetMask, CV_32FC2)
