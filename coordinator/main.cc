@@ -44,7 +44,7 @@
 // --scene: the glTF scene (table frame after the +y-up -> +z-up conversion, docs/frames.md) the
 // wand ray is cast against, in addition to the table plane z = 0.
 //
-// Once serving it prints one JSON line on stdout (common/base/ready_line.h), for supervisors
+// Once serving it prints one JSON line on stdout (cluster/report_lines.h), for supervisors
 // and tests:
 //   {"ready":"sandtable-coordinator","requests":"tcp://127.0.0.1:40001",
 //    "events":"tcp://127.0.0.1:40002"}
@@ -59,9 +59,9 @@
 #include <memory>
 #include <string>
 
+#include "cluster/report_lines.h"
 #include "common/base/log.h"
 #include "common/base/main_guard.h"
-#include "common/base/ready_line.h"
 #include "common/cli/command_line.h"
 #include "common/scene/gltf_loader.h"
 #include "coordinator/annotations/annotation_service.h"
@@ -331,14 +331,12 @@ static int Run(int argc, char** argv) {
     ST_LOG(kError) << "cannot start: " << started.ToString();
     return 1;
   }
-  nlohmann::json ready = {{"ready", "sandtable-coordinator"},
-                          {"requests", server.request_endpoint()},
-                          {"events", server.event_endpoint()}};
+  report::CoordinatorReady ready{server.request_endpoint(), server.event_endpoint(), ""};
   if (http) {
     http->Publish(status->BuildJson(server));  // served before the first step
-    ready["status"] = http->url();
+    ready.status = http->url();
   }
-  WriteJsonLine(std::cout, ready);
+  report::WriteReportLine(std::cout, ready);
   Status ran = server.Run(g_stop);
   ST_LOG(kInfo) << "stopping; messages " << server.counters().ToString();
   if (!ran.ok()) {

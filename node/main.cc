@@ -18,7 +18,7 @@
 //   sandtable-node calibrate-unit --poses DIR -o unit.json ...   (the unit's factory calibration)
 //   sandtable-node render-frame --calibration unit.json -o frame.png ...  (one frame of the show)
 //
-// On start it prints one JSON line on stdout (common/base/ready_line.h):
+// On start it prints one JSON line on stdout (cluster/report_lines.h):
 //   {"ready":"sandtable-node","id":3,"peer":"tcp://127.0.0.1:40123"}
 // and, once it holds an exported calibration:
 //   {"calibrated":3,"source":"factory+true_pose","json":"DIR/unit-3.json","yaml":"DIR/unit-3.yaml"}
@@ -41,9 +41,9 @@
 #include <iostream>
 #include <string>
 
+#include "cluster/report_lines.h"
 #include "common/base/log.h"
 #include "common/base/main_guard.h"
-#include "common/base/ready_line.h"
 #include "common/cli/command_line.h"
 #include "node/app/node_app.h"
 #include "node/app/node_config.h"
@@ -85,7 +85,8 @@ static int Run(int argc, char** argv) {
   sigaction(SIGTERM, &action, nullptr);
 
   Expected<std::unique_ptr<node::NodeApp>> node = node::NodeApp::Create(
-      std::move(config), [](const nlohmann::json& line) { WriteJsonLine(std::cout, line); });
+      std::move(config),
+      [](const report::ReportLine& line) { report::WriteReportLine(std::cout, line); });
   if (!node.ok()) {
     if (node.status().code() == StatusCode::kInvalidArgument) {
       return cli::UsageError(app, node.status().message());

@@ -44,9 +44,9 @@ void ExportAndBlend::OnCalibrated(const SelfCalibrationOutcome& outcome) {
     return;
   }
   auto held = std::make_shared<const SelfCalibrationOutcome>(outcome);
-  workers_->Run<Expected<nlohmann::json>>(
+  workers_->Run<Expected<report::Calibrated>>(
       [held, id = id_, dir = export_dir_] { return ExportSelfCalibration(*held, id, dir); },
-      [this, held](Expected<nlohmann::json> line) {
+      [this, held](Expected<report::Calibrated> line) {
         exported_(*held);
         if (!line.ok()) {
           ST_LOG(kError) << "cannot export the calibration: " << line.status().ToString();
@@ -179,7 +179,7 @@ Status NodeApp::StartRenderLoop() {
       return UnavailableError("render: " + started.status().message());
     }
     ST_LOG(kWarning) << "no show (--render auto): " << started.status().message();
-    out_({{"render", config_.id}, {"unavailable", started.status().message()}});
+    out_(report::RenderUnavailable{config_.id, started.status().message()});
     return OkStatus();
   }
   render_loop_ = std::move(*started);
@@ -244,7 +244,7 @@ void NodeApp::MakeSelfCalibration() {
       *calibration_, projector_.get(), model_, config_.SelfCalibration(),
       [this](const SelfCalibrationOutcome& outcome) { handoff_->OnCalibrated(outcome); },
       [this](const std::string& reason) {
-        out_({{"calibration_failed", config_.id}, {"reason", reason}});
+        out_(report::CalibrationFailed{config_.id, reason});
       });
   runtime_->set_calibration_state(saved_ ? wire::CALIBRATION_STATE_SAVED
                                          : wire::CALIBRATION_STATE_NONE);
@@ -273,9 +273,9 @@ void NodeApp::OpenCamera(const std::atomic<bool>& stop) {
         if (!opened.ok()) {
           ST_LOG(kError) << "camera " << camera_spec_ << ": " << opened.status().message();
           if (self_calibration_) {
-            out_({{"calibration_failed", config_.id},
-                  {"reason", "unit " + std::to_string(config_.id) + ": camera " + camera_spec_ +
-                                 ": " + opened.status().message()}});
+            out_(report::CalibrationFailed{config_.id, "unit " + std::to_string(config_.id) +
+                                                           ": camera " + camera_spec_ + ": " +
+                                                           opened.status().message()});
           }
           return;
         }
@@ -296,10 +296,12 @@ Status NodeApp::ExportHeldCalibration() {
   if (!calibration_ || config_.export_dir.empty() || self_calibration_) return OkStatus();
   Expected<ExportedCalibration> exported = ExportCalibration(*calibration_, config_.export_dir);
   if (!exported.ok()) return exported.status();
-  out_({{"calibrated", config_.id},
-        {"source", calibration_->source},
-        {"json", exported->json_path},
-        {"yaml", exported->yaml_path}});
+  report::Calibrated line;
+  line.id = config_.id;
+  line.source = calibration_->source;
+  line.json = exported->json_path;
+  line.yaml = exported->yaml_path;
+  out_(line);
   return OkStatus();
 }
 
@@ -321,13 +323,10 @@ void NodeApp::ShowHeldCalibration() {
 }
 
 void NodeApp::WriteExitLines() {
-  if (render_service_) out_(render_service_->SummaryJson(config_.id));
+  if (render_service_) out_(render_service_->Summary(config_.id));
   const net::ChannelFaultCounts faults = runtime_->fault_counts();
-  out_({{"messages", config_.id},
-        {"accepted", runtime_->counters().accepted()},
-        {"rejected", runtime_->counters().total_rejected()},
-        {"faults_dropped", faults.dropped},
-        {"faults_corrupted", faults.corrupted}});
+  out_(report::Messages{config_.id, runtime_->counters().accepted(),
+                        runtime_->counters().total_rejected(), faults.dropped, faults.corrupted});
   if (auto offset = runtime_->clock_offset()) {
     ST_LOG(kInfo) << "clock offset to coordinator " << offset->offset_s * 1e3
                   << " ms, error <= " << offset->error_bound_s * 1e3 << " ms over "
@@ -344,7 +343,7 @@ int NodeApp::Run(const std::atomic<bool>& stop) {
     return 1;
   }
   OpenCamera(stop);
-  out_({{"ready", "sandtable-node"}, {"id", config_.id}, {"peer", runtime_->peer_endpoint()}});
+  out_(report::NodeReady{config_.id, runtime_->peer_endpoint()});
   if (Status exported = ExportHeldCalibration(); !exported.ok()) {
     ST_LOG(kError) << "cannot export the calibration: " << exported.ToString();
     runtime_->SayGoodbye("export failed");

@@ -26,6 +26,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cluster/personnel_tracks.h"
+#include "cluster/report_lines.h"
 #include "common/base/status.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/scene.h"
@@ -41,7 +42,8 @@
 
 namespace sandtable::node {
 
-using LineSink = std::function<void(const nlohmann::json&)>;
+// Where the node's report lines go (main: stdout, cluster/report_lines.h).
+using LineSink = std::function<void(const report::ReportLine&)>;
 
 // What the node does with each calibration a round (or a saved calibration's check) gives it.
 // Called on the network thread.

@@ -63,8 +63,8 @@ void GridPointsToWire(const std::vector<ProjectorGridPoint>& points, wire::Corre
   }
 }
 
-Expected<nlohmann::json> ExportSelfCalibration(const SelfCalibrationOutcome& outcome, NodeId id,
-                                               const std::string& export_dir) {
+Expected<report::Calibrated> ExportSelfCalibration(const SelfCalibrationOutcome& outcome, NodeId id,
+                                                   const std::string& export_dir) {
   Expected<ExportedCalibration> exported = ExportCalibration(outcome.calibration, export_dir);
   if (!exported.ok()) return exported.status();
   // The round's report under `name`; "" when it cannot be written (logged).
@@ -92,20 +92,22 @@ Expected<nlohmann::json> ExportSelfCalibration(const SelfCalibrationOutcome& out
       mpcdi_path.clear();
     }
   }
-  return nlohmann::json{{"calibrated", id},
-                        {"source", outcome.calibration.source},
-                        {"json", exported->json_path},
-                        {"yaml", exported->yaml_path},
-                        {"report", report_path},
-                        {"mpcdi", mpcdi_path},
-                        {"join_report", join_report_path},
-                        {"round", outcome.round},
-                        {"verified", outcome.verified},
-                        {"compute_s", outcome.compute_s},
-                        {"messages_sent", outcome.messages_sent},
-                        {"messages_received", outcome.messages_received},
-                        {"bytes_sent", outcome.bytes_sent},
-                        {"bytes_received", outcome.bytes_received}};
+  report::Calibrated line;
+  line.id = id;
+  line.source = outcome.calibration.source;
+  line.json = exported->json_path;
+  line.yaml = exported->yaml_path;
+  line.report = report_path;
+  line.mpcdi = mpcdi_path;
+  line.join_report = join_report_path;
+  line.round = outcome.round;
+  line.verified = outcome.verified;
+  line.compute_s = outcome.compute_s;
+  line.messages_sent = outcome.messages_sent;
+  line.messages_received = outcome.messages_received;
+  line.bytes_sent = outcome.bytes_sent;
+  line.bytes_received = outcome.bytes_received;
+  return line;
 }
 
 SelfCalibrationService::SelfCalibrationService(UnitCalibration factory, ProjectorOutput* projector,
@@ -210,29 +212,29 @@ void SelfCalibrationService::MaybeVerify(NodeRuntime& node) {
       [this, &node](Checked c) {
         compute_s_ += c.cpu_s;
         constexpr int kFrames = 2;  // the black reference and the dots
-        nlohmann::json line{
-            {"verification", node.id()},
-            {"frames", kFrames},
-            {"device_time_s", kFrames * (options_.frame_period_s + options_.capture_latency_s)},
-            {"compute_s", c.cpu_s}};
+        report::Verification line;
+        line.id = node.id();
+        line.frames = kFrames;
+        line.device_time_s = kFrames * (options_.frame_period_s + options_.capture_latency_s);
+        line.compute_s = c.cpu_s;
         const bool holds = c.report.ok() && c.report->holds;
-        line["holds"] = holds;
+        line.holds = holds;
         if (c.report.ok()) {
-          line["dots"] = c.report->dots;
-          line["found"] = c.report->found;
-          line["median_px"] = c.report->median_px;
-          line["p90_px"] = c.report->p90_px;
-          line["wall_dots"] = c.report->wall_dots;
-          line["wall_median_px"] = c.report->wall_median_px;
-          line["threshold_px"] = options_.check.threshold_px;
-          if (!holds) line["reason"] = c.report->reason;
+          line.dots = c.report->dots;
+          line.found = c.report->found;
+          line.median_px = c.report->median_px;
+          line.p90_px = c.report->p90_px;
+          line.wall_dots = c.report->wall_dots;
+          line.wall_median_px = c.report->wall_median_px;
+          line.threshold_px = options_.check.threshold_px;
+          if (!holds) line.reason = c.report->reason;
         } else {
-          line["reason"] = c.report.status().message();
+          line.reason = c.report.status().message();
         }
         if (on_verification_) on_verification_(line);
         if (!holds) {
           ST_LOG(kWarning) << "self-calibration: the saved calibration does not hold ("
-                           << line.value("reason", std::string()) << "); calibrating again";
+                           << line.reason << "); calibrating again";
           node.set_calibration_state(wire::CALIBRATION_STATE_NONE);
           return;
         }

@@ -37,6 +37,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
+#include "cluster/report_lines.h"
 #include "common/io/mpcdi.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/scene.h"
@@ -116,8 +117,8 @@ struct SelfCalibrationOutcome {
 // unit-<id>.json and .yaml (ExportCalibration), and on the runner self_calibration_report.json
 // and site.mpcdi; returns the node's `calibrated` line (docs/lab.md). A report or MPCDI file that
 // cannot be written is logged and left out of the line; the unit files are the error.
-Expected<nlohmann::json> ExportSelfCalibration(const SelfCalibrationOutcome& outcome, NodeId id,
-                                               const std::string& export_dir);
+Expected<report::Calibrated> ExportSelfCalibration(const SelfCalibrationOutcome& outcome, NodeId id,
+                                                   const std::string& export_dir);
 
 class SelfCalibrationService : public NodeService {
  public:
@@ -143,7 +144,7 @@ class SelfCalibrationService : public NodeService {
   // own; when it holds, it is the unit's calibration (on_calibrated with verified = true) and
   // the unit needs no round. `on_verification` gets the check's figures either way. Before the
   // runtime starts; the caller sets the runtime's calibration state to SAVED.
-  using OnVerification = std::function<void(const nlohmann::json&)>;
+  using OnVerification = std::function<void(const report::Verification&)>;
   void SetSavedCalibration(UnitCalibration saved, OnVerification on_verification);
 
   const char* name() const override { return "self-calibration"; }

@@ -196,7 +196,7 @@ void BlendService::WriteSiteMpcdi(NodeRuntime& node) {
         if (!written.ok()) {
           ST_LOG(kWarning) << "blend: the MPCDI export: " << written.ToString();
         } else {
-          print_({{"blend", id_}, {"mpcdi", site_mpcdi_path_}, {"alpha_from", latest}});
+          print_(report::BlendExported{id_, site_mpcdi_path_, latest});
         }
         // Alphas that came in meanwhile: once more, with what the site holds now.
         if (mpcdi_dirty_ && mpcdi_holds_ == 0) WriteSiteMpcdi(node);
@@ -686,43 +686,40 @@ void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId p
           pending_alpha_ = PendingAlpha{shown.width_px, shown.height_px, std::move(shown.alpha_png),
                                         std::move(shown.alpha_values), Clock::now()};
         }
-        nlohmann::json line = {{"blend", id_}};
+        report::BlendShown line;
+        line.id = id_;
         if (cause == "left") {
-          line["reblend"] = "left";
-          line["peer"] = peer;
-          line["detected_ns"] = SteadyNs(detected);
-          if (noticed_by != nullptr) line["noticed_by"] = noticed_by;
+          line.reblend = true;
+          line.cause = "left";
+          line.peer = peer;
+          line.detected_ns = SteadyNs(detected);
+          if (noticed_by != nullptr) line.noticed_by = noticed_by;
         } else {
-          line["blended"] = true;
-          line["cause"] = cause;
+          line.cause = cause;
         }
-        line["neighbours"] = std::vector<NodeId>(holding_.begin(), holding_.end());
+        line.neighbours.assign(holding_.begin(), holding_.end());
         // The overlapping units whose field it does not hold yet (a blend still to come).
-        std::vector<NodeId> waiting;
         if (neighbours_) {
           for (NodeId n : *neighbours_) {
-            if (n != id_ && !holding_.count(n) && !dropped_.count(n)) waiting.push_back(n);
+            if (n != id_ && !holding_.count(n) && !dropped_.count(n)) line.waiting_for.push_back(n);
           }
         }
-        line["waiting_for"] = waiting;
-        line["level_per_m2"] = level;
+        line.level_per_m2 = level;
         // Faces shown below the level (walls met past the correction limit), the lowest.
-        line["faces_below_level"] = shown.faces_lower;
-        line["face_level_min_per_m2"] = shown.face_level_min;
+        line.faces_below_level = shown.faces_lower;
+        line.face_level_min_per_m2 = shown.face_level_min;
         if (shown.black_target > 0) {
-          line["black_target_per_m2"] = shown.black_target;
-          line["lift_max"] = shown.lift_max;
+          line.black_target_per_m2 = shown.black_target;
+          line.lift_max = shown.lift_max;
         }
-        line["compose_ms"] = shown.compose_ms;
-        line["cast_ms"] = cast_ms_;
-        line["shown_ns"] = shown.shown_ns;
-        line["frame"] = {
-            {"wait_ms", shown.frame.wait_ms},     {"set_mask_ms", shown.frame.set_mask_ms},
-            {"render_ms", shown.frame.render_ms}, {"read_ms", shown.frame.read_ms},
-            {"show_ms", shown.frame.show_ms},     {"rewarped", shown.frame.rewarped},
-            {"late", shown.frame.late},           {"prepared", shown.frame.prepared}};
-        line["bytes_sent"] = bytes_sent_;
-        line["bytes_received"] = bytes_received_;
+        line.compose_ms = shown.compose_ms;
+        line.cast_ms = cast_ms_;
+        line.shown_ns = shown.shown_ns;
+        line.frame = {shown.frame.wait_ms, shown.frame.set_mask_ms, shown.frame.render_ms,
+                      shown.frame.read_ms, shown.frame.show_ms,     shown.frame.rewarped,
+                      shown.frame.late,    shown.frame.prepared};
+        line.bytes_sent = bytes_sent_;
+        line.bytes_received = bytes_received_;
         print_(line);
       });
 }

@@ -23,7 +23,7 @@
 // asked again (options.ask_again, doubling). Bad shares (a field that does not fit its grid, a
 // model that does not check) are logged, counted and dropped.
 //
-// JSON lines (common/base/ready_line.h), for the lab:
+// JSON lines (cluster/report_lines.h), for the lab:
 //   {"blend":ID,"blended":true,"cause":..,"neighbours":[..],"waiting_for":[..],"level_per_m2":..,
 //    "faces_below_level":..,"face_level_min_per_m2":..,"cast_ms":..,"compose_ms":..,
 //    "shown_ns":..,"bytes_sent":..,"bytes_received":..}
@@ -48,6 +48,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cluster/report_lines.h"
 #include "common/io/mpcdi.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/scene.h"
@@ -93,7 +94,7 @@ Expected<std::optional<FaceLevels>> FaceLevelsFromShare(const wire::BlendShare& 
 
 class BlendService : public NodeService {
  public:
-  using Print = std::function<void(const nlohmann::json&)>;
+  using Print = std::function<void(const report::ReportLine&)>;
   // `loop` (not owned) shows the masks; `model` (may be null: the table plane) as the render
   // loop draws it.
   BlendService(std::shared_ptr<const Scene> model, RenderLoop* loop, BlendServiceOptions options,

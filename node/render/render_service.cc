@@ -6,7 +6,7 @@ namespace sandtable::node {
 
 RenderService::RenderService(const EventStateService* events, RenderLoop* loop,
                              RenderServiceOptions options,
-                             std::function<void(const nlohmann::json&)> print)
+                             std::function<void(const report::ReportLine&)> print)
     : events_(events), loop_(loop), options_(options), print_(std::move(print)) {
   inputs_.sun = options_.sun;
 }
@@ -74,32 +74,32 @@ Status RenderService::OnStep(NodeRuntime& node) {
   const auto [frames_shown, shown_pattern] = loop_->ShownPattern();
   if (shown_pattern != announced_pattern_ && frames_shown > 0) {
     announced_pattern_ = shown_pattern;
-    print_({{"render", node.id()}, {"pattern", shown_pattern}});
+    print_(report::RenderPattern{node.id(), shown_pattern});
   }
   const auto now = std::chrono::steady_clock::now();
   if (now - last_summary_ >= options_.summary_period && frames_shown > 0) {
     last_summary_ = now;
-    print_(SummaryJson(node.id()));
+    print_(Summary(node.id()));
   }
   return OkStatus();
 }
 
-nlohmann::json RenderService::SummaryJson(NodeId id) const {
+report::RenderSummary RenderService::Summary(NodeId id) const {
   const RenderSummary s = loop_->Summary();
-  nlohmann::json passes;
-  for (int p = 0; p < kPassCount; ++p) passes[PassName(static_cast<Pass>(p))] = s.pass_runs[p];
-  return {{"render", id},
-          {"frames", s.frames_shown},
-          {"failed", s.frames_failed},
-          {"unchanged", s.frames_unchanged},
-          {"rewarped", s.frames_rewarped},
-          {"frame_ms_p50", s.frame_ms_p50},
-          {"frame_ms_p99", s.frame_ms_p99},
-          {"floor_ms", s.floor_ms},
-          {"show_ms_p50", s.show_ms_p50},
-          {"passes", passes},
-          {"groups_culled", s.groups_culled},
-          {"context", s.context}};
+  report::RenderSummary line;
+  line.id = id;
+  line.frames = s.frames_shown;
+  line.failed = s.frames_failed;
+  line.unchanged = s.frames_unchanged;
+  line.rewarped = s.frames_rewarped;
+  line.frame_ms_p50 = s.frame_ms_p50;
+  line.frame_ms_p99 = s.frame_ms_p99;
+  line.floor_ms = s.floor_ms;
+  line.show_ms_p50 = s.show_ms_p50;
+  for (int p = 0; p < kPassCount; ++p) line.passes[PassName(static_cast<Pass>(p))] = s.pass_runs[p];
+  line.groups_culled = s.groups_culled;
+  line.context = s.context;
+  return line;
 }
 
 Status RenderServiceOptions::Check() const {

@@ -3,7 +3,7 @@
 // this node, the annotation strokes (rebuilt when their sequence moves), the wand's cursor, the
 // and the timeline clock converted with the node's clock
 // offset. (The tracks themselves are draped and drawn by the loop, render_loop.h.) It prints a JSON
-// line (common/base/ready_line.h) each time a new test pattern is first shown,
+// line (cluster/report_lines.h) each time a new test pattern is first shown,
 // {"render":ID,"pattern":"grid"}, and a summary every summary_period:
 //   {"render":ID,"frames":N,"frame_ms_p50":..,"frame_ms_p99":..,"floor_ms":..,"show_ms_p50":..,
 //    "failed":N,"passes":{"shadow":N,...},"context":"..."}
@@ -17,6 +17,8 @@
 #include <string>
 
 #include <nlohmann/json.hpp>
+
+#include "cluster/report_lines.h"
 
 #include "cluster/personnel_tracks.h"
 #include "node/events/event_state_service.h"
@@ -35,18 +37,18 @@ class RenderService : public NodeService {
  public:
   // `events`, `loop` outlive the service. `print` writes one JSON line (stdout in the program).
   RenderService(const EventStateService* events, RenderLoop* loop, RenderServiceOptions options,
-                std::function<void(const nlohmann::json&)> print);
+                std::function<void(const report::ReportLine&)> print);
 
   const char* name() const override { return "render"; }
   Status OnStep(NodeRuntime& node) override;
 
-  nlohmann::json SummaryJson(NodeId id) const;
+  report::RenderSummary Summary(NodeId id) const;
 
  private:
   const EventStateService* events_;
   RenderLoop* loop_;
   RenderServiceOptions options_;
-  std::function<void(const nlohmann::json&)> print_;
+  std::function<void(const report::ReportLine&)> print_;
 
   ShowInputs inputs_;
   bool inputs_sent_ = false;

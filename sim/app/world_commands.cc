@@ -9,8 +9,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "cluster/report_lines.h"
 #include "common/base/log.h"
-#include "common/base/ready_line.h"
 #include "common/io/image_file.h"
 #include "common/io/json_reader.h"
 #include "common/scene/gltf_loader.h"
@@ -247,9 +247,7 @@ int ServeCommand(const ServeArgs& args, const std::atomic<bool>& stop, std::ostr
   if (Status started = server.Start(); !started.ok()) {
     return Failure(err, kName, started.ToString());
   }
-  WriteJsonLine(out, {{"ready", "sandtable-world"},
-                      {"world", server.endpoint()},
-                      {"curve", options.curve.has_value()}});
+  report::WriteReportLine(out, report::WorldReady{server.endpoint(), options.curve.has_value()});
   const Status ran = server.Run(stop);
   const WorldServerStats& stats = server.stats();
   ST_LOG(kInfo) << "stopping: frames " << stats.frames_set << ", captures " << stats.captures

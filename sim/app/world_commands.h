@@ -21,7 +21,7 @@ int MakeSceneCommand(const MakeSceneArgs& args, std::ostream& out, std::ostream&
 int MakeSiteCommand(const MakeSiteArgs& args, std::ostream& out, std::ostream& err);
 int RenderCommand(const RenderArgs& args, std::ostream& out, std::ostream& err);
 // Once bound, prints the readiness line {"ready":"sandtable-world","world":"tcp://..."} on
-// `out` (common/base/ready_line.h), then serves until `stop`.
+// `out` (cluster/report_lines.h), then serves until `stop`.
 int ServeCommand(const ServeArgs& args, const std::atomic<bool>& stop, std::ostream& out,
                  std::ostream& err);
 

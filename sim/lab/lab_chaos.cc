@@ -131,7 +131,7 @@ void ReadChaosRun(const std::string& report_path, ChaosOutcome* o) {
   const json& calibration = r.contains("calibration") ? r["calibration"] : json::object();
   if (calibration.contains("join")) {
     const json& j = calibration["join"];
-    if (j.value("calibrated", false)) {
+    if (j.value("joined", false)) {
       o->join_ms = Num(j, "wall_s") * 1e3;
     } else {
       o->join_failed = true;
@@ -142,10 +142,17 @@ void ReadChaosRun(const std::string& report_path, ChaosOutcome* o) {
   if (r.contains("live")) o->join_reblend_ms = Num(r["live"], "join_reblend_ms");
 }
 
+Status LabChaosOptions::Check() const {
+  if (out_dir.empty()) return InvalidArgumentError("--out: an output directory is required");
+  if (runs < 1 || runs > 1000) return InvalidArgumentError("--runs must be in 1..1000");
+  if (metric_samples < 1) return InvalidArgumentError("--samples must be >= 1");
+  return OkStatus();
+}
+
 int RunChaos(const LabChaosOptions& options, const std::atomic<bool>& stop, std::ostream& out,
              std::ostream& err) {
-  if (options.out_dir.empty() || options.runs < 1) {
-    err << "sandtable-lab chaos: --out is required and --runs must be at least 1\n";
+  if (Status checked = options.Check(); !checked.ok()) {
+    err << "sandtable-lab chaos: " << checked.message() << "\n";
     return 2;
   }
   const fs::path dir = fs::absolute(options.out_dir);

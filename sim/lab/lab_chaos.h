@@ -16,6 +16,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "common/base/status.h"
+
 namespace sandtable::sim {
 
 struct ChaosPlan {
@@ -58,6 +60,8 @@ struct LabChaosOptions {
   int metric_samples = 4000;
   std::string bin_dir;
   std::string command_line;
+  // INVALID_ARGUMENT naming the flag: no --out, --runs outside 1..1000, --samples < 1.
+  Status Check() const;
 };
 
 // Exit codes: 0 every run passed (0 annotations lost, 0 crashes), 1 otherwise, 2 usage,

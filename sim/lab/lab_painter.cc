@@ -99,6 +99,17 @@ Expected<Link> Connect(zmq::context_t* context, const LabPainterOptions& options
 
 }  // namespace
 
+Status LabPainterOptions::Check() const {
+  if (requests_endpoint.empty()) {
+    return InvalidArgumentError("lab painter: the coordinator's requests endpoint is needed");
+  }
+  if (!(points_per_s > 0.0) || window < 1 || ack_timeout.count() <= 0) {
+    return InvalidArgumentError(
+        "lab painter: points_per_s and ack_timeout must be > 0, window at least 1");
+  }
+  return OkStatus();
+}
+
 LabPainter::LabPainter(LabPainterOptions options) : options_(std::move(options)) {}
 
 LabPainter::~LabPainter() { Stop(); }

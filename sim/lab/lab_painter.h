@@ -44,6 +44,8 @@ struct LabPainterOptions {
   int window = 8;
   std::chrono::milliseconds ack_timeout{500};
   uint64_t first_stroke_id = 900001;
+  // INVALID_ARGUMENT: no endpoint, points_per_s not > 0, window < 1, ack_timeout not > 0.
+  Status Check() const;
 };
 
 struct LabPainterOutage {

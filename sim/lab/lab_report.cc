@@ -128,6 +128,8 @@ json LabReportJson(const LabResult& r) {
                          {"max_rss_mb", p.max_rss_mb}});
   }
   out["processes"] = processes;
+  out["report_lines"] = {{"parsed", r.report_lines}, {"bad", r.bad_report_lines}};
+  if (r.bad_report_lines > 0) out["report_lines"]["last_bad"] = r.last_bad_report_line;
   json calibration = {{"source", r.calibration_source}};
   if (r.measured_with_true_placement) calibration["placement"] = "true (the nodes found none)";
   if (r.registration) {
@@ -436,8 +438,8 @@ std::string LabReportMarkdown(const LabResult& r) {
     const json& j = r.join;
     md << "## Live join\n\n"
        << "Unit " << j.value("unit", 0) << " started once the others held their calibration: "
-       << (j.value("calibrated", false) ? "calibrated against them" : "**not calibrated**")
-       << " in " << Fixed(j.value("wall_s", 0.0), 1) << " s of wall time; units recalibrated "
+       << (j.value("joined", false) ? "calibrated against them" : "**not calibrated**") << " in "
+       << Fixed(j.value("wall_s", 0.0), 1) << " s of wall time; units recalibrated "
        << "meanwhile: "
        << (j.contains("others_recalibrated") && !j["others_recalibrated"].empty()
                ? j["others_recalibrated"].dump()
@@ -616,7 +618,12 @@ std::string LabReportMarkdown(const LabResult& r) {
     md << "| " << p.name << " | " << p.role << " | " << p.pid << " | " << p.exit_text << " | "
        << Fixed(p.cpu_s, 2) << " | " << Fixed(p.max_rss_mb, 0) << " |\n";
   }
-  md << "\nLogs: `logs/<name>.log`.\n";
+  md << "\nLogs: `logs/<name>.log`.";
+  if (r.bad_report_lines > 0) {
+    md << " " << r.bad_report_lines << " line(s) the children printed looked like report lines "
+       << "and did not parse (cluster/report_lines.h); the last: " << r.last_bad_report_line << ".";
+  }
+  md << "\n";
   if (!r.render.empty()) {
     const json& rd = r.render;
     md << "## The show (docs/render.md)\n\n";

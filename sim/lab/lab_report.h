@@ -72,6 +72,9 @@ struct LabResult {
   std::vector<std::pair<std::string, double>> phase_seconds;
   double total_s = 0.0;
   std::vector<LabProcess> processes;
+  // The children's report lines read, and those that did not parse (cluster/report_lines.h).
+  uint64_t report_lines = 0, bad_report_lines = 0;
+  std::string last_bad_report_line;
   std::string calibration_source;  // the units' common source, or "mixed"
   std::map<NodeId, LabUnitResult> units;
   std::optional<RegistrationReport> registration;

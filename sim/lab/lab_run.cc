@@ -19,7 +19,6 @@
 
 #include "common/base/file_io.h"
 #include "common/base/log.h"
-#include "common/base/ready_line.h"
 #include "common/io/image_file.h"
 #include "common/io/mpcdi.h"
 #include "common/io/unit_calibration_file.h"
@@ -304,7 +303,7 @@ class LabRun {
         return Failed("join", blended, "", nullptr);
       }
     }
-    const std::map<NodeId, json> before = calibrated_;
+    const std::map<NodeId, report::Calibrated> before = calibrated_;
     const auto t0 = std::chrono::steady_clock::now();
     const int64_t t0_ms = SystemMs();
     const UnitSpec* spec = inputs_.site.FindUnit(late);
@@ -331,8 +330,7 @@ class LabRun {
     if (settled != WaitOutcome::kDeadline) return Failed("join", settled, "", nullptr);
     std::vector<NodeId> recalibrated;
     for (const auto& [id, line] : before) {
-      if (calibrated_.at(id).value("round", uint64_t{0}) != line.value("round", uint64_t{0}))
-        recalibrated.push_back(id);
+      if (calibrated_.at(id).round != line.round) recalibrated.push_back(id);
     }
     // What every projector was given meanwhile, from the world's own record.
     std::map<NodeId, int> frames;
@@ -367,12 +365,12 @@ class LabRun {
     }
     json join = {{"unit", late},
                  {"wall_s", wall_s},
-                 {"calibrated", calibrated_.count(late) > 0},
+                 {"joined", calibrated_.count(late) > 0},
                  {"others_recalibrated", recalibrated},
                  {"frames_during_join", frames_json},
                  {"units_showing_the_same_frame", unchanged}};
     if (calibrated_.count(late)) {
-      const std::string path = calibrated_.at(late).value("join_report", std::string());
+      const std::string path = calibrated_.at(late).join_report;
       if (!path.empty()) {
         Expected<std::string> text = ReadInputFile(path, size_t{16} << 20, "16 MiB");
         if (text.ok()) {
@@ -522,8 +520,7 @@ class LabRun {
     std::vector<NodeId> recalibrated;
     for (const auto& [id, line] : calibrated_at_kill_) {
       if (id == unit) continue;
-      if (calibrated_.at(id).value("round", uint64_t{0}) != line.value("round", uint64_t{0}))
-        recalibrated.push_back(id);
+      if (calibrated_.at(id).round != line.round) recalibrated.push_back(id);
     }
     std::vector<NodeId> finished;
     for (const auto& [id, line] : calibrated_) {
@@ -532,17 +529,17 @@ class LabRun {
     // Re-blend: each neighbour's first mask shown without the killed unit, from the kill.
     json reblend = json::object();
     double reblend_max_ms = 0.0;
-    for (const json& line : reblends_) {
-      if (line.value("peer", kInvalidNodeId) != unit) continue;
-      const std::string id = std::to_string(line.value("blend", kInvalidNodeId));
+    for (const report::BlendShown& line : reblends_) {
+      if (line.peer != unit) continue;
+      const std::string id = std::to_string(line.id);
       if (reblend.contains(id)) continue;
-      const double shown_ms = (line.value("shown_ns", int64_t{0}) - kill_ns_) * 1e-6;
-      const double detected_ms = (line.value("detected_ns", int64_t{0}) - kill_ns_) * 1e-6;
+      const double shown_ms = (line.shown_ns - kill_ns_) * 1e-6;
+      const double detected_ms = (line.detected_ns - kill_ns_) * 1e-6;
       reblend[id] = {{"detected_ms", detected_ms},
-                     {"noticed_by", line.value("noticed_by", "")},
+                     {"noticed_by", line.noticed_by},
                      {"shown_ms", shown_ms},
-                     {"compose_ms", line.value("compose_ms", 0.0)},
-                     {"frame", line.value("frame", json::object())}};
+                     {"compose_ms", line.compose_ms},
+                     {"frame", report::ToJson(line)["frame"]}};
       reblend_max_ms = std::max(reblend_max_ms, shown_ms);
     }
     if (!reblend.empty()) {
@@ -708,10 +705,12 @@ class LabRun {
       std::istringstream lines(*text);
       std::string line;
       while (std::getline(lines, line)) {
-        if (line.empty() || line[0] != '{' || line.find("\"faults_dropped\"") == std::string::npos)
-          continue;
-        const json j = json::parse(line, nullptr, false);
-        if (j.is_object()) links[child->name()] = j;
+        // The node's exit line (report::Messages) among its log's lines.
+        if (line.empty() || line[0] != '{') continue;
+        Expected<report::ReportLine> parsed = report::ParseReportLineText(line);
+        if (parsed.ok() && std::holds_alternative<report::Messages>(*parsed)) {
+          links[child->name()] = report::ToJson(*parsed);
+        }
       }
     }
     result_.chaos["links"] = links;
@@ -743,10 +742,10 @@ class LabRun {
       MaybeStall();
       if (static_cast<int>(calibrated_.size() + calibration_failed_.size()) < n) return false;
       bool round_needed = static_cast<int>(given_saved_.size()) < n;
-      for (const auto& [id, line] : verification_) round_needed |= !line.value("holds", false);
+      for (const auto& [id, line] : verification_) round_needed |= !line.holds;
       if (!round_needed) return true;
       for (const auto& [id, line] : calibrated_) {
-        if (line.value("verified", false)) return false;
+        if (line.verified) return false;
       }
       return true;
     };
@@ -1080,10 +1079,9 @@ class LabRun {
     // `waiting_for` one), and no node has shown a new one for `settle`. A node still waiting
     // after a minute is measured as it is and named in `photometric.unsettled`.
     // Only units that calibrated count: one that failed (or was killed) never shares a field.
-    auto waiting = [&](const json& line) {
-      if (!line.contains("waiting_for") || !line["waiting_for"].is_array()) return false;
-      for (const json& unit : line["waiting_for"]) {
-        if (unit.is_number_unsigned() && calibrated_.count(unit.get<NodeId>())) return true;
+    auto waiting = [&](const report::BlendShown& line) {
+      for (NodeId unit : line.waiting_for) {
+        if (calibrated_.count(unit)) return true;
       }
       return false;
     };
@@ -1106,7 +1104,7 @@ class LabRun {
       if (it == blend_.end()) {
         unsettled[std::to_string(id)] = "no blend shown";
       } else if (waiting(it->second)) {
-        unsettled[std::to_string(id)] = it->second["waiting_for"];
+        unsettled[std::to_string(id)] = it->second.waiting_for;
       }
     }
     if (blend_.empty()) return FailedWith("blend", "no node showed a blend within a minute");
@@ -1242,11 +1240,10 @@ class LabRun {
     json nodes = json::object();
     double cast_ms_max = 0.0, bytes_max = 0.0;
     for (const auto& [id, line] : blend_) {
-      nodes[std::to_string(id)] = line;
-      cast_ms_max = std::max(cast_ms_max, line.value("cast_ms", 0.0));
-      bytes_max =
-          std::max(bytes_max, line.value("bytes_sent", 0.0) + line.value("bytes_received", 0.0));
-      if (line.contains("level_per_m2")) p["level_per_m2"] = line["level_per_m2"];
+      nodes[std::to_string(id)] = report::ToJson(line);
+      cast_ms_max = std::max(cast_ms_max, line.cast_ms);
+      bytes_max = std::max(bytes_max, static_cast<double>(line.bytes_sent + line.bytes_received));
+      p["level_per_m2"] = line.level_per_m2;
     }
     p["nodes"] = nodes;
     p["blend_cast_ms_max"] = cast_ms_max;
@@ -1269,13 +1266,12 @@ class LabRun {
       const NodeId late = static_cast<NodeId>(options_.join_late);
       json join = json::object();
       double join_max_ms = 0.0;
-      for (const json& line : blended_lines_) {
-        const NodeId id = line.value("blend", kInvalidNodeId);
-        if (id == late || join.contains(std::to_string(id)) || !line.contains("neighbours"))
-          continue;
-        const auto& n = line["neighbours"];
+      for (const report::BlendShown& line : blended_lines_) {
+        const NodeId id = line.id;
+        if (id == late || join.contains(std::to_string(id))) continue;
+        const std::vector<NodeId>& n = line.neighbours;
         if (std::find(n.begin(), n.end(), late) == n.end()) continue;
-        const double ms = (line.value("shown_ns", int64_t{0}) - join_calibrated_ns_) * 1e-6;
+        const double ms = (line.shown_ns - join_calibrated_ns_) * 1e-6;
         join[std::to_string(id)] = ms;
         join_max_ms = std::max(join_max_ms, ms);
       }
@@ -1301,6 +1297,9 @@ class LabRun {
       LabPainterOptions painter;
       painter.requests_endpoint = coordinator_requests_;
       painter.site_keys = site_keys_;
+      if (Status checked = painter.Check(); !checked.ok()) {
+        return FailedWith("hold", checked.ToString());
+      }
       painter_ = std::make_unique<LabPainter>(painter);
       painter_->Start();
     }
@@ -1329,8 +1328,7 @@ class LabRun {
     for (const auto& [id, why] : calibration_failed_) result_.unit_failures[id] = why;
     for (const UnitSpec& unit : inputs_.site.units) {
       if (!calibrated_.count(unit.id)) continue;  // failed: named in the report
-      const json& line = calibrated_.at(unit.id);
-      const std::string path = line.value("json", std::string());
+      const std::string path = calibrated_.at(unit.id).json;
       Expected<UnitCalibration> calibration = LoadUnitCalibration(path);
       if (!calibration.ok()) {
         return FailedWith("metrics", "unit " + std::to_string(unit.id) +
@@ -1343,13 +1341,13 @@ class LabRun {
       LabUnitResult& unit_result = result_.units[unit.id];
       unit_result.source = calibration->source;
       unit_result.json_path = RelativeToOut(path);
-      unit_result.yaml_path = RelativeToOut(line.value("yaml", std::string()));
+      const std::string& yaml = calibrated_.at(unit.id).yaml;
+      unit_result.yaml_path = RelativeToOut(yaml);
       // No OpenCV YAML is written when the model was not found (its R, T are model ->
       // projector); the report says so through the runner's report.
-      if (!line.value("yaml", std::string()).empty() &&
-          !fs::exists(line.value("yaml", std::string()))) {
+      if (!yaml.empty() && !fs::exists(yaml)) {
         return FailedWith("metrics", "unit " + std::to_string(unit.id) + ": its OpenCV YAML " +
-                                         line.value("yaml", std::string()) + " is missing");
+                                         yaml + " is missing");
       }
       sources.insert(calibration->source);
       if (calibration->table_from_model) units_have_model_ = true;
@@ -1493,16 +1491,15 @@ class LabRun {
     json& sc = result_.self_calibration;
     sc = json::object();
     for (const auto& [id, line] : calibrated_) {
-      const std::string report = line.value("report", std::string());
-      if (report.empty()) continue;
-      Expected<std::string> text = ReadInputFile(report, size_t{16} << 20, "16 MiB");
+      if (line.report.empty()) continue;
+      Expected<std::string> text = ReadInputFile(line.report, size_t{16} << 20, "16 MiB");
       if (!text.ok()) continue;
       json parsed = json::parse(*text, nullptr, false);
       if (!parsed.is_discarded() && parsed.is_object()) sc["runner_report"] = parsed;
     }
     // The runner's MPCDI export, read back with the same reader as the files of other tools.
     for (const auto& [id, line] : calibrated_) {
-      const std::string path = line.value("mpcdi", std::string());
+      const std::string& path = line.mpcdi;
       if (path.empty()) continue;
       Expected<MpcdiSite> site = ReadMpcdi(path);
       if (!site.ok()) {
@@ -1529,24 +1526,25 @@ class LabRun {
     double slowest = 0.0;
     double messages = 0, bytes = 0;
     for (const auto& [id, line] : calibrated_) {
-      json u = {{"compute_s", line.value("compute_s", 0.0)},
-                {"messages_sent", line.value("messages_sent", 0)},
-                {"messages_received", line.value("messages_received", 0)},
-                {"bytes_sent", line.value("bytes_sent", 0)},
-                {"bytes_received", line.value("bytes_received", 0)}};
-      slowest = std::max(slowest, u["compute_s"].get<double>());
-      messages += u["messages_sent"].get<double>() + u["messages_received"].get<double>();
-      bytes += u["bytes_sent"].get<double>() + u["bytes_received"].get<double>();
+      json u = {{"compute_s", line.compute_s},
+                {"messages_sent", line.messages_sent},
+                {"messages_received", line.messages_received},
+                {"bytes_sent", line.bytes_sent},
+                {"bytes_received", line.bytes_received}};
+      slowest = std::max(slowest, line.compute_s);
+      messages += static_cast<double>(line.messages_sent + line.messages_received);
+      bytes += static_cast<double>(line.bytes_sent + line.bytes_received);
       per_unit[std::to_string(id)] = u;
     }
     sc["per_unit"] = per_unit;
     if (!verification_.empty()) {
       json checks = json::object();
-      for (const auto& [id, line] : verification_) checks[std::to_string(id)] = line;
+      for (const auto& [id, line] : verification_)
+        checks[std::to_string(id)] = report::ToJson(line);
       sc["verification"] = checks;
     }
     bool round_ran = false;
-    for (const auto& [id, line] : calibrated_) round_ran |= line.value("round", 0) != 0;
+    for (const auto& [id, line] : calibrated_) round_ran |= line.round != 0;
     sc["round_ran"] = round_ran;
     sc["compute_time_s"] = slowest;
     if (!calibrated_.empty()) {
@@ -1562,11 +1560,11 @@ class LabRun {
     std::vector<double> p50, p99, floor;
     json units = json::object();
     for (const auto& [id, line] : render_summary_) {
-      units[std::to_string(id)] = line;
-      if (line.value("frames", 0) > 0) {
-        p50.push_back(line.value("frame_ms_p50", 0.0));
-        p99.push_back(line.value("frame_ms_p99", 0.0));
-        floor.push_back(line.value("floor_ms", 0.0));
+      units[std::to_string(id)] = report::ToJson(line);
+      if (line.frames > 0) {
+        p50.push_back(line.frame_ms_p50);
+        p99.push_back(line.frame_ms_p99);
+        floor.push_back(line.floor_ms);
       }
     }
     result_.render["units"] = units;
@@ -1578,7 +1576,7 @@ class LabRun {
     result_.render["frame_ms_p50"] = median(p50);
     result_.render["frame_ms_p99"] = *std::max_element(p99.begin(), p99.end());
     result_.render["floor_ms"] = median(floor);
-    result_.render["context"] = render_summary_.begin()->second.value("context", std::string());
+    result_.render["context"] = render_summary_.begin()->second.context;
   }
 
   int Finish() {
@@ -1592,6 +1590,9 @@ class LabRun {
       result_.processes.push_back({child->name(), child->spec().role, child->pid(),
                                    child->DescribeExit(), child->cpu_s(), child->max_rss_mb()});
     }
+    result_.report_lines = supervisor_.report_lines().parsed;
+    result_.bad_report_lines = supervisor_.report_lines().bad;
+    result_.last_bad_report_line = supervisor_.report_lines().last_error;
     result_.phase_seconds = progress_.phase_seconds();
     result_.max_rms_mm = options_.verdict.max_rms_mm;
     result_.min_step_pairs = options_.verdict.min_step_pairs;
@@ -1601,7 +1602,7 @@ class LabRun {
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
     const Status written = WriteLabReport(result_, options_.out_dir);
     const std::string report_path = (fs::path(options_.out_dir) / "report.json").string();
-    WriteJsonLine(out_, {{"lab", "done"}, {"status", result_.status}, {"report", report_path}});
+    report::WriteReportLine(out_, report::LabDone{result_.status, report_path});
     if (!written.ok()) {
       err_ << "sandtable-lab run: " << written.ToString() << "\n";
       return kExitFailure;
@@ -1634,9 +1635,9 @@ class LabRun {
   void Phase(const std::string& name, int total) {
     progress_.Begin(name, total);
     progress_phase_ = name;
-    json line = {{"lab", "phase"}, {"phase", name}};
-    if (name == "hold") line["hold_s"] = options_.hold_s;
-    WriteJsonLine(out_, line);
+    report::LabPhase line{name, std::nullopt};
+    if (name == "hold") line.hold_s = options_.hold_s;
+    report::WriteReportLine(out_, line);
   }
 
   std::string RelativeToOut(const std::string& path) const {
@@ -1679,64 +1680,76 @@ class LabRun {
     return *child;
   }
 
-  // The handler of every JSON line of every child: readiness and calibration.
-  Supervisor::JsonHandler Handler() {
-    return [this](ChildProcess& child, const json& line) {
-      const std::string ready = line.value("ready", std::string());
-      if (child.spec().role == "world" && ready == "sandtable-world" && line.contains("world") &&
-          line["world"].is_string()) {
-        world_endpoint_ = line["world"].get<std::string>();
-      } else if (child.spec().role == "coordinator" && ready == "sandtable-coordinator" &&
-                 line.contains("requests") && line["requests"].is_string() &&
-                 line.contains("events") && line["events"].is_string()) {
-        coordinator_requests_ = line["requests"].get<std::string>();
-        coordinator_events_ = line["events"].get<std::string>();
-      } else if (child.spec().role == "node" && ready == "sandtable-node" && line.contains("id") &&
-                 line["id"].is_number_unsigned()) {
-        nodes_ready_.insert(line["id"].get<NodeId>());
-        progress_.Update(static_cast<int>(nodes_ready_.size()));
-      } else if (child.spec().role == "node" && line.contains("calibration_failed") &&
-                 line["calibration_failed"].is_number_unsigned()) {
-        calibration_failed_[line["calibration_failed"].get<NodeId>()] =
-            line.value("reason", std::string("(no reason given)"));
-        if (progress_phase_ == "calibration held") {
-          progress_.Update(static_cast<int>(calibrated_.size() + calibration_failed_.size()));
-        }
-      } else if (child.spec().role == "node" && line.contains("render") &&
-                 line["render"].is_number_unsigned()) {
-        const NodeId id = line["render"].get<NodeId>();
-        if (line.contains("unavailable") && line["unavailable"].is_string()) {
-          render_unavailable_[id] = line["unavailable"].get<std::string>();
-        } else if (line.contains("pattern") && line["pattern"].is_string()) {
-          render_pattern_[id] = line["pattern"].get<std::string>();
-        } else if (line.contains("frames")) {
-          render_summary_[id] = line;
-        }
-      } else if (child.spec().role == "node" && line.contains("blend") &&
-                 line["blend"].is_number_unsigned()) {
-        const NodeId id = line["blend"].get<NodeId>();
-        last_blend_line_ = std::chrono::steady_clock::now();
-        if (line.contains("reblend")) {
-          reblends_.push_back(line);
-        } else if (line.contains("blended")) {
-          blend_[id] = line;
-          blended_lines_.push_back(line);
-        }
-      } else if (child.spec().role == "node" && line.contains("verification") &&
-                 line["verification"].is_number_unsigned()) {
-        verification_[line["verification"].get<NodeId>()] = line;
-      } else if (child.spec().role == "node" && line.contains("calibrated") &&
-                 line["calibrated"].is_number_unsigned() && line.contains("json") &&
-                 line["json"].is_string()) {
-        calibrated_[line["calibrated"].get<NodeId>()] = line;
-        if (options_.join_late >= 0 &&
-            line["calibrated"].get<NodeId>() == static_cast<NodeId>(options_.join_late)) {
-          join_calibrated_ns_ = SteadyNowNs();
-        }
-        if (progress_phase_ == "calibration held") {
-          progress_.Update(static_cast<int>(calibrated_.size()));
-        }
-      }
+  // The handler of every report line of every child (cluster/report_lines.h): readiness,
+  // calibration, render and blend figures. A line of a kind a child's role does not print is
+  // logged and left out.
+  Supervisor::LineHandler Handler() {
+    return [this](ChildProcess& child, const report::ReportLine& line) {
+      const std::string& role = child.spec().role;
+      const bool from_node = role == "node";
+      std::visit(
+          report::Overloaded{
+              [&](const report::WorldReady& l) {
+                if (role == "world") world_endpoint_ = l.world;
+              },
+              [&](const report::CoordinatorReady& l) {
+                if (role != "coordinator") return;
+                coordinator_requests_ = l.requests;
+                coordinator_events_ = l.events;
+              },
+              [&](const report::NodeReady& l) {
+                if (!from_node) return;
+                nodes_ready_.insert(l.id);
+                progress_.Update(static_cast<int>(nodes_ready_.size()));
+              },
+              [&](const report::CalibrationFailed& l) {
+                if (!from_node) return;
+                calibration_failed_[l.id] = l.reason.empty() ? "(no reason given)" : l.reason;
+                if (progress_phase_ == "calibration held") {
+                  progress_.Update(
+                      static_cast<int>(calibrated_.size() + calibration_failed_.size()));
+                }
+              },
+              [&](const report::RenderUnavailable& l) {
+                if (from_node) render_unavailable_[l.id] = l.reason;
+              },
+              [&](const report::RenderPattern& l) {
+                if (from_node) render_pattern_[l.id] = l.pattern;
+              },
+              [&](const report::RenderSummary& l) {
+                if (from_node) render_summary_[l.id] = l;
+              },
+              [&](const report::BlendExported&) {
+                if (from_node) last_blend_line_ = std::chrono::steady_clock::now();
+              },
+              [&](const report::BlendShown& l) {
+                if (!from_node) return;
+                last_blend_line_ = std::chrono::steady_clock::now();
+                if (l.reblend) {
+                  reblends_.push_back(l);
+                } else {
+                  blend_[l.id] = l;
+                  blended_lines_.push_back(l);
+                }
+              },
+              [&](const report::Verification& l) {
+                if (from_node) verification_[l.id] = l;
+              },
+              [&](const report::Calibrated& l) {
+                if (!from_node) return;
+                calibrated_[l.id] = l;
+                if (options_.join_late >= 0 && l.id == static_cast<NodeId>(options_.join_late)) {
+                  join_calibrated_ns_ = SteadyNowNs();
+                }
+                if (progress_phase_ == "calibration held") {
+                  progress_.Update(static_cast<int>(calibrated_.size()));
+                }
+              },
+              [&](const report::Messages&) {},
+              [&](const report::LabPhase&) {},
+              [&](const report::LabDone&) {},
+          },
+          line);
     };
   }
 
@@ -1781,7 +1794,7 @@ class LabRun {
       f.reason = "interrupted (SIGINT/SIGTERM): the site was torn down";
       result_.status = "interrupted";
     } else {
-      f.reason = what + " within the deadline (the JSON lines of common/base/ready_line.h)";
+      f.reason = what + " within the deadline (the report lines of cluster/report_lines.h)";
       child = waited_for;
       result_.status = "failed";
     }
@@ -1825,19 +1838,19 @@ class LabRun {
   std::optional<net::CurveKeyPair> site_keys_;
   std::string tracks_path_;
   std::map<NodeId, std::string> render_pattern_;  // the last pattern each node showed
-  std::map<NodeId, json> blend_;                  // the last blended line of each node
-  std::vector<json> reblends_;
+  std::map<NodeId, report::BlendShown> blend_;    // the last blended line of each node
+  std::vector<report::BlendShown> reblends_;
   std::unique_ptr<LabPainter> painter_;
   std::set<std::string> intended_kills_;
   bool coordinator_killed_ = false;
   int64_t coordinator_kill_ms_ = 0, coordinator_restart_ms_ = -1, hold_started_ms_ = 0;
   std::map<NodeId, std::vector<int64_t>> frame_times_;  // {"blend":..,"reblend":..} lines
-  std::vector<json> blended_lines_;                     // every {"blend":..,"blended":..} line
+  std::vector<report::BlendShown> blended_lines_;       // every {"blend":..,"blended":..} line
   int64_t join_calibrated_ns_ = 0;  // when the late unit's calibrated line came (--join-late)
   std::chrono::steady_clock::time_point last_blend_line_{};
-  int64_t kill_ns_ = 0;                               // steady time of the kill
-  std::map<NodeId, std::string> render_unavailable_;  // nodes that cannot render, and why
-  std::map<NodeId, json> render_summary_;             // each node's last render summary
+  int64_t kill_ns_ = 0;                                     // steady time of the kill
+  std::map<NodeId, std::string> render_unavailable_;        // nodes that cannot render, and why
+  std::map<NodeId, report::RenderSummary> render_summary_;  // each node's last render summary
   zmq::context_t zmq_context_;
   proto::MessageCounters lab_counters_;
   uint64_t lab_incarnation_ = 0;
@@ -1850,11 +1863,11 @@ class LabRun {
   enum class StallState { kNone, kStopped, kResumed };
   StallState stall_state_ = StallState::kNone;
   std::chrono::steady_clock::time_point stalled_at_{};
-  std::map<NodeId, json> calibrated_at_kill_;
-  std::map<NodeId, json> calibrated_;
+  std::map<NodeId, report::Calibrated> calibrated_at_kill_;
+  std::map<NodeId, report::Calibrated> calibrated_;
   std::map<NodeId, std::string> calibration_failed_;
-  std::set<NodeId> given_saved_;         // nodes started with --saved-calibration
-  std::map<NodeId, json> verification_;  // their check's line
+  std::set<NodeId> given_saved_;                         // nodes started with --saved-calibration
+  std::map<NodeId, report::Verification> verification_;  // their check's line
   bool units_have_model_ = false;
 };
 

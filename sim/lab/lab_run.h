@@ -18,7 +18,7 @@
 //   metrics         the registration metric (registration_metric.h) on the exported files
 //   report          report.json, report.md, pictures (lab_report.h, lab_images.h)
 // Ports are chosen by the OS; readiness comes only from the JSON lines
-// (common/base/ready_line.h). A child that dies early, a deadline that passes, or SIGINT /
+// (cluster/report_lines.h). A child that dies early, a deadline that passes, or SIGINT /
 // SIGTERM on the lab ends the run: every child is torn down (SIGTERM, SIGKILL after a grace
 // period, always reaped), the report names the child, its exit status or signal and the last
 // lines of its log, and the lab exits non-zero.

@@ -110,10 +110,25 @@ double MessagesSpread(const std::vector<ScalePoint>& points, int from_nodes) {
   return n >= 2 ? hi / lo : 0.0;
 }
 
+Status LabScaleOptions::Check() const {
+  if (out_dir.empty()) return InvalidArgumentError("--out: an output directory is required");
+  if (nodes.empty()) return InvalidArgumentError("--nodes: at least one site size is needed");
+  for (int n : nodes) {
+    if (n < 1 || n > 64) {
+      return InvalidArgumentError("--nodes: " + std::to_string(n) + " is not in 1..64");
+    }
+  }
+  if (metric_samples < 1) return InvalidArgumentError("--samples must be >= 1");
+  if (!(resolution_scale >= 0.05 && resolution_scale <= 1.0)) {
+    return InvalidArgumentError("--resolution-scale must be in [0.05, 1]");
+  }
+  return OkStatus();
+}
+
 int RunScale(const LabScaleOptions& options, const std::atomic<bool>& stop, std::ostream& out,
              std::ostream& err) {
-  if (options.out_dir.empty() || options.nodes.empty()) {
-    err << "sandtable-lab scale: --out and --nodes are required\n";
+  if (Status checked = options.Check(); !checked.ok()) {
+    err << "sandtable-lab scale: " << checked.message() << "\n";
     return 2;
   }
   const fs::path dir = fs::absolute(options.out_dir);

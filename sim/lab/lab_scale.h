@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "common/base/status.h"
+
 namespace sandtable::sim {
 
 struct ScalePoint {
@@ -46,6 +48,9 @@ struct LabScaleOptions {
   double resolution_scale = 0.5;
   bool reblend = false;  // render and blend on, a node killed after calibration (slower)
   std::string command_line;
+  // INVALID_ARGUMENT naming the flag: no --out, no size or one outside 1..64, --samples < 1,
+  // --resolution-scale outside [0.05, 1].
+  Status Check() const;
 };
 
 // Exit codes: 0 every size measured, 1 one or more failed (the others are reported), 2 usage,

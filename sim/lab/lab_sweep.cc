@@ -308,10 +308,16 @@ std::string SweepCsv(const std::vector<SweepPoint>& points) {
   return s.str();
 }
 
+Status LabSweepOptions::Check() const {
+  if (out_dir.empty()) return InvalidArgumentError("--out: an output directory is required");
+  if (metric_samples < 1) return InvalidArgumentError("--samples must be >= 1");
+  return OkStatus();
+}
+
 int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std::ostream& out,
              std::ostream& err) {
-  if (options.out_dir.empty()) {
-    err << "sandtable-lab sweep: --out is required\n";
+  if (Status checked = options.Check(); !checked.ok()) {
+    err << "sandtable-lab sweep: " << checked.message() << "\n";
     return 2;
   }
   std::vector<SweepConfig> configs;

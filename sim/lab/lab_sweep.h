@@ -74,6 +74,8 @@ struct LabSweepOptions {
   int metric_samples = 6000;
   std::vector<std::string> only;  // configuration names to run (empty: all)
   std::string command_line;
+  // INVALID_ARGUMENT naming the flag: no --out, --samples < 1.
+  Status Check() const;
 };
 
 // Exit codes: 0 every configuration measured, 1 one or more failed (the others are reported),

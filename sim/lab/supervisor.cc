@@ -4,6 +4,7 @@
 #include <signal.h>
 
 #include "common/base/file_io.h"
+#include "common/base/log.h"
 
 namespace sandtable::sim {
 
@@ -29,7 +30,7 @@ Status Supervisor::WriteProcessesJson() const {
 
 WaitOutcome Supervisor::WaitUntil(const std::function<bool()>& done,
                                   std::chrono::milliseconds deadline, const std::atomic<bool>& stop,
-                                  const JsonHandler& on_json) {
+                                  const LineHandler& on_line) {
   dead_child_ = nullptr;
   const auto until = std::chrono::steady_clock::now() + deadline;
   while (true) {
@@ -38,9 +39,16 @@ WaitOutcome Supervisor::WaitUntil(const std::function<bool()>& done,
     for (const auto& child : children_) {
       for (const std::string& line : child->ReadLines()) {
         if (line.empty() || line.front() != '{') continue;
-        const nlohmann::json parsed = nlohmann::json::parse(line, nullptr, false);
-        if (parsed.is_discarded() || !parsed.is_object()) continue;
-        on_json(*child, parsed);
+        Expected<report::ReportLine> parsed = report::ParseReportLineText(line);
+        if (!parsed.ok()) {
+          ++report_lines_.bad;
+          report_lines_.last_error = child->name() + ": " + parsed.status().message();
+          ST_LOG(kWarning) << child->name() << " printed a line that is not a report line ("
+                           << parsed.status().message() << "): " << line;
+          continue;
+        }
+        ++report_lines_.parsed;
+        on_line(*child, *parsed);
       }
     }
     if (done()) return WaitOutcome::kDone;

@@ -1,9 +1,11 @@
 // Supervisor: the lab's children (world, coordinator, nodes) and the event loop that waits on
-// them: their JSON lines (docs: common/base/ready_line.h), an early death, the deadline, or the
-// lab's own stop request (SIGINT/SIGTERM).
+// them: their report lines (cluster/report_lines.h), an early death, the deadline, or the lab's
+// own stop request (SIGINT/SIGTERM).
 //
-// Every line a child prints on stdout that parses as a JSON object is handed to the caller;
-// other lines are free text for people (kept in the log only). Nothing is parsed with regexes.
+// Every line a child prints on stdout that starts with '{' is read as a report line and handed
+// to the caller; one that does not parse is counted (report_lines()) and logged with the child's
+// name and the reason, never dropped silently. Other lines are free text for people (kept in the
+// log only). Nothing is parsed with regexes.
 // processes.json (name, pid, role of every child) is rewritten after every start so tests can
 // find the processes.
 // Tear-down: SIGTERM to every child (nodes first, then the coordinator, then the world), then
@@ -19,8 +21,7 @@
 #include <string>
 #include <vector>
 
-#include <nlohmann/json.hpp>
-
+#include "cluster/report_lines.h"
 #include "common/base/status.h"
 #include "sim/lab/child_process.h"
 
@@ -42,11 +43,13 @@ class Supervisor {
 
   Expected<ChildProcess*> Start(const ChildSpec& spec);
 
-  using JsonHandler = std::function<void(ChildProcess& child, const nlohmann::json& line)>;
+  using LineHandler = std::function<void(ChildProcess& child, const report::ReportLine& line)>;
   // Runs the loop until `done()` holds (checked after every batch of lines and at least every
   // 50 ms), a child exits, `stop` is raised, or `deadline` passes.
   WaitOutcome WaitUntil(const std::function<bool()>& done, std::chrono::milliseconds deadline,
-                        const std::atomic<bool>& stop, const JsonHandler& on_json);
+                        const std::atomic<bool>& stop, const LineHandler& on_line);
+  // The report lines read so far, and those that did not parse.
+  const report::ReportLineCounts& report_lines() const { return report_lines_; }
 
   // The child whose death ended the last WaitUntil (nullptr otherwise).
   const ChildProcess* dead_child() const { return dead_child_; }
@@ -65,6 +68,7 @@ class Supervisor {
   std::vector<std::unique_ptr<ChildProcess>> children_;
   const ChildProcess* dead_child_ = nullptr;
   std::set<const ChildProcess*> expected_exits_;
+  report::ReportLineCounts report_lines_;
 };
 
 }  // namespace sandtable::sim

@@ -1,6 +1,6 @@
 // ChildProcess: spawns a program for multi-process tests, reads its stdout lines with
 // deadlines, signals it, and kills it (SIGKILL) if still running when destroyed.
-// ReadReadyLine: the one-line JSON readiness hand-shake of the programs (common/base/ready_line.h),
+// ReadReadyLine: the one-line JSON readiness hand-shake of the programs (cluster/report_lines.h),
 // e.g. {"ready":"sandtable-coordinator","requests":"tcp://...","events":"tcp://..."}.
 #pragma once
 

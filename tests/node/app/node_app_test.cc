@@ -193,7 +193,7 @@ TEST(NodeApp, RefusesABadFactoryFileNamingTheFlag) {
   std::ofstream(bad) << "{\"format\": \"not a unit file\"}";
   NodeConfig c = ValidConfig();
   c.factory_path = bad;
-  Expected<std::unique_ptr<NodeApp>> app = NodeApp::Create(c, [](const nlohmann::json&) {});
+  Expected<std::unique_ptr<NodeApp>> app = NodeApp::Create(c, [](const report::ReportLine&) {});
   ASSERT_FALSE(app.ok());
   EXPECT_EQ(app.status().code(), StatusCode::kInvalidArgument);
   EXPECT_NE(app.status().message().find("--factory"), std::string::npos);
@@ -244,7 +244,7 @@ TEST_F(ExportAndBlendTest, StartsTheBlendAtOnceAndWritesTheLineAfterTheFiles) {
       [&](const SelfCalibrationOutcome&) {
         events.push_back(fs::exists(unit_file) ? "exported, file there" : "exported, no file");
       },
-      [&](const nlohmann::json& line) { lines.push_back(line); });
+      [&](const report::ReportLine& line) { lines.push_back(report::ToJson(line)); });
   handoff.OnCalibrated(outcome_);
   // The blend started on this thread, before any completion ran.
   ASSERT_EQ(events.size(), 1u);
@@ -266,7 +266,7 @@ TEST_F(ExportAndBlendTest, AFailedExportIsLoggedAndTheBlendStillRuns) {
   ExportAndBlend handoff(
       3, not_a_dir.string(), &pool, [&](const SelfCalibrationOutcome&) { ++started; },
       [&](const SelfCalibrationOutcome&) { ++exported; },
-      [&](const nlohmann::json& line) { lines.push_back(line); });
+      [&](const report::ReportLine& line) { lines.push_back(report::ToJson(line)); });
   handoff.OnCalibrated(outcome_);
   ASSERT_TRUE(Drain(pool, [&] { return exported == 1; }));
   EXPECT_EQ(started, 1);
@@ -280,7 +280,7 @@ TEST_F(ExportAndBlendTest, WithoutAnExportDirectoryNothingIsWritten) {
   ExportAndBlend handoff(
       3, "", &pool, [&](const SelfCalibrationOutcome&) { ++started; },
       [&](const SelfCalibrationOutcome&) { ++exported; },
-      [&](const nlohmann::json& line) { lines.push_back(line); });
+      [&](const report::ReportLine& line) { lines.push_back(report::ToJson(line)); });
   handoff.OnCalibrated(outcome_);
   EXPECT_EQ(started, 1);
   EXPECT_EQ(exported, 1);

@@ -70,7 +70,8 @@ std::unique_ptr<Unit> MakeUnit(NodeId id, const coordinator::CoordinatorServer& 
   options.peer_silence = milliseconds(4000);
   Unit* u = unit.get();
   unit->blend = std::make_unique<BlendService>(
-      nullptr, nullptr, options, [u](const nlohmann::json& line) { u->lines.push_back(line); });
+      nullptr, nullptr, options,
+      [u](const report::ReportLine& line) { u->lines.push_back(report::ToJson(line)); });
   unit->runtime->AddService(unit->blend.get());
   return unit;
 }

@@ -43,7 +43,7 @@ TEST(ChaosPlanTest, SeededDistinctUnitsInsideTheHold) {
 TEST(ChaosReportTest, ReadsFaultsAnnotationsLinksAndCrashes) {
   nlohmann::json report = {
       {"status", "ok"},
-      {"calibration", {{"join", {{"calibrated", true}, {"wall_s", 12.5}}}}},
+      {"calibration", {{"join", {{"joined", true}, {"wall_s", 12.5}}}}},
       {"live", {{"join_reblend_ms", 300.0}}},
       {"chaos",
        {{"processes_crashed", 0},
@@ -84,7 +84,7 @@ TEST(ChaosReportTest, ReadsFaultsAnnotationsLinksAndCrashes) {
   // One acknowledged point missing, a crash, a failed join: not passed, and it says why.
   report["chaos"]["annotations"]["points_lost"] = 1;
   report["chaos"]["processes_crashed"] = 1;
-  report["calibration"]["join"] = {{"calibrated", false}, {"error", "unit 2: no answer"}};
+  report["calibration"]["join"] = {{"joined", false}, {"error", "unit 2: no answer"}};
   std::ofstream(path) << report.dump();
   ChaosOutcome bad;
   ReadChaosRun(path, &bad);

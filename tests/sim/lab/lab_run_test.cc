@@ -537,7 +537,7 @@ TEST_F(LabRunTest, Sandtable3LateUnitJoinsWithoutRecalibratingTheOthers) {
   const json& c = report["calibration"];
   ASSERT_TRUE(c.contains("join")) << c.dump();
   const json& join = c["join"];
-  EXPECT_TRUE(join["calibrated"].get<bool>());
+  EXPECT_TRUE(join["joined"].get<bool>());
   EXPECT_TRUE(join["others_recalibrated"].empty()) << join["others_recalibrated"].dump();
   for (const char* id : {"0", "1"}) {
     const json& frames = join["frames_during_join"][id];
