@@ -33,129 +33,90 @@ wire::CalibrationStep MakeStep(uint64_t round, wire::CalibrationAction action) {
 
 }  // namespace
 
-void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
-  if (!camera_ || !node.registered()) return;
-  if (runner_ && !runner_->finished) return;
+RoundView SelfCalibrationService::RoundViewNow(NodeRuntime& node) const {
+  RoundView v;
+  v.self = node.id();
+  v.has_camera = camera_ != nullptr;
+  v.registered = node.registered();
+  v.now = std::chrono::steady_clock::now();
+  v.started = created_;
   const std::optional<wire::MemberList>& list = node.member_list();
-  if (!list) return;
-  std::vector<NodeId> members;
+  v.has_member_list = list.has_value();
+  if (list) {
+    for (const wire::Member& m : list->members()) {
+      const wire::Capabilities& c = m.capabilities();
+      if (!c.has_projector() || !c.has_camera()) continue;
+      RoundMember member;
+      member.id = m.node_id();
+      if (member.id == node.id()) {
+        member.state = node.calibration_state();
+        member.linked = true;
+      } else if (auto peer = node.peers().find(member.id); peer != node.peers().end()) {
+        member.state = peer->second.calibration_state;
+        member.linked = peer->second.heartbeats_received > 0;
+      }
+      v.members.push_back(member);
+    }
+    std::sort(v.members.begin(), v.members.end(),
+              [](const RoundMember& a, const RoundMember& b) { return a.id < b.id; });
+    v.member_list_age = node.member_list_age();
+  }
+  v.round_running = runner_ && !runner_->finished;
+  v.ran_round = runner_ && runner_->finished;
+  v.holds_site_solution = v.ran_round && last_solution_ != nullptr;
+  v.site_units = last_solution_ ? last_solution_->calibrations.size() : 0;
+  if (runner_) {
+    v.last_round_members = runner_->members;
+    v.departed = runner_->departed;
+  }
+  v.calibrated = calibrated_;
+  v.calibrated_by = calibrated_by_;
+  v.first_seen_calibrated_peer = first_seen_calibrated_peer_;
+  v.first_seen_uncalibrated_member = first_seen_uncalibrated_member_;
+  return v;
+}
+
+void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
+  const RoundView view = RoundViewNow(node);
+  const RoundDecision d = DecideRound(view, options_.RoundPolicy());
+  if (d.saw_calibrated_peer && !first_seen_calibrated_peer_) first_seen_calibrated_peer_ = view.now;
+  if (!d.saw_uncalibrated_member) {
+    first_seen_uncalibrated_member_.reset();
+  } else if (!first_seen_uncalibrated_member_) {
+    first_seen_uncalibrated_member_ = view.now;
+  }
+  if (d.why != last_round_why_) {
+    ST_LOG(kInfo) << "self-calibration: " << d.why << " (" << RoundActionName(d.action) << ")";
+    last_round_why_ = d.why;
+  }
+  if (d.action != RoundAction::kRound && d.action != RoundAction::kJoinRound) return;
   std::map<NodeId, std::pair<int, int>> sizes;
-  for (const wire::Member& m : list->members()) {
+  for (const wire::Member& m : node.member_list()->members()) {
     const wire::Capabilities& c = m.capabilities();
-    if (!c.has_projector() || !c.has_camera()) continue;
-    members.push_back(m.node_id());
     sizes[m.node_id()] = {static_cast<int>(c.projector_width_px()),
                           static_cast<int>(c.projector_height_px())};
-  }
-  if (members.empty()) return;
-  // The runner: the lowest id; for a unit joining a calibrated site, the runner of the round
-  // that calibrated it (it holds the site's solution; the joining unit is held against it).
-  const bool site_runner = runner_ && runner_->finished && last_solution_;
-  if (members.front() != node.id() && !site_runner) return;
-  if (node.member_list_age() < options_.settle) return;
-  // Units that hold a saved calibration check it first (no round while one does); a unit whose
-  // saved calibration held needs no round.
-  auto state_of = [&node](NodeId m) {
-    if (m == node.id()) return node.calibration_state();
-    auto peer = node.peers().find(m);
-    return peer == node.peers().end() ? wire::CALIBRATION_STATE_UNSPECIFIED
-                                      : peer->second.calibration_state;
-  };
-  bool checking = false, all_hold = true;
-  for (NodeId m : members) {
-    const wire::CalibrationState state = state_of(m);
-    checking |=
-        state == wire::CALIBRATION_STATE_SAVED || state == wire::CALIBRATION_STATE_VERIFYING;
-    all_hold &= state == wire::CALIBRATION_STATE_VERIFIED;
-  }
-  if (checking) return;
-  // A round already ran: a new one only when units joined that it did not include (a node
-  // that started late, or after the round) and that do not hold a checked calibration. Units
-  // that left cause none. Joining units are calibrated against the site, which is held (a
-  // join round); without the site's solution (this runner's round failed), all again.
-  std::vector<NodeId> joining;
-  const bool peer_calibrated = std::any_of(members.begin(), members.end(), [&](NodeId m) {
-    return m != node.id() && state_of(m) == wire::CALIBRATION_STATE_CALIBRATED;
-  });
-  if (peer_calibrated &&
-      first_seen_calibrated_peer_ == std::chrono::steady_clock::time_point::max())
-    first_seen_calibrated_peer_ = std::chrono::steady_clock::now();
-  if (runner_ || calibrated_) {
-    if (!runner_) return;  // calibrated by another runner: that runner decides
-    for (NodeId m : members) {
-      const bool new_member =
-          std::find(runner_->members.begin(), runner_->members.end(), m) == runner_->members.end();
-      // A unit the last round left out because it left (a loaded node dropped by the
-      // coordinator) is back: it is calibrated again, unless it already holds a calibration.
-      const bool came_back = runner_->departed.count(m) &&
-                             state_of(m) != wire::CALIBRATION_STATE_CALIBRATED &&
-                             node.peers().count(m);
-      if ((new_member || came_back) && state_of(m) != wire::CALIBRATION_STATE_VERIFIED) {
-        joining.push_back(m);
-      }
-    }
-    if (joining.empty()) return;
-    // A site solved from one unit's view alone is weak (its depth rests on one short factory
-    // baseline: 25 mm rms measured on sandtable-3); units that join it calibrate all again. So
-    // do units that outnumber the site they join: a join round places them against the held
-    // units, and far from those it cannot (grid-32 on a loaded machine: the first round began
-    // with 2 of 32 registered, and the join of the other 30 left 24 'not reached').
-    const size_t held = last_solution_->calibrations.size();
-    const bool weak_site = site_runner && (held < 2 || joining.size() > held);
-    if (weak_site) {
-      ST_LOG(kInfo) << "self-calibration: " << joining.size()
-                    << " unit(s) joined a site solved from " << held << "; calibrating all again";
-      joining.clear();
-    } else if (site_runner) {
-      ST_LOG(kInfo) << "self-calibration: " << joining.size()
-                    << " unit(s) joined the calibrated site; calibrating them against it";
-    } else {
-      // (Not the site's runner, so the lowest id: the check above.)
-      ST_LOG(kInfo) << "self-calibration: units joined after the last round; calibrating again";
-      joining.clear();
-    }
-    runner_.reset();
-  } else if (peer_calibrated &&
-             std::chrono::steady_clock::now() - first_seen_calibrated_peer_ < kJoinWait) {
-    // Joining a calibrated site as its lowest id: its runner calibrates this unit against it.
-    return;
-  } else if (all_hold) {
-    if (!logged_all_hold_) {
-      ST_LOG(kInfo) << "self-calibration: every unit's saved calibration held its check; no round";
-      logged_all_hold_ = true;
-    }
-    return;
-  }
-  for (NodeId m : members) {
-    if (m == node.id()) continue;
-    auto peer = node.peers().find(m);
-    if (peer == node.peers().end() || peer->second.heartbeats_received == 0) return;
-  }
-  if (!runner_ && !calibrated_ && options_.expected_units > 0 &&
-      static_cast<int>(members.size()) < options_.expected_units) {
-    const bool waited = std::chrono::steady_clock::now() - created_ >= options_.expect_wait;
-    if (!logged_expecting_) {
-      ST_LOG(kInfo) << "self-calibration: " << members.size() << " of " << options_.expected_units
-                    << " expected units are members; "
-                    << (waited ? "waited long enough, starting" : "waiting for the others");
-      logged_expecting_ = true;
-    }
-    if (!waited) return;
   }
   runner_ = std::make_unique<Runner>();
   Runner& r = *runner_;
   r.round = static_cast<uint64_t>(proto::SteadyNowNs());
   r.self = node.id();
-  r.members = members;
-  r.join = !joining.empty();
-  r.projecting = r.join ? joining : members;
+  r.members = d.members;
+  r.join = d.action == RoundAction::kJoinRound;
+  r.projecting = d.projecting;
   r.projector_size = sizes;
   r.round_started = std::chrono::steady_clock::now();
   ST_LOG(kInfo) << "self-calibration: running " << (r.join ? "join " : "") << "round " << r.round
-                << " for " << r.projecting.size() << " of " << members.size() << " units";
-  // Pre-pass: the projecting units black, a black reference on every camera, then each
-  // projecting unit white alone. (In a join round the calibrated units go on showing what they
-  // show: the reference holds it.)
+                << " for " << r.projecting.size() << " of " << r.members.size() << " units";
+  PlanPrepass(r);
+  r.stages.back().after = [this](NodeRuntime&) { PlanSequences(); };
+}
+
+// Pre-pass: the projecting units black, a black reference on every camera, then each
+// projecting unit white alone, and its response by its own camera.
+void SelfCalibrationService::PlanPrepass(Runner& r) {
+  // (In a join round the calibrated units go on showing what they show: the reference holds
+  // it.)
+  const std::vector<NodeId>& members = r.members;
   Runner::Stage black, reference;
   black.label = "pre-pass black";
   reference.label = "pre-pass reference";
@@ -232,154 +193,166 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
     r.stages.push_back(off);
     ++r.prepass_frames;
   }
-  r.stages.back().after = [this](NodeRuntime& n) {
-    Runner& rr = *runner_;
-    // Who sees whom, the schedule, the plans.
-    for (NodeId p : rr.projecting) {
-      if (!rr.Active(p)) continue;
-      std::set<NodeId> seeing;
-      for (const auto& [c, count] : rr.lit[p]) {
-        if (rr.Active(c) && static_cast<int>(count) >= options_.min_lit_pixels) seeing.insert(c);
-      }
-      if (seeing.empty()) {
-        rr.left_out[p] = "projector " + std::to_string(p) + ": no camera sees it";
-        ST_LOG(kWarning) << "self-calibration: " << rr.left_out[p];
-        continue;
-      }
-      if (!seeing.count(p)) {
-        rr.left_out[p] = "unit " + std::to_string(p) + ": its camera does not see its projector";
-        ST_LOG(kWarning) << "self-calibration: " << rr.left_out[p];
-        continue;
-      }
-      rr.cameras_seeing[p] = seeing;
+}
+
+// After the pre-pass: who sees whom, the schedule, the plans, one sequence per colour class,
+// the decodes and the local geometry; then the solve.
+void SelfCalibrationService::PlanSequences() {
+  Runner& rr = *runner_;
+  // Who sees whom, the schedule, the plans.
+  for (NodeId p : rr.projecting) {
+    if (!rr.Active(p)) continue;
+    std::set<NodeId> seeing;
+    for (const auto& [c, count] : rr.lit[p]) {
+      if (rr.Active(c) && static_cast<int>(count) >= options_.min_lit_pixels) seeing.insert(c);
     }
-    // Conflicts: projector pairs whose lit regions some camera cannot tell apart.
-    std::set<NodeId> scheduled;
-    for (const auto& [p, seeing] : rr.cameras_seeing) scheduled.insert(p);
-    const std::map<NodeId, std::set<NodeId>> graph = ConflictGraphFromPairs(scheduled, rr.overlaps);
-    rr.colours = ColourGraph(graph);
-    const int colour_count = ColourCount(rr.colours);
+    if (seeing.empty()) {
+      rr.left_out[p] = "projector " + std::to_string(p) + ": no camera sees it";
+      ST_LOG(kWarning) << "self-calibration: " << rr.left_out[p];
+      continue;
+    }
+    if (!seeing.count(p)) {
+      rr.left_out[p] = "unit " + std::to_string(p) + ": its camera does not see its projector";
+      ST_LOG(kWarning) << "self-calibration: " << rr.left_out[p];
+      continue;
+    }
+    rr.cameras_seeing[p] = seeing;
+  }
+  // Conflicts: projector pairs whose lit regions some camera cannot tell apart.
+  std::set<NodeId> scheduled;
+  for (const auto& [p, seeing] : rr.cameras_seeing) scheduled.insert(p);
+  const std::map<NodeId, std::set<NodeId>> graph = ConflictGraphFromPairs(scheduled, rr.overlaps);
+  rr.colours = ColourGraph(graph);
+  const int colour_count = ColourCount(rr.colours);
+  for (const auto& [p, seeing] : rr.cameras_seeing) {
+    const auto [w, h] = rr.projector_size[p];
+    const uint32_t own = rr.lit[p][p];
+    const double ratio = own > 0 ? std::sqrt(static_cast<double>(w) * h / own) : 2.0;
+    rr.resolution[p] = ratio;
+    // The coarsest camera: the own one, or a neighbour at the stated factor.
+    const double coarsest =
+        seeing.size() > 1 ? ratio * options_.neighbour_resolution_factor : ratio;
+    rr.plans[p] = PlanPatterns(w, h, coarsest, options_.plan);
+  }
+  ST_LOG(kInfo) << "self-calibration: " << rr.cameras_seeing.size() << " projectors in "
+                << colour_count << " colours";
+  // A join round: the calibrated neighbours whose cameras saw a joining projector's light
+  // blank it in what they display while its sequence is captured (and only then).
+  Runner::Stage blank, restore;
+  blank.label = "neighbours blank";
+  restore.label = "neighbours restore";
+  if (rr.join) {
+    std::set<NodeId> neighbours;
     for (const auto& [p, seeing] : rr.cameras_seeing) {
-      const auto [w, h] = rr.projector_size[p];
-      const uint32_t own = rr.lit[p][p];
-      const double ratio = own > 0 ? std::sqrt(static_cast<double>(w) * h / own) : 2.0;
-      rr.resolution[p] = ratio;
-      // The coarsest camera: the own one, or a neighbour at the stated factor.
-      const double coarsest =
-          seeing.size() > 1 ? ratio * options_.neighbour_resolution_factor : ratio;
-      rr.plans[p] = PlanPatterns(w, h, coarsest, options_.plan);
-    }
-    ST_LOG(kInfo) << "self-calibration: " << rr.cameras_seeing.size() << " projectors in "
-                  << colour_count << " colours";
-    // A join round: the calibrated neighbours whose cameras saw a joining projector's light
-    // blank it in what they display while its sequence is captured (and only then).
-    Runner::Stage blank, restore;
-    blank.label = "neighbours blank";
-    restore.label = "neighbours restore";
-    if (rr.join) {
-      std::set<NodeId> neighbours;
-      for (const auto& [p, seeing] : rr.cameras_seeing) {
-        for (NodeId cam : seeing) {
-          if (std::find(rr.projecting.begin(), rr.projecting.end(), cam) != rr.projecting.end())
-            continue;
-          wire::CalibrationStep b = MakeStep(rr.round, wire::CALIBRATION_ACTION_BLANK);
-          b.set_about_projector(p);
-          b.set_has_about_projector(true);
-          b.set_blank_on(true);
-          blank.commands.push_back({cam, b});
-          neighbours.insert(cam);
-        }
-      }
-      for (NodeId cam : neighbours) {
+      for (NodeId cam : seeing) {
+        if (std::find(rr.projecting.begin(), rr.projecting.end(), cam) != rr.projecting.end())
+          continue;
         wire::CalibrationStep b = MakeStep(rr.round, wire::CALIBRATION_ACTION_BLANK);
-        b.set_blank_on(false);
-        restore.commands.push_back({cam, b});
+        b.set_about_projector(p);
+        b.set_has_about_projector(true);
+        b.set_blank_on(true);
+        blank.commands.push_back({cam, b});
+        neighbours.insert(cam);
       }
-      if (!blank.commands.empty()) rr.stages.push_back(blank);
     }
-    // One sequence per colour class.
-    for (int colour = 0; colour < colour_count; ++colour) {
-      std::vector<NodeId> projectors;
-      std::set<NodeId> cameras;
-      int frames = 0;
-      for (const auto& [p, c] : rr.colours) {
-        if (c != colour) continue;
-        projectors.push_back(p);
-        for (NodeId cam : rr.cameras_seeing[p]) cameras.insert(cam);
-        const int f = MakePatternLayout(rr.plans[p]).frame_count;
-        rr.frames_per_projector[p] = f;
-        frames = std::max(frames, f);
-      }
-      const uint32_t base = 1000u * static_cast<uint32_t>(colour + 1);
-      for (int f = 0; f < frames; ++f) {
-        Runner::Stage show, capture;
-        show.label = "colour " + std::to_string(colour) + " frame " + std::to_string(f);
-        capture.label = show.label + " capture";
-        for (NodeId p : projectors) {
-          wire::CalibrationStep s = MakeStep(rr.round, wire::CALIBRATION_ACTION_SHOW);
-          if (f < rr.frames_per_projector[p]) {
-            s.set_show(wire::SHOW_WHAT_PATTERN);
-            s.set_frame(static_cast<uint32_t>(f));
-            *s.mutable_plan() = PatternPlanToWire(rr.plans[p]);
-          } else {
-            s.set_show(wire::SHOW_WHAT_BLACK);
-          }
-          show.commands.push_back({p, s});
-        }
-        for (NodeId cam : cameras) {
-          wire::CalibrationStep s = MakeStep(rr.round, wire::CALIBRATION_ACTION_CAPTURE);
-          s.set_slot(base + static_cast<uint32_t>(f));
-          capture.commands.push_back({cam, s});
-        }
-        rr.stages.push_back(show);
-        rr.stages.push_back(capture);
-      }
-      rr.site_frames += frames;
-      if (colour == colour_count - 1 && !restore.commands.empty()) rr.stages.push_back(restore);
-      Runner::Stage off, decode;
-      off.label = "colour " + std::to_string(colour) + " off";
-      decode.label = "colour " + std::to_string(colour) + " decode";
-      for (NodeId p : projectors) {
-        wire::CalibrationStep s = MakeStep(rr.round, wire::CALIBRATION_ACTION_SHOW);
-        s.set_show(wire::SHOW_WHAT_BLACK);
-        off.commands.push_back({p, s});
-        for (NodeId cam : rr.cameras_seeing[p]) {
-          wire::CalibrationStep d = MakeStep(rr.round, wire::CALIBRATION_ACTION_DECODE);
-          d.set_slot(base);
-          d.set_frames(static_cast<uint32_t>(rr.frames_per_projector[p]));
-          *d.mutable_plan() = PatternPlanToWire(rr.plans[p]);
-          d.set_projector_id(p);
-          d.set_grid_step_px(static_cast<uint32_t>(options_.grid_step_px));
-          decode.commands.push_back({cam, d});
-        }
-      }
-      // The last decode of each camera in this colour frees its captures.
-      std::set<NodeId> released;
-      for (auto it = decode.commands.rbegin(); it != decode.commands.rend(); ++it) {
-        if (released.insert(it->to).second) it->step.set_release_slots(true);
-      }
-      rr.stages.push_back(off);
-      rr.stages.push_back(decode);
+    for (NodeId cam : neighbours) {
+      wire::CalibrationStep b = MakeStep(rr.round, wire::CALIBRATION_ACTION_BLANK);
+      b.set_blank_on(false);
+      restore.commands.push_back({cam, b});
     }
-    Runner::Stage local;
-    local.label = "local geometry";
-    for (const auto& [p, seeing] : rr.cameras_seeing) {
-      wire::CalibrationStep s = MakeStep(rr.round, wire::CALIBRATION_ACTION_LOCAL);
-      uint32_t expected = 0;
-      for (NodeId cam : seeing) expected += rr.Active(cam) ? 1 : 0;
-      s.set_frames(expected);
-      local.commands.push_back({p, s});
+    if (!blank.commands.empty()) rr.stages.push_back(blank);
+  }
+  // One sequence per colour class; the neighbours restore after the last.
+  for (int colour = 0; colour < colour_count; ++colour) {
+    PlanColour(colour, colour_count, [&] {
+      if (!restore.commands.empty()) rr.stages.push_back(restore);
+    });
+  }
+  Runner::Stage local;
+  local.label = "local geometry";
+  for (const auto& [p, seeing] : rr.cameras_seeing) {
+    wire::CalibrationStep s = MakeStep(rr.round, wire::CALIBRATION_ACTION_LOCAL);
+    uint32_t expected = 0;
+    for (NodeId cam : seeing) expected += rr.Active(cam) ? 1 : 0;
+    s.set_frames(expected);
+    local.commands.push_back({p, s});
+  }
+  local.after = [this](NodeRuntime& n2) {
+    if (runner_->join) {
+      StartJoinSolve(n2);
+    } else {
+      StartSolve(n2);
     }
-    local.after = [this](NodeRuntime& n2) {
-      if (runner_->join) {
-        StartJoinSolve(n2);
-      } else {
-        StartSolve(n2);
-      }
-    };
-    rr.stages.push_back(local);
-    (void)n;
   };
+  rr.stages.push_back(local);
+}
+
+// One colour class's sequence: its projectors show their frames together, every camera that
+// sees one of them captures each; then the projectors go dark and the cameras decode.
+void SelfCalibrationService::PlanColour(int colour, int colour_count,
+                                        const std::function<void()>& restore) {
+  Runner& rr = *runner_;
+  std::vector<NodeId> projectors;
+  std::set<NodeId> cameras;
+  int frames = 0;
+  for (const auto& [p, c] : rr.colours) {
+    if (c != colour) continue;
+    projectors.push_back(p);
+    for (NodeId cam : rr.cameras_seeing[p]) cameras.insert(cam);
+    const int f = MakePatternLayout(rr.plans[p]).frame_count;
+    rr.frames_per_projector[p] = f;
+    frames = std::max(frames, f);
+  }
+  const uint32_t base = 1000u * static_cast<uint32_t>(colour + 1);
+  for (int f = 0; f < frames; ++f) {
+    Runner::Stage show, capture;
+    show.label = "colour " + std::to_string(colour) + " frame " + std::to_string(f);
+    capture.label = show.label + " capture";
+    for (NodeId p : projectors) {
+      wire::CalibrationStep s = MakeStep(rr.round, wire::CALIBRATION_ACTION_SHOW);
+      if (f < rr.frames_per_projector[p]) {
+        s.set_show(wire::SHOW_WHAT_PATTERN);
+        s.set_frame(static_cast<uint32_t>(f));
+        *s.mutable_plan() = PatternPlanToWire(rr.plans[p]);
+      } else {
+        s.set_show(wire::SHOW_WHAT_BLACK);
+      }
+      show.commands.push_back({p, s});
+    }
+    for (NodeId cam : cameras) {
+      wire::CalibrationStep s = MakeStep(rr.round, wire::CALIBRATION_ACTION_CAPTURE);
+      s.set_slot(base + static_cast<uint32_t>(f));
+      capture.commands.push_back({cam, s});
+    }
+    rr.stages.push_back(show);
+    rr.stages.push_back(capture);
+  }
+  rr.site_frames += frames;
+  if (colour == colour_count - 1) restore();
+  Runner::Stage off, decode;
+  off.label = "colour " + std::to_string(colour) + " off";
+  decode.label = "colour " + std::to_string(colour) + " decode";
+  for (NodeId p : projectors) {
+    wire::CalibrationStep s = MakeStep(rr.round, wire::CALIBRATION_ACTION_SHOW);
+    s.set_show(wire::SHOW_WHAT_BLACK);
+    off.commands.push_back({p, s});
+    for (NodeId cam : rr.cameras_seeing[p]) {
+      wire::CalibrationStep d = MakeStep(rr.round, wire::CALIBRATION_ACTION_DECODE);
+      d.set_slot(base);
+      d.set_frames(static_cast<uint32_t>(rr.frames_per_projector[p]));
+      *d.mutable_plan() = PatternPlanToWire(rr.plans[p]);
+      d.set_projector_id(p);
+      d.set_grid_step_px(static_cast<uint32_t>(options_.grid_step_px));
+      decode.commands.push_back({cam, d});
+    }
+  }
+  // The last decode of each camera in this colour frees its captures.
+  std::set<NodeId> released;
+  for (auto it = decode.commands.rbegin(); it != decode.commands.rend(); ++it) {
+    if (released.insert(it->to).second) it->step.set_release_slots(true);
+  }
+  rr.stages.push_back(off);
+  rr.stages.push_back(decode);
 }
 
 bool SelfCalibrationService::EndStage(NodeRuntime& node) {

@@ -297,6 +297,7 @@ void SelfCalibrationService::Deliver(NodeId from, const wire::Envelope& e, NodeR
       RunnerInput(from, e.calibration_input(), node);
       break;
     case wire::Envelope::kCalibrationResult:
+      if (e.calibration_result().projector_id() == node.id()) calibrated_by_ = from;
       HandleResult(e.calibration_result(), node);
       break;
     default:
@@ -862,10 +863,11 @@ Status SelfCalibrationOptions::Check() const {
   ST_RETURN_IF_ERROR(solve.Check());
   ST_RETURN_IF_ERROR(check.Check());
   ST_RETURN_IF_ERROR(planar.Check());
-  if (settle.count() < 0 || expect_wait.count() < 0 || step_timeout.count() <= 0 ||
-      member_grace.count() < 0 || step_retry.count() <= 0) {
+  if (settle.count() < 0 || expect_wait.count() < 0 || join_wait.count() < 0 ||
+      step_timeout.count() <= 0 || member_grace.count() < 0 || step_retry.count() <= 0) {
     return InvalidArgumentError(
-        "self-calibration: settle, expect_wait, member_grace >= 0; step_timeout, step_retry > 0");
+        "self-calibration: settle, expect_wait, join_wait, member_grace >= 0; step_timeout, "
+        "step_retry > 0");
   }
   if (expected_units < 0 || !(frame_period_s > 0.0) || !(capture_latency_s >= 0.0) ||
       !(neighbour_resolution_factor >= 1.0) || grid_step_px < 1 || lit_threshold < 1 ||
@@ -881,6 +883,15 @@ Status SelfCalibrationOptions::Check() const {
     }
   }
   return OkStatus();
+}
+
+RoundPolicyOptions SelfCalibrationOptions::RoundPolicy() const {
+  RoundPolicyOptions o;
+  o.settle = settle;
+  o.join_wait = join_wait;
+  o.expected_units = expected_units;
+  o.expect_wait = expect_wait;
+  return o;
 }
 
 }  // namespace sandtable::node

@@ -9,9 +9,10 @@
 // relative to the cameras that share its points, sent to the runner). Device calls and long
 // work run on the node's workers; the network thread never blocks.
 //
-// The runner of a round is the lowest id among the members that have a projector and a
-// camera, once the member list has not changed for `settle` and every member is a linked
-// peer: a rule every node applies to the same member list. It runs the pre-pass (one black
+// Who runs a round and when is the round policy (round_policy.h): the lowest id among the
+// members that have a projector and a camera, once the member list has not changed for
+// `settle` and every member is a linked peer, a rule every node applies to the same member
+// list. The runner runs the pre-pass (one black
 // reference, then each projector white alone: which cameras see which projectors), colours
 // the conflict graph (schedule.h), plans each projector's patterns from what its cameras
 // resolve (structured_light_plan.h), runs the colour classes' sequences, collects the
@@ -41,6 +42,7 @@
 #include "common/io/mpcdi.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/scene.h"
+#include "node/app/round_policy.h"
 #include "node/calibration/calibration_check.h"
 #include "node/calibration/cluster_solver.h"
 #include "node/calibration/planar_solver.h"
@@ -61,6 +63,10 @@ struct SelfCalibrationOptions {
   // 8 to a join round).
   int expected_units = 0;
   std::chrono::milliseconds expect_wait{180000};
+  // The lowest id of a site whose other units are calibrated waits this long for their
+  // runner's join round before it runs a round itself (that runner may have left); so does
+  // the lowest unit of a site whose runner left before calibrating a unit that joined.
+  std::chrono::milliseconds join_wait{15000};
   std::chrono::milliseconds step_timeout{60000};
   // A unit awaited by the runner that is out of the member list this long has left the round.
   std::chrono::milliseconds member_grace{3000};
@@ -94,6 +100,7 @@ struct SelfCalibrationOptions {
   Path path = Path::kAuto;
   PlanarSolveOptions planar;
   Status Check() const;
+  RoundPolicyOptions RoundPolicy() const;
 };
 
 // What a node holds once a round ends, and the figures the lab reports.
@@ -174,7 +181,13 @@ class SelfCalibrationService : public NodeService {
   SelfCalibrationOutcome Outcome(const UnitCalibration& calibration) const;
 
   // Runner side (self_calibration_runner.cc).
+  // What the round policy needs to know, now.
+  RoundView RoundViewNow(NodeRuntime& node) const;
   void MaybeStartRound(NodeRuntime& node);
+  // The round's stages: the pre-pass, then (once it is answered) the sequences.
+  void PlanPrepass(Runner& r);
+  void PlanSequences();
+  void PlanColour(int colour, int colour_count, const std::function<void()>& restore);
   void RunnerStep(NodeRuntime& node);
   // The current stage is answered: runs its `after`; false when the round moved on to the
   // solve (nothing more to send).
@@ -230,19 +243,19 @@ class SelfCalibrationService : public NodeService {
                     std::function<void()> then);
   OnVerification on_verification_;
   bool verify_started_ = false;
-  bool logged_all_hold_ = false;
+  NodeId calibrated_by_ = kInvalidNodeId;  // the runner of the round that calibrated it
 
   std::unique_ptr<Runner> runner_;
   // The runner's last solved site (every unit it calibrated; joined units are added), which a
   // join round holds the joining units against.
   std::shared_ptr<ClusterSolution> last_solution_;
-  // A unit that is the lowest id of a site whose other units are calibrated waits this long for
-  // their runner's join round before it runs a round itself (that runner may have left).
-  static constexpr std::chrono::seconds kJoinWait{15};
   const std::chrono::steady_clock::time_point created_ = std::chrono::steady_clock::now();
-  bool logged_expecting_ = false;
-  std::chrono::steady_clock::time_point first_seen_calibrated_peer_ =
-      std::chrono::steady_clock::time_point::max();
+  // For the round policy: when a calibrated peer, and a member without a calibration (since
+  // the last time there was none), were first seen; the last decision's words (logged when
+  // they change).
+  std::optional<std::chrono::steady_clock::time_point> first_seen_calibrated_peer_;
+  std::optional<std::chrono::steady_clock::time_point> first_seen_uncalibrated_member_;
+  std::string last_round_why_;
 };
 
 }  // namespace sandtable::node

@@ -1,0 +1,381 @@
+// The round policy (node/app/round_policy.h), table-driven: one row per situation a unit can be
+// in (a first round, a join while a round runs, a runner that dies mid-round or after it, a
+// newcomer whose messages are dropped, two newcomers at once, a unit that leaves during its
+// join, saved calibrations, an expected site size), each with the action and units expected.
+#include <chrono>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "node/app/round_policy.h"
+
+namespace sandtable::node {
+namespace {
+
+using std::chrono::milliseconds;
+using std::chrono::seconds;
+constexpr auto kNone = wire::CALIBRATION_STATE_NONE;
+constexpr auto kCalibrated = wire::CALIBRATION_STATE_CALIBRATED;
+constexpr auto kSaved = wire::CALIBRATION_STATE_SAVED;
+constexpr auto kVerified = wire::CALIBRATION_STATE_VERIFIED;
+
+const RoundClock::time_point kNow = RoundClock::time_point() + seconds(1000);
+
+// A registered unit `self` with a camera whose member list (linked members, no calibration)
+// settled long ago, that has run no round.
+RoundView Fresh(NodeId self, std::vector<NodeId> ids) {
+  RoundView v;
+  v.self = self;
+  v.has_camera = v.registered = v.has_member_list = true;
+  for (NodeId id : ids) v.members.push_back({id, kNone, true});
+  v.now = kNow;
+  v.member_list_age = seconds(10);
+  v.started = kNow - seconds(60);
+  return v;
+}
+
+void SetState(RoundView* v, NodeId id, wire::CalibrationState state) {
+  for (RoundMember& m : v->members) {
+    if (m.id == id) m.state = state;
+  }
+}
+
+// `self` ran the round of `round` and solved the site (every unit of the round calibrated).
+RoundView SiteRunner(NodeId self, std::vector<NodeId> round, std::vector<NodeId> now) {
+  RoundView v = Fresh(self, now);
+  v.ran_round = v.holds_site_solution = true;
+  v.last_round_members = round;
+  v.site_units = round.size();
+  v.calibrated = true;
+  v.calibrated_by = self;
+  for (NodeId id : round) SetState(&v, id, kCalibrated);
+  return v;
+}
+
+struct Row {
+  std::string name;
+  std::function<RoundView()> view;
+  RoundAction action;
+  std::vector<NodeId> members, projecting;  // checked for kRound and kJoinRound
+  std::string why;                          // a part of the decision's words
+};
+
+TEST(RoundPolicyTest, EveryBranch) {
+  RoundPolicyOptions options;  // settle 1.5 s, join_wait 15 s
+  RoundPolicyOptions expecting = options;
+  expecting.expected_units = 4;
+  const std::vector<Row> rows = {
+      {"no camera",
+       [] {
+         RoundView v = Fresh(1, {1, 2});
+         v.has_camera = false;
+         return v;
+       },
+       RoundAction::kNone,
+       {},
+       {},
+       "no camera"},
+      {"not registered",
+       [] {
+         RoundView v = Fresh(1, {1, 2});
+         v.registered = false;
+         return v;
+       },
+       RoundAction::kNone,
+       {},
+       {},
+       "not registered"},
+      {"no member list",
+       [] {
+         RoundView v = Fresh(1, {});
+         v.has_member_list = false;
+         return v;
+       },
+       RoundAction::kWait,
+       {},
+       {},
+       "no member list"},
+      {"the first round, by the lowest id",
+       [] {
+         return Fresh(1, {1, 2, 3});
+       },
+       RoundAction::kRound,
+       {1, 2, 3},
+       {1, 2, 3},
+       "every member"},
+      {"not the lowest id",
+       [] {
+         return Fresh(2, {1, 2, 3});
+       },
+       RoundAction::kNone,
+       {},
+       {},
+       "unit 1 runs the rounds"},
+      {"the member list just changed",
+       [] {
+         RoundView v = Fresh(1, {1, 2});
+         v.member_list_age = milliseconds(200);
+         return v;
+       },
+       RoundAction::kWait,
+       {},
+       {},
+       "settle"},
+      {"a newcomer whose messages are dropped (no heartbeat yet)",
+       [] {
+         RoundView v = Fresh(1, {1, 2, 3});
+         v.members[2].linked = false;
+         return v;
+       },
+       RoundAction::kWait,
+       {},
+       {},
+       "unit 3 is not linked"},
+      {"a join while its round runs",
+       [] {
+         RoundView v = Fresh(1, {1, 2, 3, 4});
+         v.round_running = true;
+         return v;
+       },
+       RoundAction::kWait,
+       {},
+       {},
+       "running"},
+      {"one newcomer after the round: a join round",
+       [] {
+         return SiteRunner(1, {1, 2, 3}, {1, 2, 3, 4});
+       },
+       RoundAction::kJoinRound,
+       {1, 2, 3, 4},
+       {4},
+       "against it"},
+      {"two newcomers at once: one join round for both",
+       [] {
+         return SiteRunner(1, {1, 2, 3}, {1, 2, 3, 4, 5});
+       },
+       RoundAction::kJoinRound,
+       {1, 2, 3, 4, 5},
+       {4, 5},
+       "2 unit(s) joined"},
+      {"a newcomer with a lower id than the site's runner: the runner still decides",
+       [] {
+         return SiteRunner(2, {2, 3, 4}, {0, 2, 3, 4});
+       },
+       RoundAction::kJoinRound,
+       {0, 2, 3, 4},
+       {0},
+       "against it"},
+      {"newcomers that outnumber the site: all again",
+       [] {
+         return SiteRunner(1, {1, 2}, {1, 2, 3, 4, 5});
+       },
+       RoundAction::kRound,
+       {1, 2, 3, 4, 5},
+       {1, 2, 3, 4, 5},
+       "all again"},
+      {"a site solved from one unit: all again",
+       [] {
+         return SiteRunner(1, {1}, {1, 2});
+       },
+       RoundAction::kRound,
+       {1, 2},
+       {1, 2},
+       "solved from 1"},
+      {"a runner whose round failed: all again",
+       [] {
+         RoundView v = SiteRunner(1, {1, 2, 3}, {1, 2, 3, 4});
+         v.holds_site_solution = false;
+         v.site_units = 0;
+         return v;
+       },
+       RoundAction::kRound,
+       {1, 2, 3, 4},
+       {1, 2, 3, 4},
+       "not solved"},
+      {"nobody new after the round",
+       [] {
+         return SiteRunner(1, {1, 2, 3}, {1, 2, 3});
+       },
+       RoundAction::kNone,
+       {},
+       {},
+       "every member was in the last round"},
+      {"a unit that left the round comes back without a calibration",
+       [] {
+         RoundView v = SiteRunner(1, {1, 2, 3}, {1, 2, 3});
+         v.departed = {3};
+         SetState(&v, 3, kNone);
+         return v;
+       },
+       RoundAction::kJoinRound,
+       {1, 2, 3},
+       {3},
+       "against it"},
+      {"a unit that leaves during its join: nothing more until it comes back",
+       [] {
+         RoundView v = SiteRunner(1, {1, 2, 3, 4}, {1, 2, 3});
+         v.departed = {4};
+         v.site_units = 3;
+         return v;
+       },
+       RoundAction::kNone,
+       {},
+       {},
+       "every member was in the last round"},
+      {"a newcomer whose saved calibration held needs no round",
+       [] {
+         RoundView v = SiteRunner(1, {1, 2, 3}, {1, 2, 3, 4});
+         SetState(&v, 4, kVerified);
+         return v;
+       },
+       RoundAction::kNone,
+       {},
+       {},
+       "every member was in the last round"},
+      {"a member checking its saved calibration",
+       [] {
+         RoundView v = Fresh(1, {1, 2});
+         SetState(&v, 2, kSaved);
+         return v;
+       },
+       RoundAction::kWait,
+       {},
+       {},
+       "checking its saved calibration"},
+      {"every saved calibration held",
+       [] {
+         RoundView v = Fresh(1, {1, 2});
+         SetState(&v, 1, kVerified);
+         SetState(&v, 2, kVerified);
+         return v;
+       },
+       RoundAction::kNone,
+       {},
+       {},
+       "held its check"},
+      {"calibrated by a runner that is still a member",
+       [] {
+         RoundView v = Fresh(1, {1, 2, 3, 4});
+         v.calibrated = true;
+         v.calibrated_by = 2;
+         for (NodeId id : {1, 2, 3}) SetState(&v, id, kCalibrated);
+         return v;
+       },
+       RoundAction::kNone,
+       {},
+       {},
+       "calibrated by unit 2, which decides"},
+      {"the runner died mid-round: the next lowest id runs it again",
+       [] {
+         return Fresh(2, {2, 3, 4});
+       },
+       RoundAction::kRound,
+       {2, 3, 4},
+       {2, 3, 4},
+       "every member"},
+      {"the runner died after the round and a unit joined: wait join_wait first",
+       [] {
+         RoundView v = Fresh(2, {2, 3, 4});
+         v.calibrated = true;
+         v.calibrated_by = 1;
+         SetState(&v, 2, kCalibrated);
+         SetState(&v, 3, kCalibrated);
+         v.first_seen_uncalibrated_member = kNow - seconds(3);
+         return v;
+       },
+       RoundAction::kWait,
+       {},
+       {},
+       "its site's runner (unit 1) left"},
+      {"the runner died after the round and a unit joined: then all again",
+       [] {
+         RoundView v = Fresh(2, {2, 3, 4});
+         v.calibrated = true;
+         v.calibrated_by = 1;
+         SetState(&v, 2, kCalibrated);
+         SetState(&v, 3, kCalibrated);
+         v.first_seen_uncalibrated_member = kNow - seconds(16);
+         return v;
+       },
+       RoundAction::kRound,
+       {2, 3, 4},
+       {2, 3, 4},
+       "left and units joined"},
+      {"the runner died after the round, nobody joined",
+       [] {
+         RoundView v = Fresh(2, {2, 3});
+         v.calibrated = true;
+         v.calibrated_by = 1;
+         SetState(&v, 2, kCalibrated);
+         SetState(&v, 3, kCalibrated);
+         return v;
+       },
+       RoundAction::kNone,
+       {},
+       {},
+       "every member holds a calibration"},
+      {"the lowest id joins a calibrated site: it waits for the site's runner",
+       [] {
+         RoundView v = Fresh(0, {0, 1, 2});
+         SetState(&v, 1, kCalibrated);
+         SetState(&v, 2, kCalibrated);
+         v.first_seen_calibrated_peer = kNow - seconds(2);
+         return v;
+       },
+       RoundAction::kWait,
+       {},
+       {},
+       "waiting join_wait"},
+      {"... and runs a round itself when no join round came",
+       [] {
+         RoundView v = Fresh(0, {0, 1, 2});
+         SetState(&v, 1, kCalibrated);
+         SetState(&v, 2, kCalibrated);
+         v.first_seen_calibrated_peer = kNow - seconds(20);
+         return v;
+       },
+       RoundAction::kRound,
+       {0, 1, 2},
+       {0, 1, 2},
+       "did not calibrate this unit"},
+  };
+  for (const Row& row : rows) {
+    SCOPED_TRACE(row.name);
+    const RoundDecision d = DecideRound(row.view(), options);
+    EXPECT_EQ(d.action, row.action) << RoundActionName(d.action) << ": " << d.why;
+    EXPECT_NE(d.why.find(row.why), std::string::npos) << d.why;
+    if (row.action == RoundAction::kRound || row.action == RoundAction::kJoinRound) {
+      EXPECT_EQ(d.members, row.members);
+      EXPECT_EQ(d.projecting, row.projecting);
+    }
+  }
+  // An expected site size: wait for it, at most expect_wait from the start.
+  RoundView early = Fresh(1, {1, 2, 3});
+  early.started = kNow - seconds(10);
+  EXPECT_EQ(DecideRound(early, expecting).action, RoundAction::kWait);
+  EXPECT_NE(DecideRound(early, expecting).why.find("3 of 4 expected"), std::string::npos);
+  RoundView late = early;
+  late.started = kNow - seconds(200);
+  EXPECT_EQ(DecideRound(late, expecting).action, RoundAction::kRound);
+  RoundView full = Fresh(1, {1, 2, 3, 4});
+  full.started = kNow - seconds(10);
+  EXPECT_EQ(DecideRound(full, expecting).action, RoundAction::kRound);
+}
+
+TEST(RoundPolicyTest, ReportsWhatItSawForTheNextAsk) {
+  RoundView v = Fresh(0, {0, 1, 2});
+  SetState(&v, 1, kCalibrated);
+  const RoundDecision d = DecideRound(v, {});
+  EXPECT_TRUE(d.saw_calibrated_peer);
+  EXPECT_TRUE(d.saw_uncalibrated_member);
+  // Without a first sighting yet, the wait counts from now.
+  EXPECT_EQ(d.action, RoundAction::kWait);
+  SetState(&v, 0, kCalibrated);
+  SetState(&v, 2, kCalibrated);
+  EXPECT_FALSE(DecideRound(v, {}).saw_uncalibrated_member);
+}
+
+}  // namespace
+}  // namespace sandtable::node
