@@ -31,6 +31,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <ostream>
 #include <string>
@@ -44,6 +45,32 @@ namespace sandtable::sim {
 // The exit code of a run that completed and failed its verdict (sweep and scale read its
 // figures all the same).
 inline constexpr int kLabExitVerdict = 3;
+
+// The lab's fixed waits and timeouts, each named with its unit (the flags' timeouts are in
+// LabRunOptions itself).
+struct LabTimings {
+  // A blend is settled when no node has shown a new mask for this long.
+  std::chrono::milliseconds blend_settle{1500};
+  // The longest wait for the blend to settle (after it: measured as it is, `unsettled`).
+  std::chrono::milliseconds blend_wait{60000};
+  // The longest wait for every node to show a test pattern.
+  std::chrono::milliseconds pattern_wait{60000};
+  // After a late unit's calibration: its neighbours' re-blend and recalibration may follow.
+  std::chrono::milliseconds join_settle{2000};
+  // A request to the coordinator (test pattern, timeline), and the painter's last acks.
+  std::chrono::milliseconds request_timeout{10000};
+  // A world request that renders (top views, the ground truth at many points).
+  std::chrono::milliseconds world_render_timeout{300000};
+  // The nodes flush their render logs once a second: the wait after the show for the last.
+  std::chrono::milliseconds render_log_flush{1200};
+  // The longest a piece of the lab's own work (a measure) may run while children are watched.
+  std::chrono::milliseconds work_limit{3600000};
+  // After SIGKILL, the longest wait for the child to be reaped.
+  std::chrono::milliseconds reap_after_kill{5000};
+  // How often a request's reply is looked for.
+  std::chrono::milliseconds reply_poll{50};
+  Status Check() const;
+};
 
 struct LabRunOptions {
   std::string site = "sandtable-3";
@@ -135,6 +162,7 @@ struct LabRunOptions {
   // (docs/blend.md, "A neighbour leaves").
   std::string node_huge_pages = "on";
   std::string command_line;  // for the report
+  LabTimings timings;
   Status Check() const;
 };
 

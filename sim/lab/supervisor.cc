@@ -77,6 +77,12 @@ WaitOutcome Supervisor::WaitUntil(const std::function<bool()>& done,
   }
 }
 
+WaitOutcome Supervisor::Watch(std::chrono::milliseconds period, const std::atomic<bool>& stop,
+                              const LineHandler& on_line) {
+  const WaitOutcome outcome = WaitUntil([] { return false; }, period, stop, on_line);
+  return outcome == WaitOutcome::kDeadline ? WaitOutcome::kDone : outcome;
+}
+
 std::vector<std::string> Supervisor::TearDown(std::chrono::milliseconds grace) {
   std::vector<std::string> killed;
   const auto until = std::chrono::steady_clock::now() + grace;

@@ -48,6 +48,10 @@ class Supervisor {
   // 50 ms), a child exits, `stop` is raised, or `deadline` passes.
   WaitOutcome WaitUntil(const std::function<bool()>& done, std::chrono::milliseconds deadline,
                         const std::atomic<bool>& stop, const LineHandler& on_line);
+  // Runs the loop for `period` (children watched, their lines handled): kDone once it passed,
+  // else kChildDied or kStopped.
+  WaitOutcome Watch(std::chrono::milliseconds period, const std::atomic<bool>& stop,
+                    const LineHandler& on_line);
   // The report lines read so far, and those that did not parse.
   const report::ReportLineCounts& report_lines() const { return report_lines_; }
 
