@@ -92,9 +92,20 @@ void ReadChaosRun(const std::string& report_path, ChaosOutcome* o) {
     return;
   }
   if (r.value("status", std::string()) != "ok") {
-    const json& f = r.contains("failure") ? r["failure"] : json::object();
-    o->error = "run " + r.value("status", std::string("?")) + " in phase '" +
-               f.value("phase", std::string()) + "': " + f.value("reason", std::string());
+    if (r.contains("failure") && r["failure"].is_object()) {
+      const json& f = r["failure"];
+      o->error = "run " + r.value("status", std::string("?")) + " in phase '" +
+                 f.value("phase", std::string()) + "': " + f.value("reason", std::string());
+    } else {
+      // A run that completed and failed its verdict: its reasons.
+      std::string reasons;
+      for (const json& reason : r.value("reasons", json::array())) {
+        reasons += (reasons.empty() ? "" : "; ") + reason.value("what", std::string()) + ": " +
+                   reason.value("detail", std::string());
+      }
+      o->error = "run " + r.value("status", std::string("?")) +
+                 " its verdict: " + (reasons.empty() ? std::string("(no reason given)") : reasons);
+    }
   }
   const json& chaos = r.contains("chaos") ? r["chaos"] : json::object();
   o->ran = chaos.is_object() && chaos.contains("processes_crashed");

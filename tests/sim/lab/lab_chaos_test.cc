@@ -93,6 +93,19 @@ TEST(ChaosReportTest, ReadsFaultsAnnotationsLinksAndCrashes) {
   EXPECT_EQ(bad.lost, 1);
   EXPECT_EQ(bad.crashed, 1);
   EXPECT_NE(bad.error.find("no answer"), std::string::npos) << bad.error;
+
+  // A run that completed and failed its verdict says which (not an empty phase and reason).
+  nlohmann::json verdict = {{"status", "failed"},
+                            {"reasons",
+                             {{{"what", "registration over its bar"},
+                               {"detail", "3.445 mm rms > 1.000 mm (--max-rms-mm)"}}}}};
+  std::ofstream(path) << verdict.dump();
+  ChaosOutcome judged;
+  ReadChaosRun(path, &judged);
+  std::filesystem::remove(path);
+  EXPECT_NE(judged.error.find("failed its verdict: registration over its bar: 3.445 mm"),
+            std::string::npos)
+      << judged.error;
 }
 
 TEST(LabChaosTest, Sandtable3SeedOneLosesNoAnnotationAndCrashesNothing) {
