@@ -9,10 +9,11 @@ bool Contains(const std::vector<NodeId>& ids, NodeId id) {
   return std::find(ids.begin(), ids.end(), id) != ids.end();
 }
 
-RoundDecision Decide(RoundAction action, std::string why) {
+RoundDecision Decide(RoundAction action, std::string why, bool transient = false) {
   RoundDecision d;
   d.action = action;
   d.why = std::move(why);
+  d.transient = transient;
   return d;
 }
 
@@ -36,9 +37,9 @@ const char* RoundActionName(RoundAction action) {
 
 RoundDecision DecideRound(const RoundView& v, const RoundPolicyOptions& options) {
   if (!v.has_camera) return Decide(RoundAction::kNone, "no camera");
-  if (!v.registered) return Decide(RoundAction::kNone, "not registered");
-  if (v.round_running) return Decide(RoundAction::kWait, "its round is running");
-  if (!v.has_member_list) return Decide(RoundAction::kWait, "no member list yet");
+  if (!v.registered) return Decide(RoundAction::kNone, "not registered", true);
+  if (v.round_running) return Decide(RoundAction::kWait, "its round is running", true);
+  if (!v.has_member_list) return Decide(RoundAction::kWait, "no member list yet", true);
   if (v.members.empty()) return Decide(RoundAction::kNone, "no member has a projector and camera");
   std::vector<NodeId> ids;
   for (const RoundMember& m : v.members) ids.push_back(m.id);
@@ -57,7 +58,7 @@ RoundDecision DecideRound(const RoundView& v, const RoundPolicyOptions& options)
     return Decide(RoundAction::kNone, Unit(ids.front()) + " runs the rounds (the lowest id)");
   }
   if (v.member_list_age < options.settle) {
-    return Decide(RoundAction::kWait, "the member list changed less than settle ago");
+    return Decide(RoundAction::kWait, "the member list changed less than settle ago", true);
   }
   bool checking = false, all_hold = true, peer_calibrated = false;
   std::vector<NodeId> uncalibrated;

@@ -91,6 +91,9 @@ struct RoundDecision {
   std::vector<NodeId> members;     // kRound, kJoinRound: the round's units
   std::vector<NodeId> projecting;  // ... those calibrated (a join round: the joining units)
   std::string why;                 // in words, for the log
+  // A passing state (not registered, no member list yet, the list settling, its own round
+  // running): the service logs it at debug level, the rest at info when it changes.
+  bool transient = false;
   // What the service keeps for the next ask: a calibrated peer, or a member without a
   // calibration, was seen.
   bool saw_calibrated_peer = false;

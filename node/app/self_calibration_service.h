@@ -166,6 +166,20 @@ class SelfCalibrationService : public NodeService {
 
   // Node side.
   void HandleStep(const wire::CalibrationStep& step, NodeId from, NodeRuntime& node);
+  // One function per action (HandleStep's switch); each answers `done` when the step is done.
+  void StepShow(const wire::CalibrationStep& step, NodeId from, wire::CalibrationStepDone done,
+                NodeRuntime& node);
+  void StepResponse(const wire::CalibrationStep& step, NodeId from, wire::CalibrationStepDone done,
+                    NodeRuntime& node);
+  void StepCapture(const wire::CalibrationStep& step, NodeId from, wire::CalibrationStepDone done,
+                   NodeRuntime& node);
+  void StepDecode(const wire::CalibrationStep& step, NodeId from, wire::CalibrationStepDone done,
+                  NodeRuntime& node);
+  void StepBlank(const wire::CalibrationStep& step, NodeId from, wire::CalibrationStepDone done,
+                 NodeRuntime& node);
+  // Answers `done` as failed with `why` (logged).
+  void FailStep(NodeId from, wire::CalibrationStepDone done, NodeRuntime& node,
+                const std::string& why);
   void RunDeferred(NodeRuntime& node);
   void Answer(NodeId to, wire::CalibrationStepDone done, NodeRuntime& node);
   // False when the message could not be queued (the peer is not linked).
@@ -204,6 +218,8 @@ class SelfCalibrationService : public NodeService {
   // `solution` is null when the solve failed with `status`.
   void FinishRound(const ClusterSolution* solution, const Status& status, double solve_cpu_s,
                    NodeRuntime& node);
+  void SendResults(const ClusterSolution* solution, const Status& status,
+                   const std::string& report_text, NodeRuntime& node);
 
   UnitCalibration factory_;
   ProjectorOutput* projector_;

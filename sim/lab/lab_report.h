@@ -111,6 +111,15 @@ struct LabResult {
   double model_offset_mm = 0.0, model_offset_deg = 0.0;
 };
 
+// The registration metric in words (report.json "definition", report.md).
+inline constexpr char kRegistrationMetricDefinition[] =
+    "points X sampled area-weighted on every lit surface where the model truly stands; per "
+    "projector that truly lights X at incidence under max_incidence_deg: u_hat = X projected "
+    "with the unit's exported calibration (projector intrinsics, table_from_projector, "
+    "table_from_model); the TRUE ray of the projector through u_hat meets the plane of X's "
+    "triangle at X'; error |X' - X| (mm) and |u_hat - u_true| (projector px). Table faces: "
+    "all vertices within 0.1 mm of z = 0 and normal z > 0.999; every other face is building.";
+
 nlohmann::json LabReportJson(const LabResult& result);
 std::string LabReportMarkdown(const LabResult& result);
 Status WriteLabReport(const LabResult& result, const std::string& out_dir);

@@ -40,19 +40,11 @@ namespace {
 std::atomic<bool> g_stop{false};
 void OnSignal(int) { g_stop = true; }
 
-}  // namespace
+namespace cli = sandtable::cli;
+namespace sim = sandtable::sim;
 
-static int Run(int argc, char** argv) {
-  using namespace sandtable;
-  SetLogTag("lab");
-  CLI::App app("sandtable-lab: a simulated site on localhost, measured against the truth",
-               "sandtable-lab");
-  cli::Configure(app);
-  app.require_subcommand(1);
-  CLI::App* run = app.add_subcommand("run", "Run the site, collect calibrations, write the report");
-  cli::Configure(*run);
-  sim::LabRunOptions options;
-  std::string progress = "auto";
+// The subcommands' flags, each into the options it fills (kept alive by Run).
+void AddRunFlags(CLI::App* run, sim::LabRunOptions& options) {
   run->add_option("--site", options.site,
                   "Site: sandtable-3, grid-N (1..64), flat-4, random:SEED (a random sound site), "
                   "or a site file");
@@ -99,6 +91,10 @@ static int Run(int argc, char** argv) {
                   "self-calibration: auto (the planar path when every footprint is planar) or "
                   "full (for comparison)")
       ->check(CLI::IsMember({"auto", "full"}));
+}
+
+// `run`'s faults: kills, stalls, the coordinator's restart, faulty links, a late join.
+void AddRunFaultFlags(CLI::App* run, sim::LabRunOptions& options) {
   run->add_option("--kill-unit", options.kill_unit,
                   "SIGKILL this unit --kill-at-s seconds after calibration began (during the "
                   "round, or after it with a longer --hold-s); the run goes on")
@@ -143,6 +139,10 @@ static int Run(int argc, char** argv) {
                   "calibrated site (a live join; the report says whether any other unit was "
                   "recalibrated)")
       ->check(CLI::Range(0, 1 << 20));
+}
+
+// `run`'s show, blend, node and terminal flags.
+void AddRunShowFlags(CLI::App* run, sim::LabRunOptions& options, std::string& progress) {
   run->add_option("--render", options.render,
                   "the nodes' show: on (grid measured from above, tracks played) or off")
       ->check(CLI::IsMember({"on", "off"}));
@@ -180,10 +180,9 @@ static int Run(int argc, char** argv) {
                   "Terminal progress: bars, plain lines, or auto (bars "
                   "on a TTY)")
       ->check(CLI::IsMember({"auto", "bar", "plain"}));
-  CLI::App* sweep = app.add_subcommand(
-      "sweep", "Run time against error: one run per configuration, CSV and Pareto plots");
-  cli::Configure(*sweep);
-  sim::LabSweepOptions sweep_options;
+}
+
+void AddSweepFlags(CLI::App* sweep, sim::LabSweepOptions& sweep_options) {
   sweep->add_option("--site", sweep_options.site,
                     "Site: sandtable-3, grid-N (1..64), flat-4, random:SEED (a random sound site), "
                     "or a site file");
@@ -200,10 +199,9 @@ static int Run(int argc, char** argv) {
       ->check(cli::Integer<int>(1, 10000000));
   sweep->add_option("--only", sweep_options.only,
                     "run only these configurations (defaults, phase-steps=4, ...; repeat it)");
-  CLI::App* scale =
-      app.add_subcommand("scale", "The cost of a site as it grows: one grid-N run per N, plots");
-  cli::Configure(*scale);
-  sim::LabScaleOptions scale_options;
+}
+
+void AddScaleFlags(CLI::App* scale, sim::LabScaleOptions& scale_options) {
   scale->add_option("--nodes", scale_options.nodes, "site sizes N of grid-N, e.g. 2,4,8,16")
       ->delimiter(',')
       ->check(cli::Integer<int>(1, 64));
@@ -225,12 +223,9 @@ static int Run(int argc, char** argv) {
   scale->add_flag("--reblend", scale_options.reblend,
                   "with the show and the blend, unit 0 killed after calibration: the re-blend "
                   "time per N (much slower)");
-  CLI::App* chaos =
-      app.add_subcommand("chaos",
-                         "Faults while a site runs, over seeded runs: kills, a join, a stall, the "
-                         "coordinator killed and restarted, faulty links; annotations checked");
-  cli::Configure(*chaos);
-  sim::LabChaosOptions chaos_options;
+}
+
+void AddChaosFlags(CLI::App* chaos, sim::LabChaosOptions& chaos_options) {
   chaos->add_option("--site", chaos_options.site,
                     "Site: sandtable-3, grid-N (3..64), flat-4 (at least 3 units)");
   chaos->add_option("--scene", chaos_options.scene, "Scene: sandtable, city, flat, or a glTF file");
@@ -246,6 +241,41 @@ static int Run(int argc, char** argv) {
       ->add_option("--samples", chaos_options.metric_samples,
                    "Surface points sampled by each run's registration metric")
       ->check(cli::Integer<int>(1, 10000000));
+}
+
+}  // namespace
+
+static int Run(int argc, char** argv) {
+  using namespace sandtable;
+  SetLogTag("lab");
+  CLI::App app("sandtable-lab: a simulated site on localhost, measured against the truth",
+               "sandtable-lab");
+  cli::Configure(app);
+  app.require_subcommand(1);
+  CLI::App* run = app.add_subcommand("run", "Run the site, collect calibrations, write the report");
+  cli::Configure(*run);
+  sim::LabRunOptions options;
+  std::string progress = "auto";
+  AddRunFlags(run, options);
+  AddRunFaultFlags(run, options);
+  AddRunShowFlags(run, options, progress);
+  CLI::App* sweep = app.add_subcommand(
+      "sweep", "Run time against error: one run per configuration, CSV and Pareto plots");
+  cli::Configure(*sweep);
+  sim::LabSweepOptions sweep_options;
+  AddSweepFlags(sweep, sweep_options);
+  CLI::App* scale =
+      app.add_subcommand("scale", "The cost of a site as it grows: one grid-N run per N, plots");
+  cli::Configure(*scale);
+  sim::LabScaleOptions scale_options;
+  AddScaleFlags(scale, scale_options);
+  CLI::App* chaos =
+      app.add_subcommand("chaos",
+                         "Faults while a site runs, over seeded runs: kills, a join, a stall, the "
+                         "coordinator killed and restarted, faulty links; annotations checked");
+  cli::Configure(*chaos);
+  sim::LabChaosOptions chaos_options;
+  AddChaosFlags(chaos, chaos_options);
   CLI::App* html = app.add_subcommand(
       "html", "A markdown report as one HTML page, the PNGs it links from its folder inlined");
   cli::Configure(*html);
