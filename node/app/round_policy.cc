@@ -144,6 +144,11 @@ RoundDecision DecideRound(const RoundView& v, const RoundPolicyOptions& options)
       out.why = "the other units are calibrated; waiting join_wait for their runner's join round";
       return out;
     }
+    if (v.last_step_from_other && v.now - *v.last_step_from_other < options.join_wait) {
+      out.action = RoundAction::kWait;
+      out.why = "another unit's round is calibrating this unit";
+      return out;
+    }
     out.why =
         "the other units are calibrated and their runner did not calibrate this unit; "
         "calibrating all";

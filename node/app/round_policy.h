@@ -22,7 +22,9 @@
 //     without a calibration (a unit that joined after the runner left) is calibrated with all
 //     the others again, once join_wait has passed since it was first seen.
 //   - The lowest id of a site whose other units are calibrated waits join_wait for their
-//     runner's join round before it runs one itself (that runner may have left).
+//     runner's join round before it runs one itself (that runner may have left), and goes on
+//     waiting while that round sends it steps (a join round can take longer than join_wait;
+//     a second round started beside it would clobber both).
 //   - Every saved calibration held its check: no round.
 //   - Every member must be linked (a heartbeat came), and with expected_units, that many must
 //     be members or expect_wait must have passed since the unit started.
@@ -67,6 +69,8 @@ struct RoundView {
   bool calibrated = false;
   NodeId calibrated_by = kInvalidNodeId;
   std::optional<RoundClock::time_point> first_seen_calibrated_peer;
+  // The last calibration step another unit's round sent this one: it is being calibrated.
+  std::optional<RoundClock::time_point> last_step_from_other;
   std::optional<RoundClock::time_point> first_seen_uncalibrated_member;
   RoundClock::time_point started{};  // the service's creation
 };

@@ -72,6 +72,7 @@ RoundView SelfCalibrationService::RoundViewNow(NodeRuntime& node) const {
   v.calibrated = calibrated_;
   v.calibrated_by = calibrated_by_;
   v.first_seen_calibrated_peer = first_seen_calibrated_peer_;
+  v.last_step_from_other = last_step_from_other_;
   v.first_seen_uncalibrated_member = first_seen_uncalibrated_member_;
   return v;
 }

@@ -278,6 +278,7 @@ void SelfCalibrationService::OnPeerMessage(net::Incoming request, NodeRuntime& n
 void SelfCalibrationService::Deliver(NodeId from, const wire::Envelope& e, NodeRuntime& node) {
   switch (e.body_case()) {
     case wire::Envelope::kCalibrationStep:
+      if (from != node.id()) last_step_from_other_ = std::chrono::steady_clock::now();
       HandleStep(e.calibration_step(), from, node);
       break;
     case wire::Envelope::kCalibrationStepDone:

@@ -270,6 +270,8 @@ class SelfCalibrationService : public NodeService {
   // the last time there was none), were first seen; the last decision's words (logged when
   // they change).
   std::optional<std::chrono::steady_clock::time_point> first_seen_calibrated_peer_;
+  // When another unit's round last sent this unit a step.
+  std::optional<std::chrono::steady_clock::time_point> last_step_from_other_;
   std::optional<std::chrono::steady_clock::time_point> first_seen_uncalibrated_member_;
   std::string last_round_why_;
 };

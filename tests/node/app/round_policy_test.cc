@@ -328,6 +328,19 @@ TEST(RoundPolicyTest, EveryBranch) {
        {},
        {},
        "waiting join_wait"},
+      {"... but not while the runner's join round sends it steps (longer than join_wait)",
+       [] {
+         RoundView v = Fresh(0, {0, 1, 2});
+         SetState(&v, 1, kCalibrated);
+         SetState(&v, 2, kCalibrated);
+         v.first_seen_calibrated_peer = kNow - seconds(20);
+         v.last_step_from_other = kNow - seconds(2);
+         return v;
+       },
+       RoundAction::kWait,
+       {},
+       {},
+       "another unit's round is calibrating this unit"},
       {"... and runs a round itself when no join round came",
        [] {
          RoundView v = Fresh(0, {0, 1, 2});
