@@ -1,0 +1,202 @@
+// A whole self-calibration round in one process: a real CoordinatorServer, a real WorldServer
+// (the simulated site's projectors and cameras) and three NodeApps, each on its own thread over
+// real loopback sockets; no child processes. The same with one unit's links dropping a share of
+// what it sends. sandtable-3 at half resolution, so that it fits every CI run.
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <variant>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "common/scene/gltf_loader.h"
+#include "coordinator/membership/coordinator_server.h"
+#include "node/app/node_app.h"
+#include "sim/app/world_server.h"
+#include "sim/lab/lab_inputs.h"
+#include "sim/transport/world.h"
+#include "tests/node/net/node_site_test_util.h"
+
+namespace sandtable::node {
+namespace {
+
+namespace fs = std::filesystem;
+using std::chrono::milliseconds;
+
+constexpr milliseconds kHeartbeat{100};
+// A round of sandtable-3 at half resolution takes ~10 s on two cores; lossy links add resends.
+constexpr auto kRoundDeadline = std::chrono::seconds(240);
+// The solve's fit of a unit's projector (decoded correspondences, px): the round worked.
+constexpr double kMaxProjectorRms_px = 0.5;
+
+class InProcessSite {
+ public:
+  explicit InProcessSite(const fs::path& dir) : dir_(dir) {}
+  ~InProcessSite() { Stop(); }
+
+  // Prepares sandtable-3, starts the coordinator and the world; false (with a failure) if not.
+  void Start() {
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    Expected<sim::LabInputs> inputs =
+        sim::PrepareLabInputs("sandtable-3", "sandtable", /*seed=*/1, dir_.string(), "",
+                              /*resolution_scale=*/0.5);
+    ASSERT_TRUE(inputs.ok()) << inputs.status().ToString();
+    inputs_ = std::move(*inputs);
+    Expected<Scene> scene = LoadGltfScene(inputs_.scene_path);
+    ASSERT_TRUE(scene.ok()) << scene.status().ToString();
+    Expected<std::unique_ptr<sim::World>> world = sim::World::Create(inputs_.site, *scene);
+    ASSERT_TRUE(world.ok()) << world.status().ToString();
+    world_ = std::make_unique<sim::WorldServer>(std::move(*world), sim::WorldServerOptions{});
+    ASSERT_TRUE(world_->Start().ok());
+    coordinator_ = std::make_unique<coordinator::CoordinatorServer>(
+        test_site::SiteCoordinatorOptions(kHeartbeat, /*misses_allowed=*/50));
+    ASSERT_TRUE(coordinator_->Start().ok());
+    threads_.emplace_back([this] { (void)world_->Run(stop_); });
+    threads_.emplace_back([this] { (void)coordinator_->Run(stop_); });
+  }
+
+  // Starts every unit's NodeApp; `faults` on unit `faulty` (none: kInvalidNodeId).
+  void StartNodes(NodeId faulty = kInvalidNodeId, net::ChannelFaults faults = {}) {
+    for (const sim::UnitSpec& unit : inputs_.site.units) {
+      NodeConfig c;
+      c.id = unit.id;
+      c.coordinator_requests = coordinator_->request_endpoint();
+      c.coordinator_events = coordinator_->event_endpoint();
+      c.heartbeat_ms = static_cast<int>(kHeartbeat.count());
+      c.world = world_->endpoint();
+      c.factory_path = inputs_.factory_paths.at(unit.id);
+      c.model_path = inputs_.model_path;
+      c.export_dir = (dir_ / "calibration").string();
+      c.render = RenderMode::kOff;
+      c.blend = false;
+      c.expected_units = static_cast<int>(inputs_.site.units.size());
+      if (unit.id == faulty) c.faults = faults;
+      Expected<std::unique_ptr<NodeApp>> app =
+          NodeApp::Create(c, [this](const report::ReportLine& line) {
+            std::lock_guard<std::mutex> lock(mutex_);
+            if (const auto* l = std::get_if<report::Calibrated>(&line)) calibrated_[l->id] = *l;
+            if (const auto* l = std::get_if<report::CalibrationFailed>(&line)) {
+              failed_[l->id] = l->reason;
+            }
+            if (const auto* l = std::get_if<report::Messages>(&line)) messages_[l->id] = *l;
+          });
+      ASSERT_TRUE(app.ok()) << app.status().ToString();
+      NodeApp* raw = app->get();
+      apps_.push_back(std::move(*app));
+      threads_.emplace_back([this, raw] {
+        const int code = raw->Run(stop_);
+        std::lock_guard<std::mutex> lock(mutex_);
+        exits_.push_back(code);
+      });
+    }
+  }
+
+  // Waits until every unit reported a calibration or a failure.
+  bool WaitForRound() {
+    const auto until = std::chrono::steady_clock::now() + kRoundDeadline;
+    while (std::chrono::steady_clock::now() < until) {
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (calibrated_.size() + failed_.size() >= inputs_.site.units.size()) return true;
+      }
+      std::this_thread::sleep_for(milliseconds(50));
+    }
+    return false;
+  }
+
+  void Stop() {
+    stop_ = true;
+    for (std::thread& t : threads_) {
+      if (t.joinable()) t.join();
+    }
+    threads_.clear();
+    apps_.clear();
+  }
+
+  std::map<NodeId, report::Calibrated> calibrated() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return calibrated_;
+  }
+  // Each NodeApp's exit status (after Stop).
+  std::vector<int> exits() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return exits_;
+  }
+  // Each node's exit line (after Stop).
+  std::map<NodeId, report::Messages> messages() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return messages_;
+  }
+  std::map<NodeId, std::string> failed() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return failed_;
+  }
+  const sim::LabInputs& inputs() const { return inputs_; }
+
+ private:
+  fs::path dir_;
+  sim::LabInputs inputs_;
+  std::atomic<bool> stop_{false};
+  std::unique_ptr<sim::WorldServer> world_;
+  std::unique_ptr<coordinator::CoordinatorServer> coordinator_;
+  std::vector<std::unique_ptr<NodeApp>> apps_;
+  std::vector<std::thread> threads_;
+  std::mutex mutex_;
+  std::map<NodeId, report::Calibrated> calibrated_;
+  std::map<NodeId, std::string> failed_;
+  std::map<NodeId, report::Messages> messages_;
+  std::vector<int> exits_;
+};
+
+// Every unit calibrated by one round, its file written, its projector fitted.
+void ExpectOneRoundCalibratedAll(InProcessSite& site) {
+  ASSERT_TRUE(site.WaitForRound()) << "no result from every unit within the deadline";
+  EXPECT_TRUE(site.failed().empty()) << site.failed().begin()->second;
+  const std::map<NodeId, report::Calibrated> calibrated = site.calibrated();
+  ASSERT_EQ(calibrated.size(), site.inputs().site.units.size());
+  const uint64_t round = calibrated.begin()->second.round;
+  EXPECT_NE(round, 0u);
+  for (const auto& [id, line] : calibrated) {
+    SCOPED_TRACE("unit " + std::to_string(id));
+    EXPECT_EQ(line.round, round);  // one round calibrated them all
+    EXPECT_TRUE(fs::exists(line.json));
+    Expected<UnitCalibration> unit = LoadUnitCalibration(line.json);
+    ASSERT_TRUE(unit.ok()) << unit.status().ToString();
+    EXPECT_TRUE(unit->table_from_projector.has_value());
+    EXPECT_LT(unit->projector_rms_px, kMaxProjectorRms_px);
+  }
+}
+
+TEST(InProcessRoundTest, ThreeNodesCalibrateInOneProcess) {
+  InProcessSite site(fs::temp_directory_path() / ("in_process_round_" + std::to_string(getpid())));
+  ASSERT_NO_FATAL_FAILURE(site.Start());
+  ASSERT_NO_FATAL_FAILURE(site.StartNodes());
+  ExpectOneRoundCalibratedAll(site);
+  site.Stop();
+  EXPECT_EQ(site.exits(), std::vector<int>(site.inputs().site.units.size(), 0));
+}
+
+TEST(InProcessRoundTest, ARoundOverLossyLinksStillCalibratesEveryUnit) {
+  InProcessSite site(fs::temp_directory_path() /
+                     ("in_process_lossy_round_" + std::to_string(getpid())));
+  ASSERT_NO_FATAL_FAILURE(site.Start());
+  net::ChannelFaults faults;
+  faults.drop_share = 0.1;  // a tenth of what unit 1 sends never arrives
+  faults.seed = 7;
+  ASSERT_NO_FATAL_FAILURE(site.StartNodes(/*faulty=*/1, faults));
+  ExpectOneRoundCalibratedAll(site);
+  site.Stop();
+  const std::map<NodeId, report::Messages> messages = site.messages();
+  ASSERT_TRUE(messages.count(1));
+  EXPECT_GT(messages.at(1).faults_dropped, 0u);  // the links did lose messages
+  EXPECT_EQ(messages.at(0).faults_dropped, 0u);
+}
+
+}  // namespace
+}  // namespace sandtable::node
