@@ -80,11 +80,10 @@ namespace {
 std::atomic<bool> g_stop{false};
 void OnSignal(int) { g_stop = true; }
 
-}  // namespace
+using namespace sandtable;  // this file's helpers, like Run
 
-static int Run(int argc, char** argv) {
-  using namespace sandtable;
-  SetLogTag("coordinator");
+// Everything the command line sets.
+struct CoordinatorFlags {
   coordinator::CoordinatorOptions options;
   std::string annotations_path = ":memory:";
   coordinator::AnnotationStoreOptions store_options;
@@ -93,39 +92,37 @@ static int Run(int argc, char** argv) {
   std::string curve_keys_path, generate_keys_path, sync_name = "full", status_token_path;
   int heartbeat_ms = static_cast<int>(options.membership.heartbeat_period.count());
   int misses = options.membership.misses_allowed;
+};
 
-  CLI::App app(
-      "The site's rendezvous (membership), time reference and event hub. Prints one JSON "
-      "line {\"ready\":\"sandtable-coordinator\",...} on stdout once serving; SIGINT/SIGTERM "
-      "stop it.",
-      "sandtable-coordinator");
+// The flags, into `f`; returns --generate-curve-keys (a command of its own).
+CLI::Option* AddFlags(CLI::App& app, CoordinatorFlags& f) {
   cli::Configure(app);
-  app.add_option("--requests", options.request_endpoint, "ROUTER endpoint the nodes connect to")
+  app.add_option("--requests", f.options.request_endpoint, "ROUTER endpoint the nodes connect to")
       ->check(cli::Endpoint());
-  app.add_option("--events", options.event_endpoint, "PUB endpoint of the events")
+  app.add_option("--events", f.options.event_endpoint, "PUB endpoint of the events")
       ->check(cli::Endpoint());
-  app.add_option("--curve-keys", curve_keys_path, "site CURVE key file: require CURVE");
-  CLI::Option* generate = app.add_option("--generate-curve-keys", generate_keys_path,
+  app.add_option("--curve-keys", f.curve_keys_path, "site CURVE key file: require CURVE");
+  CLI::Option* generate = app.add_option("--generate-curve-keys", f.generate_keys_path,
                                          "write a new site key file and exit");
-  app.add_option("--heartbeat-ms", heartbeat_ms, "heartbeat period of the members, ms")
+  app.add_option("--heartbeat-ms", f.heartbeat_ms, "heartbeat period of the members, ms")
       ->check(cli::Integer(1, 60000));
-  app.add_option("--misses", misses, "missed heartbeats before a member is dead")
+  app.add_option("--misses", f.misses, "missed heartbeats before a member is dead")
       ->check(cli::Integer(1, 1000));
-  app.add_option("--annotations", annotations_path,
+  app.add_option("--annotations", f.annotations_path,
                  "SQLite database of the annotation events (created when absent; default: in "
                  "memory only)");
-  app.add_option("--annotation-sync", sync_name, "SQLite synchronous mode of the database")
+  app.add_option("--annotation-sync", f.sync_name, "SQLite synchronous mode of the database")
       ->check(CLI::IsMember({"full", "normal"}));
-  app.add_flag("--annotations-accept-loss", store_options.accept_lost_events,
+  app.add_flag("--annotations-accept-loss", f.store_options.accept_lost_events,
                "start even though acknowledged annotation events are missing (lost -wal, "
                "older copy): logged, and the sequence record reset");
   CLI::Option* export_session = app.add_option(
-      "--export-session", export_path, "write the database's events as JSON lines and exit");
-  CLI::Option* import_session = app.add_option("--import-session", import_path,
+      "--export-session", f.export_path, "write the database's events as JSON lines and exit");
+  CLI::Option* import_session = app.add_option("--import-session", f.import_path,
                                                "append JSON-lines events to the database and exit");
   export_session->excludes(import_session);
-  app.add_option("--timeline", timeline_path, "personnel tracks (CSV) replayed as a timeline");
-  app.add_option("--status", status_address,
+  app.add_option("--timeline", f.timeline_path, "personnel tracks (CSV) replayed as a timeline");
+  app.add_option("--status", f.status_address,
                  "serve JSON at http://HOST:PORT/status (a bare PORT binds loopback; 0: any "
                  "free port)")
       ->check(CLI::Validator(
@@ -134,114 +131,57 @@ static int Run(int argc, char** argv) {
             return valid.ok() ? std::string() : valid.message();
           },
           "PORT|IPv4:PORT", "StatusAddress"));
-  app.add_option("--status-token-file", status_token_path,
+  app.add_option("--status-token-file", f.status_token_path,
                  "token file for --status (required with --curve-keys or beyond loopback)");
-  app.add_option("--max-members", options.membership.max_members,
+  app.add_option("--max-members", f.options.membership.max_members,
                  "most members of the site; further Hellos are refused")
       ->check(cli::Integer(1, coordinator::kMaxMembersLimit));
-  CLI::Option* replay = app.add_option("--tracker-replay", tracker_replay_path,
+  CLI::Option* replay = app.add_option("--tracker-replay", f.tracker_replay_path,
                                        "replay a tracker recording (FASTRAK .traj or .csv)");
   CLI::Option* table_from_tracker_option =
-      app.add_option("--table-from-tracker", table_from_tracker_path,
+      app.add_option("--table-from-tracker", f.table_from_tracker_path,
                      "tracker calibration JSON for --tracker-replay (identity without it)");
-  CLI::Option* virtual_wand = app.add_option("--virtual-wand", virtual_wand_path,
+  CLI::Option* virtual_wand = app.add_option("--virtual-wand", f.virtual_wand_path,
                                              "play a scripted wand (written in the table frame)");
   table_from_tracker_option->needs(replay);
   virtual_wand->excludes(replay)->excludes(table_from_tracker_option);
-  app.add_option("--scene", scene_path, "glTF scene the wand ray is cast against (.gltf, .glb)");
-  if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
-  if (generate->count() > 0) {
-    Expected<net::CurveKeyPair> keys = net::GenerateCurveKeyPair();
-    Status written = keys.ok() ? net::WriteCurveKeyFile(generate_keys_path, *keys) : keys.status();
-    if (!written.ok()) {
-      std::cerr << written.ToString() << "\n";
-      return 1;
+  app.add_option("--scene", f.scene_path, "glTF scene the wand ray is cast against (.gltf, .glb)");
+  return generate;
+}
+
+// --import-session / --export-session: the database's events from or into a file; the exit code.
+int ImportOrExport(const CoordinatorFlags& f, coordinator::AnnotationStore* store) {
+  Expected<size_t> n = 0;
+  if (!f.import_path.empty()) {
+    // A bad file is bad input (exit 2); a failure to store it is not (exit 1).
+    Expected<std::vector<wire::AnnotationEvent>> events =
+        coordinator::ReadSessionFile(f.import_path);
+    if (!events.ok()) {
+      std::cerr << "sandtable-coordinator: --import-session: " << events.status().ToString()
+                << "\n";
+      return 2;
     }
-    std::cout << "wrote " << generate_keys_path << "\n";
-    return 0;
-  }
-  if (!curve_keys_path.empty()) {
-    Expected<net::CurveKeyPair> keys = net::ReadCurveKeyFile(curve_keys_path);
-    if (!keys.ok()) return cli::UsageError(app, "--curve-keys: " + keys.status().ToString());
-    options.curve = *keys;
-  }
-  coordinator::HttpStatusOptions status_options;
-  if (!status_token_path.empty()) {
-    Expected<std::string> token = coordinator::LoadStatusToken(status_token_path);
-    if (!token.ok())
-      return cli::UsageError(app, "--status-token-file: " + token.status().ToString());
-    status_options.token = *token;
-  }
-  if (!status_address.empty() && status_options.token.empty()) {
-    if (options.curve) {
-      return cli::UsageError(app,
-                             "--status on a CURVE site (--curve-keys) needs --status-token-file");
-    }
-    if (!coordinator::IsLoopbackAddress(status_address)) {
-      return cli::UsageError(
-          app, "--status " + status_address + " is beyond loopback: it needs --status-token-file");
-    }
-  }
-  options.membership.heartbeat_period = std::chrono::milliseconds(heartbeat_ms);
-  options.membership.misses_allowed = misses;
-  store_options.sync =
-      sync_name == "full" ? coordinator::SyncMode::kFull : coordinator::SyncMode::kNormal;
-  Expected<std::unique_ptr<coordinator::AnnotationStore>> store =
-      coordinator::AnnotationStore::Open(annotations_path, store_options);
-  if (!store.ok()) {
-    std::cerr << "sandtable-coordinator: cannot open annotations: " << store.status().ToString()
-              << "\n";
-    return store.status().code() == StatusCode::kInternal ? 1 : 2;
-  }
-  if (annotations_path == ":memory:") {
-    ST_LOG(kWarning) << "annotations are kept in memory only (no --annotations FILE): a restart "
-                        "loses them";
+    n = coordinator::ImportEvents(std::move(*events), f.import_path, store);
   } else {
-    ST_LOG(kInfo) << "annotations: " << annotations_path << ", " << (*store)->events_loaded()
-                  << " events restored, " << (*store)->state().strokes().size() << " strokes";
+    n = coordinator::ExportSession(*store, f.export_path);
   }
-  if (!import_path.empty() || !export_path.empty()) {
-    Expected<size_t> n = 0;
-    if (!import_path.empty()) {
-      // A bad file is bad input (exit 2); a failure to store it is not (exit 1).
-      Expected<std::vector<wire::AnnotationEvent>> events =
-          coordinator::ReadSessionFile(import_path);
-      if (!events.ok()) {
-        std::cerr << "sandtable-coordinator: --import-session: " << events.status().ToString()
-                  << "\n";
-        return 2;
-      }
-      n = coordinator::ImportEvents(std::move(*events), import_path, store->get());
-    } else {
-      n = coordinator::ExportSession(**store, export_path);
-    }
-    if (!n.ok()) {
-      std::cerr << "sandtable-coordinator: " << n.status().ToString() << "\n";
-      return n.status().code() == StatusCode::kInvalidArgument ? 2 : 1;
-    }
-    std::cout << (import_path.empty() ? "exported " : "imported ") << *n << " events\n";
-    return 0;
+  if (!n.ok()) {
+    std::cerr << "sandtable-coordinator: " << n.status().ToString() << "\n";
+    return n.status().code() == StatusCode::kInvalidArgument ? 2 : 1;
   }
-  coordinator::AnnotationService annotations(store->get());
-  std::unique_ptr<coordinator::TimelineService> timeline;
-  if (!timeline_path.empty()) {
-    Expected<cluster::PersonnelTracks> tracks = cluster::PersonnelTracks::Load(timeline_path);
-    if (!tracks.ok()) {
-      std::cerr << "sandtable-coordinator: --timeline: " << tracks.status().ToString() << "\n";
-      return 2;  // bad input file
-    }
-    ST_LOG(kInfo) << "timeline: " << timeline_path << ", " << tracks->tracks().size() << " tracks, "
-                  << tracks->sample_count() << " samples, " << tracks->duration_s() << " s";
-    timeline = std::make_unique<coordinator::TimelineService>(std::move(*tracks));
-    // The clock goes out at 30 Hz: the server must step at least that often.
-    options.step_period = std::min(options.step_period, std::chrono::milliseconds(10));
-  }
+  std::cout << (f.import_path.empty() ? "exported " : "imported ") << *n << " events\n";
+  return 0;
+}
+
+// The wand (--virtual-wand or --tracker-replay, cast against --scene), none without either;
+// 0, or the exit code of a bad input file. Steps the server faster for a tracker's rate.
+int MakeWand(CoordinatorFlags& f, std::unique_ptr<coordinator::WandService>* wand_out) {
   std::unique_ptr<coordinator::WandService> wand;
   // The wand's scene: the table plane (always) plus the glTF scene's triangles.
   std::vector<Eigen::Vector3d> scene_positions_in_table_m;
   std::vector<Eigen::Vector3i> scene_triangles;
-  if (!scene_path.empty()) {
-    Expected<Scene> scene = LoadGltfScene(scene_path);
+  if (!f.scene_path.empty()) {
+    Expected<Scene> scene = LoadGltfScene(f.scene_path);
     if (!scene.ok()) {
       std::cerr << "sandtable-coordinator: --scene: " << scene.status().ToString() << "\n";
       return 2;  // bad input file
@@ -250,40 +190,41 @@ static int Run(int argc, char** argv) {
       scene_positions_in_table_m.push_back(p.cast<double>());
     }
     scene_triangles = scene->triangles;
-    ST_LOG(kInfo) << "scene: " << scene_path << ", " << scene->NumTriangles() << " triangles";
+    ST_LOG(kInfo) << "scene: " << f.scene_path << ", " << scene->NumTriangles() << " triangles";
   }
   auto make_wand = [&](std::unique_ptr<coordinator::TrackerSource> source,
                        coordinator::WandServiceOptions wand_options) {
     return std::make_unique<coordinator::WandService>(std::move(source), wand_options,
                                                       scene_positions_in_table_m, scene_triangles);
   };
-  if (!virtual_wand_path.empty()) {
+  if (!f.virtual_wand_path.empty()) {
     Expected<coordinator::VirtualWandScript> script =
-        coordinator::LoadVirtualWandScript(virtual_wand_path);
+        coordinator::LoadVirtualWandScript(f.virtual_wand_path);
     if (!script.ok()) {
       std::cerr << "sandtable-coordinator: --virtual-wand: " << script.status().ToString() << "\n";
       return 2;  // bad input file (docs/reliability.md)
     }
-    auto source = std::make_unique<coordinator::VirtualWandSource>(virtual_wand_path, *script);
+    auto source = std::make_unique<coordinator::VirtualWandSource>(f.virtual_wand_path, *script);
     ST_LOG(kInfo) << "tracker: " << source->Describe();
     wand = make_wand(std::move(source), coordinator::WandServiceOptions{});
-    options.step_period = std::min(options.step_period, std::chrono::milliseconds(5));
+    f.options.step_period = std::min(f.options.step_period, std::chrono::milliseconds(5));
   }
-  if (!tracker_replay_path.empty()) {
-    const bool csv = tracker_replay_path.size() >= 4 &&
-                     tracker_replay_path.compare(tracker_replay_path.size() - 4, 4, ".csv") == 0;
+  if (!f.tracker_replay_path.empty()) {
+    const bool csv =
+        f.tracker_replay_path.size() >= 4 &&
+        f.tracker_replay_path.compare(f.tracker_replay_path.size() - 4, 4, ".csv") == 0;
     Expected<std::vector<coordinator::TrackerSample>> samples =
-        csv ? coordinator::LoadTrackerCsv(tracker_replay_path)
-            : coordinator::LoadFastrakTraj(tracker_replay_path);
+        csv ? coordinator::LoadTrackerCsv(f.tracker_replay_path)
+            : coordinator::LoadFastrakTraj(f.tracker_replay_path);
     if (!samples.ok()) {
       std::cerr << "sandtable-coordinator: --tracker-replay: " << samples.status().ToString()
                 << "\n";
       return 2;  // bad input file (docs/reliability.md)
     }
     coordinator::WandServiceOptions wand_options;
-    if (!table_from_tracker_path.empty()) {
+    if (!f.table_from_tracker_path.empty()) {
       Expected<Rigid3d> table_from_tracker =
-          coordinator::LoadTableFromTracker(table_from_tracker_path);
+          coordinator::LoadTableFromTracker(f.table_from_tracker_path);
       if (!table_from_tracker.ok()) {
         std::cerr << "sandtable-coordinator: --table-from-tracker: "
                   << table_from_tracker.status().ToString() << "\n";
@@ -292,19 +233,106 @@ static int Run(int argc, char** argv) {
       wand_options.table_from_tracker = *table_from_tracker;
     }
     auto source =
-        std::make_unique<coordinator::ReplaySource>(tracker_replay_path, std::move(*samples));
+        std::make_unique<coordinator::ReplaySource>(f.tracker_replay_path, std::move(*samples));
     ST_LOG(kInfo) << "tracker: " << source->Describe();
     wand = make_wand(std::move(source), wand_options);
     // Samples go out when due, at most one step late: step at least twice per sample period
     // (5 ms for 100 Hz).
-    options.step_period = std::min(options.step_period, std::chrono::milliseconds(5));
+    f.options.step_period = std::min(f.options.step_period, std::chrono::milliseconds(5));
   }
+  *wand_out = std::move(wand);
+  return 0;
+}
+
+}  // namespace
+
+static int Run(int argc, char** argv) {
+  using namespace sandtable;
+  SetLogTag("coordinator");
+  CoordinatorFlags f;
+
+  CLI::App app(
+      "The site's rendezvous (membership), time reference and event hub. Prints one JSON "
+      "line {\"ready\":\"sandtable-coordinator\",...} on stdout once serving; SIGINT/SIGTERM "
+      "stop it.",
+      "sandtable-coordinator");
+  CLI::Option* generate = AddFlags(app, f);
+  if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
+  if (generate->count() > 0) {
+    Expected<net::CurveKeyPair> keys = net::GenerateCurveKeyPair();
+    Status written =
+        keys.ok() ? net::WriteCurveKeyFile(f.generate_keys_path, *keys) : keys.status();
+    if (!written.ok()) {
+      std::cerr << written.ToString() << "\n";
+      return 1;
+    }
+    std::cout << "wrote " << f.generate_keys_path << "\n";
+    return 0;
+  }
+  if (!f.curve_keys_path.empty()) {
+    Expected<net::CurveKeyPair> keys = net::ReadCurveKeyFile(f.curve_keys_path);
+    if (!keys.ok()) return cli::UsageError(app, "--curve-keys: " + keys.status().ToString());
+    f.options.curve = *keys;
+  }
+  coordinator::HttpStatusOptions status_options;
+  if (!f.status_token_path.empty()) {
+    Expected<std::string> token = coordinator::LoadStatusToken(f.status_token_path);
+    if (!token.ok())
+      return cli::UsageError(app, "--status-token-file: " + token.status().ToString());
+    status_options.token = *token;
+  }
+  if (!f.status_address.empty() && status_options.token.empty()) {
+    if (f.options.curve) {
+      return cli::UsageError(app,
+                             "--status on a CURVE site (--curve-keys) needs --status-token-file");
+    }
+    if (!coordinator::IsLoopbackAddress(f.status_address)) {
+      return cli::UsageError(app, "--status " + f.status_address +
+                                      " is beyond loopback: it needs --status-token-file");
+    }
+  }
+  f.options.membership.heartbeat_period = std::chrono::milliseconds(f.heartbeat_ms);
+  f.options.membership.misses_allowed = f.misses;
+  f.store_options.sync =
+      f.sync_name == "full" ? coordinator::SyncMode::kFull : coordinator::SyncMode::kNormal;
+  Expected<std::unique_ptr<coordinator::AnnotationStore>> store =
+      coordinator::AnnotationStore::Open(f.annotations_path, f.store_options);
+  if (!store.ok()) {
+    std::cerr << "sandtable-coordinator: cannot open annotations: " << store.status().ToString()
+              << "\n";
+    return store.status().code() == StatusCode::kInternal ? 1 : 2;
+  }
+  if (f.annotations_path == ":memory:") {
+    ST_LOG(kWarning) << "annotations are kept in memory only (no --annotations FILE): a restart "
+                        "loses them";
+  } else {
+    ST_LOG(kInfo) << "annotations: " << f.annotations_path << ", " << (*store)->events_loaded()
+                  << " events restored, " << (*store)->state().strokes().size() << " strokes";
+  }
+  if (!f.import_path.empty() || !f.export_path.empty()) return ImportOrExport(f, store->get());
+  coordinator::AnnotationService annotations(store->get());
+  std::unique_ptr<coordinator::TimelineService> timeline;
+  if (!f.timeline_path.empty()) {
+    Expected<cluster::PersonnelTracks> tracks = cluster::PersonnelTracks::Load(f.timeline_path);
+    if (!tracks.ok()) {
+      std::cerr << "sandtable-coordinator: --timeline: " << tracks.status().ToString() << "\n";
+      return 2;  // bad input file
+    }
+    ST_LOG(kInfo) << "timeline: " << f.timeline_path << ", " << tracks->tracks().size()
+                  << " tracks, " << tracks->sample_count() << " samples, " << tracks->duration_s()
+                  << " s";
+    timeline = std::make_unique<coordinator::TimelineService>(std::move(*tracks));
+    // The clock goes out at 30 Hz: the server must step at least that often.
+    f.options.step_period = std::min(f.options.step_period, std::chrono::milliseconds(10));
+  }
+  std::unique_ptr<coordinator::WandService> wand;
+  if (int exit = MakeWand(f, &wand); exit != 0) return exit;
   if (wand) wand->EnablePainting(coordinator::WandPainterOptions{}, &annotations);
   std::unique_ptr<coordinator::HttpStatusServer> http;
   std::unique_ptr<coordinator::StatusService> status;
-  if (!status_address.empty()) {
+  if (!f.status_address.empty()) {
     Expected<std::unique_ptr<coordinator::HttpStatusServer>> started =
-        coordinator::HttpStatusServer::Start(status_address, status_options);
+        coordinator::HttpStatusServer::Start(f.status_address, status_options);
     if (!started.ok()) {
       std::cerr << "sandtable-coordinator: --status: " << started.status().ToString() << "\n";
       return 1;
@@ -319,7 +347,7 @@ static int Run(int argc, char** argv) {
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
 
-  coordinator::CoordinatorServer server(options);
+  coordinator::CoordinatorServer server(f.options);
   server.AddService(&annotations);
   coordinator::TestPatternService test_patterns;
   server.AddService(&test_patterns);
