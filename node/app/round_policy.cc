@@ -21,6 +21,15 @@ std::string Unit(NodeId id) { return "unit " + std::to_string(id); }
 
 }  // namespace
 
+Status RoundPolicyOptions::Check() const {
+  if (settle.count() < 0 || join_wait.count() < 0 || expect_wait.count() < 0 ||
+      expected_units < 0) {
+    return InvalidArgumentError(
+        "round policy: settle, join_wait, expect_wait and expected_units must be >= 0");
+  }
+  return OkStatus();
+}
+
 const char* RoundActionName(RoundAction action) {
   switch (action) {
     case RoundAction::kNone:

@@ -37,6 +37,7 @@
 #include <vector>
 
 #include "common/base/ids.h"
+#include "common/base/status.h"
 #include "proto/envelope.pb.h"
 
 namespace sandtable::node {
@@ -80,6 +81,8 @@ struct RoundPolicyOptions {
   RoundClock::duration join_wait = std::chrono::seconds(15);
   int expected_units = 0;  // 0: any number
   RoundClock::duration expect_wait = std::chrono::seconds(180);
+  // INVALID_ARGUMENT: a negative duration or expected_units.
+  Status Check() const;
 };
 
 enum class RoundAction {

@@ -314,6 +314,98 @@ Status LabSweepOptions::Check() const {
   return OkStatus();
 }
 
+namespace {
+
+// sweep.md: the calibration configurations against their fronts, the blend's, the plots.
+std::string SweepMarkdown(const LabSweepOptions& options, const std::vector<SweepPoint>& points,
+                          double wall_s, const std::vector<std::string>& plot_notes,
+                          bool any_calibration) {
+  std::ostringstream md;
+  md << "# Sweep: run time against registration error\n\n"
+     << "Site `" << options.site << "`, scene `" << options.scene << "`, seed " << options.seed
+     << "; one `sandtable-lab run` per configuration (`--render off`, metric on "
+     << options.metric_samples << " samples), the shipped defaults and one knob changed at a "
+     << "time. Command:\n\n    " << options.command_line << "\n\n"
+     << "Wall time of the sweep: " << Fixed(wall_s, 0)
+     << " s. Projection: the site's modeled projection time (frames x (frame period + capture "
+        "latency)); compute: the slowest node's CPU time in the round (one core); wall: the "
+        "round on this machine. Front: on the Pareto front of error against projection (P) "
+        "or compute (C).\n\n"
+     << "| configuration | frames / projector | projection (s) | compute (s) | round wall (s) "
+        "| rms (mm) | p99 (mm) | max (mm) | front |\n"
+     << "| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n";
+  const SweepPoint* defaults = nullptr;
+  for (const SweepPoint& p : points) {
+    if (p.config.blend) continue;
+    if (p.config.knob.empty()) defaults = &p;
+    if (!p.ok) {
+      md << "| " << p.config.name << " | failed: " << p.error << " | | | | | | | |\n";
+      continue;
+    }
+    std::string front = std::string(p.front_device ? "P" : "") + (p.front_compute ? "C" : "");
+    md << "| " << (p.config.knob.empty() ? "**defaults**" : "`" + p.config.name + "`") << " | "
+       << p.frames_per_projector << " | " << Fixed(p.device_time_s, 3) << " | "
+       << Fixed(p.compute_s, 2) << " | " << Fixed(p.round_wall_s, 1) << " | " << Fixed(p.rms_mm, 3)
+       << " | " << Fixed(p.p99_mm, 3) << " | " << Fixed(p.max_mm, 3) << " | "
+       << (front.empty() ? "-" : front) << " |\n";
+  }
+  md << "\n";
+  if (defaults && defaults->ok) {
+    md << "The shipped defaults are " << (defaults->front_device ? "on" : "**not** on")
+       << " the projection front and " << (defaults->front_compute ? "on" : "**not** on")
+       << " the compute front.";
+    for (const SweepPoint& p : points) {
+      if (&p == defaults || !p.ok || p.config.blend || p.rms_mm > defaults->rms_mm) continue;
+      if (p.device_time_s <= defaults->device_time_s || p.compute_s <= defaults->compute_s) {
+        md << " `" << p.config.name << "` is as accurate or better (" << Fixed(p.rms_mm, 3)
+           << " mm) at " << Fixed(p.device_time_s, 3) << " s projection, " << Fixed(p.compute_s, 2)
+           << " s compute.";
+      }
+    }
+    md << " (docs/results.md says why the defaults stay where they are not on a front.)\n\n";
+  }
+  for (const std::string& note : plot_notes) md << "- " << note << "\n";
+  if (any_calibration) {
+    md << "\n![error against projection time](sweep_projection.png)\n\n"
+       << "![error against compute time](sweep_compute.png)\n\n";
+  }
+  if (std::any_of(points.begin(), points.end(),
+                  [](const SweepPoint& p) { return p.config.blend; })) {
+    md << "## The blend\n\n"
+       << "Each run shows and blends (the default run); steps over 5 mm through the world's "
+          "truth (docs/blend.md), the cast is the slowest node's surface and distance field. "
+          "Knobs: the blend's sampling resolution (`blend-step-px`, the distance field's grid "
+          "step) and how far the others make up a clipped projector's shortfall "
+          "(`blend-fill-limit`). Front (B): walls' p99 against cast time.\n\n"
+       << "| configuration | table p99 (%) | table max (%) | walls p99 (%) | walls max (%) | "
+          "uniformity | cast (ms) | front |\n"
+       << "| --- | --- | --- | --- | --- | --- | --- | --- |\n";
+    const SweepPoint* blend_defaults = nullptr;
+    for (const SweepPoint& p : points) {
+      if (!p.config.blend) continue;
+      if (p.config.knob.empty()) blend_defaults = &p;
+      if (!p.ok) {
+        md << "| " << p.config.name << " | failed: " << p.error << " | | | | | | |\n";
+        continue;
+      }
+      md << "| " << (p.config.knob.empty() ? "**blend defaults**" : "`" + p.config.name + "`")
+         << " | " << Fixed(p.table_p99_pct, 2) << " | " << Fixed(p.table_max_pct, 1) << " | "
+         << Fixed(p.walls_p99_pct, 2) << " | " << Fixed(p.walls_max_pct, 1) << " | "
+         << Fixed(p.uniformity, 3) << " | " << Fixed(p.cast_ms, 0) << " | "
+         << (p.front_blend ? "B" : "-") << " |\n";
+    }
+    if (blend_defaults && blend_defaults->ok) {
+      md << "\nThe shipped blend is " << (blend_defaults->front_blend ? "on" : "**not** on")
+         << " the blend's front.\n";
+    }
+    md << "\n![blend: walls step against cast time](sweep_blend.png)\n\n";
+  }
+  md << "Each run's report: `runs/<configuration>/report.md`; the figures: `sweep.csv`.\n";
+  return md.str();
+}
+
+}  // namespace
+
 int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std::ostream& out,
              std::ostream& err) {
   if (Status checked = options.Check(); !checked.ok()) {
@@ -404,88 +496,10 @@ int RunSweep(const LabSweepOptions& options, const std::atomic<bool>& stop, std:
   }
 
   // sweep.md and sweep.html.
+  const double wall_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   std::ostringstream md;
-  md << "# Sweep: run time against registration error\n\n"
-     << "Site `" << options.site << "`, scene `" << options.scene << "`, seed " << options.seed
-     << "; one `sandtable-lab run` per configuration (`--render off`, metric on "
-     << options.metric_samples << " samples), the shipped defaults and one knob changed at a "
-     << "time. Command:\n\n    " << options.command_line << "\n\n"
-     << "Wall time of the sweep: "
-     << Fixed(std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count(), 0)
-     << " s. Projection: the site's modeled projection time (frames x (frame period + capture "
-        "latency)); compute: the slowest node's CPU time in the round (one core); wall: the "
-        "round on this machine. Front: on the Pareto front of error against projection (P) "
-        "or compute (C).\n\n"
-     << "| configuration | frames / projector | projection (s) | compute (s) | round wall (s) "
-        "| rms (mm) | p99 (mm) | max (mm) | front |\n"
-     << "| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n";
-  const SweepPoint* defaults = nullptr;
-  for (const SweepPoint& p : points) {
-    if (p.config.blend) continue;
-    if (p.config.knob.empty()) defaults = &p;
-    if (!p.ok) {
-      md << "| " << p.config.name << " | failed: " << p.error << " | | | | | | | |\n";
-      continue;
-    }
-    std::string front = std::string(p.front_device ? "P" : "") + (p.front_compute ? "C" : "");
-    md << "| " << (p.config.knob.empty() ? "**defaults**" : "`" + p.config.name + "`") << " | "
-       << p.frames_per_projector << " | " << Fixed(p.device_time_s, 3) << " | "
-       << Fixed(p.compute_s, 2) << " | " << Fixed(p.round_wall_s, 1) << " | " << Fixed(p.rms_mm, 3)
-       << " | " << Fixed(p.p99_mm, 3) << " | " << Fixed(p.max_mm, 3) << " | "
-       << (front.empty() ? "-" : front) << " |\n";
-  }
-  md << "\n";
-  if (defaults && defaults->ok) {
-    md << "The shipped defaults are " << (defaults->front_device ? "on" : "**not** on")
-       << " the projection front and " << (defaults->front_compute ? "on" : "**not** on")
-       << " the compute front.";
-    for (const SweepPoint& p : points) {
-      if (&p == defaults || !p.ok || p.config.blend || p.rms_mm > defaults->rms_mm) continue;
-      if (p.device_time_s <= defaults->device_time_s || p.compute_s <= defaults->compute_s) {
-        md << " `" << p.config.name << "` is as accurate or better (" << Fixed(p.rms_mm, 3)
-           << " mm) at " << Fixed(p.device_time_s, 3) << " s projection, " << Fixed(p.compute_s, 2)
-           << " s compute.";
-      }
-    }
-    md << " (docs/results.md says why the defaults stay where they are not on a front.)\n\n";
-  }
-  for (const std::string& note : plot_notes) md << "- " << note << "\n";
-  if (any_calibration) {
-    md << "\n![error against projection time](sweep_projection.png)\n\n"
-       << "![error against compute time](sweep_compute.png)\n\n";
-  }
-  if (std::any_of(points.begin(), points.end(),
-                  [](const SweepPoint& p) { return p.config.blend; })) {
-    md << "## The blend\n\n"
-       << "Each run shows and blends (the default run); steps over 5 mm through the world's "
-          "truth (docs/blend.md), the cast is the slowest node's surface and distance field. "
-          "Knobs: the blend's sampling resolution (`blend-step-px`, the distance field's grid "
-          "step) and how far the others make up a clipped projector's shortfall "
-          "(`blend-fill-limit`). Front (B): walls' p99 against cast time.\n\n"
-       << "| configuration | table p99 (%) | table max (%) | walls p99 (%) | walls max (%) | "
-          "uniformity | cast (ms) | front |\n"
-       << "| --- | --- | --- | --- | --- | --- | --- | --- |\n";
-    const SweepPoint* blend_defaults = nullptr;
-    for (const SweepPoint& p : points) {
-      if (!p.config.blend) continue;
-      if (p.config.knob.empty()) blend_defaults = &p;
-      if (!p.ok) {
-        md << "| " << p.config.name << " | failed: " << p.error << " | | | | | | |\n";
-        continue;
-      }
-      md << "| " << (p.config.knob.empty() ? "**blend defaults**" : "`" + p.config.name + "`")
-         << " | " << Fixed(p.table_p99_pct, 2) << " | " << Fixed(p.table_max_pct, 1) << " | "
-         << Fixed(p.walls_p99_pct, 2) << " | " << Fixed(p.walls_max_pct, 1) << " | "
-         << Fixed(p.uniformity, 3) << " | " << Fixed(p.cast_ms, 0) << " | "
-         << (p.front_blend ? "B" : "-") << " |\n";
-    }
-    if (blend_defaults && blend_defaults->ok) {
-      md << "\nThe shipped blend is " << (blend_defaults->front_blend ? "on" : "**not** on")
-         << " the blend's front.\n";
-    }
-    md << "\n![blend: walls step against cast time](sweep_blend.png)\n\n";
-  }
-  md << "Each run's report: `runs/<configuration>/report.md`; the figures: `sweep.csv`.\n";
+  md << SweepMarkdown(options, points, wall_s, plot_notes, any_calibration);
   std::ofstream(dir / "sweep.md") << md.str();
   Expected<std::string> html = MarkdownToHtmlPage(md.str(), dir.string(), "Sandtable sweep");
   if (html.ok()) std::ofstream(dir / "sweep.html") << *html;

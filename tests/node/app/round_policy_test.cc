@@ -390,5 +390,15 @@ TEST(RoundPolicyTest, ReportsWhatItSawForTheNextAsk) {
   EXPECT_FALSE(DecideRound(v, {}).saw_uncalibrated_member);
 }
 
+TEST(RoundPolicyTest, OptionsCheck) {
+  EXPECT_TRUE(RoundPolicyOptions{}.Check().ok());
+  RoundPolicyOptions bad;
+  bad.join_wait = -std::chrono::seconds(1);
+  EXPECT_EQ(bad.Check().code(), StatusCode::kInvalidArgument);
+  bad = RoundPolicyOptions{};
+  bad.expected_units = -1;
+  EXPECT_EQ(bad.Check().code(), StatusCode::kInvalidArgument);
+}
+
 }  // namespace
 }  // namespace sandtable::node
