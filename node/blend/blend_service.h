@@ -68,8 +68,8 @@ struct BlendServiceOptions {
   // A neighbour whose field has not come this long after it was asked for is asked again (a
   // share lost while a link was down: the coordinator dropped one of the two for a moment, or on
   // a lossy link), then after twice as long, up to ask_again_max. A field received again is not
-  // looked up again (SameField). 2 s until 2026-12-04: a newcomer's share lost on its lossy
-  // link held its neighbour's re-blend with it to ~3 s.
+  // looked up again (SameField). Short, because a newcomer's share lost on its lossy link holds
+  // its neighbour's re-blend with it until the ask comes again.
   std::chrono::milliseconds ask_again{500};
   std::chrono::milliseconds ask_again_max{16000};
   std::string export_dir;  // blend-<id>.png (the alpha mask) is written here (empty: not)

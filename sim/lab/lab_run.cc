@@ -19,7 +19,6 @@ int LabRun::Run() {
   return Finish();
 }
 
-// ---- phases ----
 int LabRun::Prepare() {
   Phase("prepare", 0);
   Expected<LabInputs> inputs =
@@ -258,9 +257,6 @@ bool LabRun::Calibrate() {
   return held;
 }
 
-// ---- the show (docs/render.md) ----
-// A request to the coordinator or the world from the lab's own DEALER; the reply whose body
-// is `reply_case`, within `timeout`.
 Expected<wire::Envelope> LabRun::Call(const std::string& endpoint, wire::Envelope request,
                                       wire::Envelope::BodyCase reply_case, milliseconds timeout) {
   net::SocketOptions socket_options;
@@ -336,7 +332,6 @@ int LabRun::Finish() {
   return result_.reasons.empty() ? kExitOk : kExitVerdict;
 }
 
-// ---- helpers ----
 void LabRun::Phase(const std::string& name, int total) {
   progress_.Begin(name, total);
   progress_phase_ = name;
@@ -352,11 +347,6 @@ std::string LabRun::RelativeToOut(const std::string& path) const {
   return relative.string();
 }
 
-// GLIBC_TUNABLES with glibc's malloc on transparent huge pages (LabOptions::node_huge_pages),
-// added to what the lab's environment already tunes: hugetlb=1 puts the main heap (and mmap'd
-// chunks) on huge pages, arena_max=1 keeps every thread's allocations in that heap (the
-// threads' own arenas, ~190 MB of a node's ~360 MB, stayed on 4 KiB pages: a killed node's
-// sockets then closed 25-32 ms after the kill, 10-12 ms with them in the main heap).
 std::vector<std::string> LabRun::NodeHugePagesEnv() {
   const char* tunables = std::getenv("GLIBC_TUNABLES");
   std::string value = tunables != nullptr ? tunables : "";
@@ -406,8 +396,6 @@ Supervisor::LineHandler LabRun::Handler() {
   };
 }
 
-// Waits for `done`; on anything else records the failure (with `what` on a deadline) and
-// returns false.
 bool LabRun::Wait(const std::string& phase, const std::function<bool()>& done,
                   milliseconds deadline, const std::string& what, const ChildProcess* waited_for,
                   const std::function<int()>& count, const std::function<std::string()>& missing) {
@@ -422,7 +410,6 @@ bool LabRun::Wait(const std::string& phase, const std::function<bool()>& done,
   return Failed(phase, outcome, details, waited_for);
 }
 
-// "node-1, node-2": the site's units not in `have`.
 std::string LabRun::Missing(const std::set<NodeId>& have) const {
   std::string out;
   for (const UnitSpec& unit : inputs_.site.units) {

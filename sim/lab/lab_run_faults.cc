@@ -4,10 +4,6 @@
 
 namespace sandtable::sim::lab_internal {
 
-// The late unit (--join-late): started once the others hold their calibration (and their
-// blend has settled); done when it holds its own, and 2 s more so that a round that
-// recalibrated the others would show. Frames given to the others are counted from its start
-// to its calibration.
 bool LabRun::Join() {
   if (options_.join_late < 0) return true;
   Phase("join", 1);
@@ -110,7 +106,6 @@ bool LabRun::Join() {
   return true;
 }
 
-// --kill-unit: SIGKILL the unit once kill_at_s have passed since the calibration phase began.
 void LabRun::MaybeKill() {
   const bool holding = hold_started_ != std::chrono::steady_clock::time_point{};
   if (options_.kill_unit < 0 || killed_ || (options_.kill_after_calibration && !holding)) return;
@@ -140,8 +135,6 @@ void LabRun::MaybeKill() {
   }
 }
 
-// --stall-unit: SIGSTOP the unit stall_at_s after the calibration phase began, SIGCONT it
-// stall_for_s later (and at the latest before the teardown).
 void LabRun::MaybeStall() {
   if (options_.stall_unit < 0 || stall_state_ == StallState::kResumed) return;
   const auto now = std::chrono::steady_clock::now();
@@ -177,7 +170,6 @@ void LabRun::Stall(bool stop) {
   }
 }
 
-// What the other units did after the kill (their calibrated lines' rounds).
 void LabRun::RecordKill() {
   if (!killed_) return;
   const NodeId unit = static_cast<NodeId>(options_.kill_unit);
@@ -220,8 +212,6 @@ void LabRun::RecordKill() {
                   {"others_recalibrated_after_the_kill", recalibrated}};
 }
 
-// --kill-coordinator-at-s: SIGKILL the coordinator that long into the hold and start a new
-// one at once on the same database and endpoints (the nodes reconnect by themselves).
 void LabRun::MaybeKillCoordinator() {
   if (options_.kill_coordinator_at_s < 0 || coordinator_killed_) return;
   const auto now = std::chrono::steady_clock::now();
@@ -248,11 +238,6 @@ void LabRun::MaybeKillCoordinator() {
   if (lines_.coordinator_events.empty()) lines_.coordinator_events = events;
 }
 
-// Frames each other node showed in [from_ms, from_ms + window_ms) against those it showed in
-// the same span just before from_ms: the frames a fault cost the others (largest per node).
-// Nodes draw on change, so the span before is what the show asked of them; a pace taken from
-// the median interval of the few frames a quiet hold shows (before 2026-12-04) made two frames
-// 36 ms apart predict 83 in 3 s.
 int LabRun::FramesLost(int64_t from_ms, int64_t window_ms, const std::set<NodeId>& skip) {
   if (options_.render == "off") return -1;
   if (frame_times_.empty()) {
@@ -279,7 +264,6 @@ int LabRun::FramesLost(int64_t from_ms, int64_t window_ms, const std::set<NodeId
   return worst;
 }
 
-// The chaos section: every fault of the hold, the annotations, the nodes' link faults.
 void LabRun::RecordChaos() {
   const bool any = Chaos() || options_.fault_unit >= 0 ||
                    (options_.kill_unit >= 0 && options_.kill_after_calibration) ||
@@ -357,7 +341,6 @@ void LabRun::RecordChaos() {
   result_.chaos = chaos;
 }
 
-// After the teardown: the nodes' exit lines (link faults, rejected messages) and crashes.
 void LabRun::FinishChaos(const std::vector<std::string>& killed_at_teardown) {
   if (result_.chaos.is_null()) return;
   json links = json::object();

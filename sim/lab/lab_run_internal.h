@@ -176,8 +176,8 @@ class LabRun {
   // Frames each other node showed in [from_ms, from_ms + window_ms) against those it showed in
   // the same span just before from_ms: the frames a fault cost the others (largest per node).
   // Nodes draw on change, so the span before is what the show asked of them; a pace taken from
-  // the median interval of the few frames a quiet hold shows (before 2026-12-04) made two frames
-  // 36 ms apart predict 83 in 3 s.
+  // the median interval of the few frames a quiet hold shows would overstate the loss (two frames
+  // 36 ms apart predict 83 in 3 s).
   int FramesLost(int64_t from_ms, int64_t window_ms, const std::set<NodeId>& skip);
 
   // The chaos section: every fault of the hold, the annotations, the nodes' link faults.

@@ -121,7 +121,6 @@ bool LabRun::Measure() {
   return true;
 }
 
-// The runner's report and each node's figures (docs/lab.md, "Self-calibration").
 void LabRun::CollectSelfCalibration() {
   json& sc = result_.self_calibration;
   sc = json::object();
@@ -188,8 +187,6 @@ void LabRun::CollectSelfCalibration() {
   }
 }
 
-// The nodes' render summaries (their last lines, printed at exit) into the report: the
-// median p50 and floor, the worst p99.
 void LabRun::CollectRender() {
   if (lines_.render_summary.empty()) return;
   std::vector<double> p50, p99, floor;

@@ -41,8 +41,6 @@ Expected<TopView> LabRun::TopViewOf(const std::vector<NodeId>& lit) {
   return view;
 }
 
-// The top view's pixels whose surface seen from above is the table (the truth's scene, cast
-// straight down): the grid is compared there.
 cv::Mat LabRun::TableMask(const std::map<NodeId, TopView>& views) const {
   if (views.empty()) return cv::Mat();
   const TopView& v = views.begin()->second;
@@ -65,7 +63,6 @@ cv::Mat LabRun::TableMask(const std::map<NodeId, TopView>& views) const {
   return mask;
 }
 
-// Waits until every calibrated unit has shown `pattern` (the phase goes on).
 bool LabRun::WaitForPattern(const std::string& pattern) {
   const auto done = [&] {
     for (const auto& [id, line] : lines_.calibrated) {
@@ -150,7 +147,6 @@ bool LabRun::Show() {
   return true;
 }
 
-// The world's truth of one projector at points (one sample per point, in order).
 Expected<wire::GroundTruthReply> LabRun::GroundTruth(NodeId projector,
                                                      const std::vector<Eigen::Vector3d>& points) {
   wire::Envelope request;
@@ -173,7 +169,6 @@ Expected<wire::GroundTruthReply> LabRun::GroundTruth(NodeId projector,
   return g;
 }
 
-// Whether that projector can project at each point, lights it, and its pixel there.
 Expected<std::vector<SampleTruth>> LabRun::TruthSamples(
     NodeId projector, const std::vector<Eigen::Vector3d>& points) {
   Expected<wire::GroundTruthReply> g = GroundTruth(projector, points);
@@ -188,7 +183,6 @@ Expected<std::vector<SampleTruth>> LabRun::TruthSamples(
   return out;
 }
 
-// The luminance of each point from that projector (0 where it does not light it).
 Expected<std::vector<double>> LabRun::TruthLuminance(NodeId projector,
                                                      const std::vector<Eigen::Vector3d>& points) {
   Expected<wire::GroundTruthReply> g = GroundTruth(projector, points);
@@ -200,8 +194,6 @@ Expected<std::vector<double>> LabRun::TruthLuminance(NodeId projector,
   return out;
 }
 
-// Where the table's steps over the bound lie (PlaceSteps), in every calibrated
-// projector's truth.
 Expected<json> LabRun::PlaceTableSteps(const StepStats& steps, const TopView& view,
                                        double bound_pct) {
   const Eigen::Vector2d span = view.area_max_m - view.area_min_m;
