@@ -467,8 +467,8 @@ void SelfCalibrationService::RunnerDone(NodeId from, const wire::CalibrationStep
     // A unit sends its CalibrationInput before the done, on the same connection: a done without
     // it means the input was lost on the way (a lossy link drops or corrupts it). The step stays
     // awaited and goes again at its retry; the unit answers a repeated step with the same input
-    // and done. Taken as done, the round went on without the unit ("sent no calibration input":
-    // the chaos run's newcomer on a link dropping 4.7 %, CI at 841516a).
+    // and done. Taken as done, the round would go on without the unit ("sent no calibration
+    // input").
     ST_LOG(kInfo) << "self-calibration: unit " << from << " finished step " << done.step()
                   << " but its calibration input did not come; asking again";
     r.unsent.insert(done.step());  // sent again at the runner's next turn, not after step_retry
