@@ -286,12 +286,6 @@ Expected<ReportLine> ParseLab(const json& j) {
   return InvalidArgumentError("report line: unknown lab line " + what.dump());
 }
 
-json FrameJson(const BlendFrame& f) {
-  return {{"wait_ms", f.wait_ms}, {"set_mask_ms", f.set_mask_ms}, {"render_ms", f.render_ms},
-          {"read_ms", f.read_ms}, {"show_ms", f.show_ms},         {"rewarped", f.rewarped},
-          {"late", f.late},       {"prepared", f.prepared}};
-}
-
 }  // namespace
 
 const char* KindName(const ReportLine& line) {
@@ -398,7 +392,7 @@ json ToJson(const ReportLine& line) {
             j["compose_ms"] = l.compose_ms;
             j["cast_ms"] = l.cast_ms;
             j["shown_ns"] = l.shown_ns;
-            j["frame"] = FrameJson(l.frame);
+            j["frame"] = ToJson(l.frame);
             j["bytes_sent"] = l.bytes_sent;
             j["bytes_received"] = l.bytes_received;
             return j;
@@ -420,6 +414,12 @@ json ToJson(const ReportLine& line) {
           },
       },
       line);
+}
+
+json ToJson(const BlendFrame& f) {
+  return {{"wait_ms", f.wait_ms}, {"set_mask_ms", f.set_mask_ms}, {"render_ms", f.render_ms},
+          {"read_ms", f.read_ms}, {"show_ms", f.show_ms},         {"rewarped", f.rewarped},
+          {"late", f.late},       {"prepared", f.prepared}};
 }
 
 std::string ToText(const ReportLine& line) { return ToJson(line).dump(); }

@@ -162,6 +162,8 @@ Overloaded(F...) -> Overloaded<F...>;
 const char* KindName(const ReportLine& line);
 
 nlohmann::json ToJson(const ReportLine& line);
+// A blend line's frame timing as it appears in the line ("frame").
+nlohmann::json ToJson(const BlendFrame& frame);
 // One compact line, no newline.
 std::string ToText(const ReportLine& line);
 // Writes the line and a newline, and flushes (a supervisor waits for it).

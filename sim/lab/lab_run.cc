@@ -383,12 +383,8 @@ Supervisor::LineHandler LabRun::Handler() {
     if (std::holds_alternative<report::NodeReady>(line)) {
       progress_.Update(static_cast<int>(lines_.nodes_ready.size()));
     }
-    const auto* calibrated = std::get_if<report::Calibrated>(&line);
-    if (calibrated && options_.join_late >= 0 &&
-        calibrated->id == static_cast<NodeId>(options_.join_late)) {
-      join_calibrated_ns_ = SteadyNowNs();
-    }
-    if ((calibrated || std::holds_alternative<report::CalibrationFailed>(line)) &&
+    if ((std::holds_alternative<report::Calibrated>(line) ||
+         std::holds_alternative<report::CalibrationFailed>(line)) &&
         progress_phase_ == "calibration held") {
       progress_.Update(
           static_cast<int>(lines_.calibrated.size() + lines_.calibration_failed.size()));

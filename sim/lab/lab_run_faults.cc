@@ -195,7 +195,7 @@ void LabRun::RecordKill() {
                    {"noticed_by", line.noticed_by},
                    {"shown_ms", shown_ms},
                    {"compose_ms", line.compose_ms},
-                   {"frame", report::ToJson(line)["frame"]}};
+                   {"frame", report::ToJson(line.frame)}};
     reblend_max_ms = std::max(reblend_max_ms, shown_ms);
   }
   if (!reblend.empty()) {

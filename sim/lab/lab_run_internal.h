@@ -64,12 +64,6 @@ inline double AlphaMean(const MpcdiRegion& region) {
   return sum / (255.0 * static_cast<double>(region.alpha->values.size()));
 }
 
-inline int64_t SteadyNowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-
 inline constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2, kExitVerdict = kLabExitVerdict,
                      kExitInterrupted = 130;
 inline constexpr int kLogTailLines = 20;
@@ -328,8 +322,7 @@ class LabRun {
   bool coordinator_killed_ = false;
   int64_t coordinator_kill_ms_ = 0, coordinator_restart_ms_ = -1, hold_started_ms_ = 0;
   std::map<NodeId, std::vector<int64_t>> frame_times_;  // {"blend":..,"reblend":..} lines
-  int64_t join_calibrated_ns_ = 0;  // when the late unit's calibrated line came (--join-late)
-  int64_t kill_ns_ = 0;             // steady time of the kill
+  int64_t kill_ns_ = 0;                                 // steady time of the kill
   zmq::context_t zmq_context_;
   proto::MessageCounters lab_counters_;
   uint64_t lab_incarnation_ = 0;

@@ -416,8 +416,13 @@ LabRun::BlendMeasure LabRun::MeasureBlend(const TopView& b, const TopView& a,
 
 // A late unit's join: from its calibrated line to each neighbour's first mask with it.
 void LabRun::RecordJoinReblend() {
-  if (join_calibrated_ns_ <= 0) return;
+  if (options_.join_late < 0) return;
   const NodeId late = static_cast<NodeId>(options_.join_late);
+  auto calibrated_at = lines_.calibrated_at.find(late);
+  if (calibrated_at == lines_.calibrated_at.end()) return;
+  const int64_t join_calibrated_ns =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(calibrated_at->second.time_since_epoch())
+          .count();
   json join = json::object();
   double join_max_ms = 0.0;
   for (const report::BlendShown& line : lines_.blended) {
@@ -425,7 +430,7 @@ void LabRun::RecordJoinReblend() {
     if (id == late || join.contains(std::to_string(id))) continue;
     const std::vector<NodeId>& n = line.neighbours;
     if (std::find(n.begin(), n.end(), late) == n.end()) continue;
-    const double ms = (line.shown_ns - join_calibrated_ns_) * 1e-6;
+    const double ms = (line.shown_ns - join_calibrated_ns) * 1e-6;
     join[std::to_string(id)] = ms;
     join_max_ms = std::max(join_max_ms, ms);
   }
