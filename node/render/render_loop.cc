@@ -399,6 +399,316 @@ std::pair<uint64_t, std::string> RenderLoop::ShownPattern() const {
   return {summary_.frames_shown, summary_.pattern};
 }
 
+// What only the render thread touches: the renderer, what it drew last, the masks it holds.
+struct RenderLoop::ThreadState {
+  GlContext* context = nullptr;
+  std::unique_ptr<Renderer> renderer;
+  uint64_t drawn_version = ~uint64_t{0}, drawn_frame_version = ~uint64_t{0};
+  double drawn_media_time_s = 0.0;  // of the frame last drawn
+  Clock::time_point last_frame{};
+  Clock::time_point last_flush = Clock::now();
+  std::ofstream log;  // options_.frame_log_path
+  // Prepared masks (PrepareBlends) in the renderer: of standby set `prepared_version`, these
+  // neighbours'; `prepared_complete` once every one the set holds (up to the limit) is.
+  uint64_t prepared_version = ~uint64_t{0};
+  std::set<NodeId> prepared_keys;
+  bool prepared_complete = true;
+};
+
+// One frame: its inputs, taken under the lock, and what drawing and showing it gave.
+struct RenderLoop::FrameWork {
+  ShowInputs inputs;
+  TimelineView timeline;
+  uint64_t version = 0, frame_version = 0, generation = 0;
+  std::optional<ProjectorView> view;
+  std::optional<Scene> scene;
+  std::optional<cv::Mat> mask;
+  std::optional<PreparedKey> prepared;  // mask is the one prepared for this neighbour
+  MaskFrameTimes mask_frame;
+  Status status = OkStatus();
+  bool rewarp = false;  // the last frame again under a new mask (the warp pass alone)
+  int64_t draw_ns = 0;
+  double media_time_s = 0.0;
+  std::optional<FrameStats> late_stats;  // a late mask's rewarp over the frame just drawn
+  bool shown = false, unchanged = false;
+  double show_ms = 0.0;
+};
+
+void RenderLoop::PublishPrepared(const ThreadState& t) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  summary_.masks_prepared = static_cast<int>(t.prepared_keys.size());
+}
+
+void RenderLoop::ForgetPrepared(ThreadState& t) {
+  t.prepared_keys.clear();
+  t.prepared_version = ~uint64_t{0};
+  t.prepared_complete = false;
+  PublishPrepared(t);
+}
+
+// One mask a call is prepared, so a mask that comes meanwhile waits for one upload at most.
+void RenderLoop::PrepareStandby(ThreadState& t) {
+  if (!t.renderer || !t.renderer->has_view()) return;
+  std::pair<cv::Mat, cv::Mat> next;
+  NodeId key = kInvalidNodeId;
+  cv::Mat blank;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (pending_mask_ || pending_view_ || stop_) return;
+    if (standby_version_ != t.prepared_version) {
+      t.renderer->ClearPreparedMasks();
+      t.prepared_keys.clear();
+      t.prepared_version = standby_version_;
+      summary_.masks_prepared = 0;
+    }
+    t.prepared_complete = true;
+    if (static_cast<int>(t.prepared_keys.size()) >= options_.max_prepared_masks) return;
+    for (const auto& [left, masks] : standby_) {
+      if (t.prepared_keys.count(left)) continue;
+      key = left;
+      next = masks;
+      break;
+    }
+    if (key == kInvalidNodeId) return;
+    blank = blank_factor_;
+    t.prepared_complete = false;
+  }
+  const cv::Mat mask = ComposeMask(blank, next.first, next.second);
+  if (Status done = t.renderer->PrepareMask(key, mask); !done.ok()) {
+    ST_LOG(kWarning) << "render: " << done.ToString();
+    t.prepared_complete = true;  // not tried again for this set
+    return;
+  }
+  t.prepared_keys.insert(key);
+  PublishPrepared(t);
+}
+
+RenderLoop::Taken RenderLoop::TakeWork(ThreadState& t, FrameWork* work) {
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    changed_.wait_for(lock, std::chrono::milliseconds(20), [&] {
+      return stop_ ||
+             (!suspended_ &&
+              (pending_view_ || pending_mask_ ||
+               (t.renderer && (inputs_version_ != t.drawn_version || timeline_.playing ||
+                               (t.renderer->has_view() && (standby_version_ != t.prepared_version ||
+                                                           !t.prepared_complete))))));
+    });
+    if (stop_) return Taken::kStop;
+    if (suspended_ || (!pending_view_ && !t.renderer)) return Taken::kNothing;
+    if (pending_view_) draped_tracks_ = std::move(pending_tracks_);
+    work->view = std::move(pending_view_);
+    work->scene = std::move(pending_scene_);
+    work->mask = std::move(pending_mask_);
+    work->prepared = pending_prepared_;
+    pending_view_.reset();
+    pending_scene_.reset();
+    pending_mask_.reset();
+    pending_prepared_.reset();
+    work->inputs = inputs_;
+    if (draped_tracks_) work->inputs.tracks = draped_tracks_;
+    work->timeline = timeline_;
+    work->version = inputs_version_;
+    work->frame_version = frame_inputs_version_;
+    work->generation = generation_;
+    if (!work->view && !work->mask && work->version == t.drawn_version && !work->timeline.playing) {
+      return Taken::kIdle;
+    }
+    if (work->mask) work->mask_frame.wait_ms = MsBetween(mask_posted_, Clock::now());
+  }
+  // At most max_fps; a new mask (a re-blend after a neighbour left) is not held back.
+  const auto period = std::chrono::duration<double>(1.0 / options_.max_fps);
+  const Clock::time_point next = t.last_frame + std::chrono::duration_cast<Clock::duration>(period);
+  if (!work->mask && Clock::now() < next) {
+    // Until the next frame is due, or a new mask comes (taken at once, not after this frame).
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (changed_.wait_until(lock, next, [&] { return stop_ || pending_mask_.has_value(); })) {
+      if (stop_) return Taken::kStop;
+      work->mask = std::move(pending_mask_);
+      work->prepared = pending_prepared_;
+      pending_mask_.reset();
+      pending_prepared_.reset();
+      work->generation = generation_;
+      work->mask_frame.wait_ms = MsBetween(mask_posted_, Clock::now());
+    }
+  }
+  return Taken::kFrame;
+}
+
+bool RenderLoop::MakeRenderer(ThreadState& t, const Scene& scene) {
+  RendererOptions renderer_options = options_.renderer;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (display_gamma_ > 0) renderer_options.display_gamma = display_gamma_;
+  }
+  Expected<std::unique_ptr<Renderer>> made = Renderer::Create(t.context, scene, renderer_options);
+  if (!made.ok()) {
+    ST_LOG(kError) << "render: " << made.status().ToString();
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++summary_.frames_failed;
+    return false;
+  }
+  t.renderer = std::move(*made);
+  ForgetPrepared(t);
+  if (options_.floor_samples > 0) {
+    std::vector<double> floor;
+    for (int i = 0; i < options_.floor_samples; ++i) {
+      Expected<double> ms = t.renderer->RenderFloor();
+      if (ms.ok()) floor.push_back(*ms);
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    summary_.floor_ms = Percentile(std::deque<double>(floor.begin(), floor.end()), 0.5);
+  }
+  return true;
+}
+
+// A new mask into the renderer (timed) and kept as the current one: the one prepared for it
+// swapped in when the renderer holds it, else encoded and uploaded.
+void RenderLoop::SetMask(ThreadState& t, FrameWork& work, const cv::Mat& mask) {
+  if (work.status.ok()) {
+    const Clock::time_point t0 = Clock::now();
+    const std::optional<PreparedKey>& key = work.prepared;
+    const bool ready =
+        key && key->version == t.prepared_version && t.prepared_keys.count(key->left) > 0;
+    work.mask_frame.prepared = ready && t.renderer->UseMask(key->left).ok();
+    if (!work.mask_frame.prepared) work.status = t.renderer->SetMask(mask);
+    work.mask_frame.set_mask_ms = MsBetween(t0, Clock::now());
+    ForgetPrepared(t);
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  current_mask_ = mask;
+}
+
+Expected<FrameStats> RenderLoop::Draw(ThreadState& t, FrameWork& work) {
+  // Only the mask changed (a re-blend, a join's blanking), or the overlay besides (strokes
+  // being painted): the frame already drawn goes out again under it, the warp pass alone,
+  // instead of waiting for a whole frame; the new strokes follow in the next frame, drawn as
+  // usual. Other new inputs (a pattern, the sun) are drawn whole: a caller of ShowBlend or
+  // ShowMask expects what it set to show under the mask.
+  work.rewarp = work.status.ok() && work.mask && !work.view && !work.scene &&
+                work.frame_version == t.drawn_frame_version && t.renderer->CanRewarp();
+  work.draw_ns = NowNs();
+  work.media_time_s = work.rewarp ? t.drawn_media_time_s : work.timeline.MediaTimeAt(work.draw_ns);
+  Expected<FrameStats> stats =
+      !work.status.ok() ? Expected<FrameStats>(work.status)
+      : work.rewarp     ? t.renderer->Rewarp()
+                        : t.renderer->Render(BuildContent(work.inputs, work.media_time_s));
+  if (stats.ok()) t.drawn_media_time_s = work.media_time_s;
+  if (work.rewarp || !stats.ok()) return stats;
+  // A new mask that came while this whole frame was drawn (a re-blend after a neighbour left):
+  // the frame does not go out under the old mask first (its read back and show, 10-20 ms
+  // on a loaded machine); the new mask goes over it at once, as a rewarp.
+  if (options_.after_render_for_test) options_.after_render_for_test();
+  std::optional<cv::Mat> late;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (pending_mask_ && !pending_view_ && !pending_scene_ && t.renderer->CanRewarp()) {
+      late = std::move(pending_mask_);
+      work.prepared = pending_prepared_;
+      pending_mask_.reset();
+      pending_prepared_.reset();
+      work.generation = generation_;
+      work.mask_frame = MaskFrameTimes{};
+      work.mask_frame.wait_ms = MsBetween(mask_posted_, Clock::now());
+    }
+  }
+  if (!late) return stats;
+  SetMask(t, work, *late);
+  Expected<FrameStats> again =
+      work.status.ok() ? t.renderer->Rewarp() : Expected<FrameStats>(work.status);
+  if (again.ok()) {
+    work.late_stats = *again;
+  } else {
+    stats = again.status();
+  }
+  work.mask = std::move(late);
+  work.mask_frame.late = true;
+  return stats;
+}
+
+void RenderLoop::ShowFrame(ThreadState& t, FrameWork& work, const Expected<FrameStats>& stats) {
+  const Clock::time_point read_start = Clock::now();
+  Expected<cv::Mat> frame =
+      stats.ok() ? t.context->ReadOutput() : Expected<cv::Mat>(stats.status());
+  if (!work.rewarp) t.last_frame = Clock::now();
+  work.mask_frame.read_ms = MsBetween(read_start, Clock::now());
+  if (!work.rewarp) {
+    t.drawn_version = work.version;
+    t.drawn_frame_version = work.frame_version;
+  }
+  const Clock::time_point show_start = Clock::now();
+  if (frame.ok()) {
+    std::lock_guard<std::mutex> showing(show_mutex_);
+    bool suspended = false;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      suspended = suspended_;
+    }
+    const uint64_t hash = FrameHash(*frame);
+    if (suspended) {
+      last_shown_hash_.reset();  // calibration shows its own frames meanwhile
+    } else if (last_shown_hash_ == hash) {
+      work.shown = true;  // the projector already shows exactly this
+      work.unchanged = true;
+    } else {
+      Expected<ShownFrame> done = projector_->Show(*frame);
+      if (!done.ok()) {
+        work.status = done.status();
+        last_shown_hash_.reset();
+      } else {
+        work.shown = true;
+        last_shown_hash_ = hash;
+      }
+    }
+  } else {
+    work.status = frame.status();
+  }
+  work.show_ms = MsBetween(show_start, Clock::now());
+}
+
+void RenderLoop::RecordFrame(FrameWork& work, const Expected<FrameStats>& stats) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!work.status.ok()) {
+    ++summary_.frames_failed;
+    ST_LOG(kWarning) << "render: frame not shown: " << work.status.ToString();
+  }
+  if (!work.shown) return;
+  if (work.unchanged) {
+    ++summary_.frames_unchanged;
+  } else {
+    ++summary_.frames_shown;
+    // A re-warped frame is one pass, not a frame's work: kept out of the frame times.
+    if (work.rewarp || work.late_stats) ++summary_.frames_rewarped;
+    if (!work.rewarp) Keep(&frame_ms_, stats->frame_ms);
+    Keep(&show_ms_, work.show_ms);
+    for (int p = 0; p < kPassCount; ++p) summary_.pass_runs[p] += stats->ran[p] ? 1 : 0;
+    summary_.groups_culled += static_cast<uint64_t>(stats->groups_culled);
+  }
+  summary_.pattern = TestPatternName(work.inputs.pattern);
+  shown_generation_ = std::max(shown_generation_, work.generation);
+  last_shown_ns_ = NowNs();
+  if (work.mask) {
+    work.mask_frame.generation = work.generation;
+    work.mask_frame.render_ms = work.late_stats ? work.late_stats->frame_ms : stats->frame_ms;
+    work.mask_frame.rewarped = work.rewarp || work.late_stats.has_value();
+    work.mask_frame.show_ms = work.show_ms;
+    work.mask_frame.shown_ns = last_shown_ns_;
+    last_mask_frame_ = work.mask_frame;
+  }
+}
+
+void RenderLoop::LogFrame(ThreadState& t, const FrameWork& work, const FrameStats& stats) {
+  if (!t.log.is_open()) return;
+  t.log << work.draw_ns << "," << work.media_time_s << "," << (work.timeline.playing ? 1 : 0) << ","
+        << stats.frame_ms << "," << work.timeline.rate << "\n";
+  if (Clock::now() - t.last_flush > std::chrono::seconds(1)) {
+    t.log.flush();
+    t.last_flush = Clock::now();
+  }
+}
+
+// The render thread: takes what changed, draws it (a whole frame, or the last one again under a
+// new mask), reads it back and shows it, and records the frame.
 void RenderLoop::Run(std::promise<Status>* started) {
   Expected<std::unique_ptr<GlContext>> context = CreateEglContext(projector_->size());
   if (!context.ok()) {
@@ -410,313 +720,37 @@ void RenderLoop::Run(std::promise<Status>* started) {
     summary_.context = (*context)->description();
   }
   started->set_value(OkStatus());
-  std::ofstream log;
+  ThreadState t;
+  t.context = context->get();
   if (!options_.frame_log_path.empty()) {
-    log.open(options_.frame_log_path);
-    log << "node_steady_ns,media_time_s,playing,frame_ms,rate\n";
+    t.log.open(options_.frame_log_path);
+    t.log << "node_steady_ns,media_time_s,playing,frame_ms,rate\n";
   }
-  std::unique_ptr<Renderer> renderer;
-  uint64_t drawn_version = ~uint64_t{0}, drawn_frame_version = ~uint64_t{0};
-  uint64_t drawn_generation = 0;
-  double drawn_media_time_s = 0.0;  // of the frame last drawn
-  Clock::time_point last_frame{};
-  Clock::time_point last_flush = Clock::now();
-  const auto period = std::chrono::duration<double>(1.0 / options_.max_fps);
-  // Prepared masks (PrepareBlends) in the renderer: of standby set `prepared_version`, these
-  // neighbours'; `prepared_complete` once every one the set holds (up to the limit) is.
-  uint64_t prepared_version = ~uint64_t{0};
-  std::set<NodeId> prepared_keys;
-  bool prepared_complete = true;
-  auto publish_prepared = [&] {
-    std::lock_guard<std::mutex> lock(mutex_);
-    summary_.masks_prepared = static_cast<int>(prepared_keys.size());
-  };
-  auto forget_prepared = [&] {  // the renderer dropped them (a mask set or used, a new view)
-    prepared_keys.clear();
-    prepared_version = ~uint64_t{0};
-    prepared_complete = false;
-    publish_prepared();
-  };
-  // One mask a call is prepared, so a mask that comes meanwhile waits for one upload at most.
-  auto prepare_standby = [&] {
-    if (!renderer || !renderer->has_view()) return;
-    std::pair<cv::Mat, cv::Mat> next;
-    NodeId key = kInvalidNodeId;
-    cv::Mat blank;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (pending_mask_ || pending_view_ || stop_) return;
-      if (standby_version_ != prepared_version) {
-        renderer->ClearPreparedMasks();
-        prepared_keys.clear();
-        prepared_version = standby_version_;
-        summary_.masks_prepared = 0;
-      }
-      prepared_complete = true;
-      if (static_cast<int>(prepared_keys.size()) >= options_.max_prepared_masks) return;
-      for (const auto& [left, masks] : standby_) {
-        if (prepared_keys.count(left)) continue;
-        key = left;
-        next = masks;
-        break;
-      }
-      if (key == kInvalidNodeId) return;
-      blank = blank_factor_;
-      prepared_complete = false;
-    }
-    const cv::Mat mask = ComposeMask(blank, next.first, next.second);
-    if (Status done = renderer->PrepareMask(key, mask); !done.ok()) {
-      ST_LOG(kWarning) << "render: " << done.ToString();
-      std::lock_guard<std::mutex> lock(mutex_);
-      prepared_complete = true;  // not tried again for this set
-      return;
-    }
-    prepared_keys.insert(key);
-    publish_prepared();
-  };
   while (true) {
-    ShowInputs inputs;
-    TimelineView timeline;
-    uint64_t version = 0, frame_version = 0, generation = 0;
-    std::optional<ProjectorView> view;
-    std::optional<Scene> scene;
-    std::optional<cv::Mat> mask;
-    std::optional<PreparedKey> prepared;  // mask is the one prepared for this neighbour
-    MaskFrameTimes mask_frame;
-    bool idle = false;
-    {
-      std::unique_lock<std::mutex> lock(mutex_);
-      changed_.wait_for(lock, std::chrono::milliseconds(20), [&] {
-        return stop_ ||
-               (!suspended_ &&
-                (pending_view_ || pending_mask_ ||
-                 (renderer && (inputs_version_ != drawn_version || timeline_.playing ||
-                               (renderer->has_view() &&
-                                (standby_version_ != prepared_version || !prepared_complete))))));
-      });
-      if (stop_) break;
-      if (suspended_ || (!pending_view_ && !renderer)) continue;
-      if (pending_view_) draped_tracks_ = std::move(pending_tracks_);
-      view = std::move(pending_view_);
-      scene = std::move(pending_scene_);
-      mask = std::move(pending_mask_);
-      prepared = pending_prepared_;
-      pending_view_.reset();
-      pending_scene_.reset();
-      pending_mask_.reset();
-      pending_prepared_.reset();
-      inputs = inputs_;
-      if (draped_tracks_) inputs.tracks = draped_tracks_;
-      timeline = timeline_;
-      version = inputs_version_;
-      frame_version = frame_inputs_version_;
-      generation = generation_;
-      idle = !view && !mask && version == drawn_version && !timeline.playing;
-      if (mask) mask_frame.wait_ms = MsBetween(mask_posted_, Clock::now());
-    }
-    if (idle) {
-      prepare_standby();
-      continue;
-    }
-    // At most max_fps; a new mask (a re-blend after a neighbour left) is not held back.
-    const Clock::time_point next = last_frame + std::chrono::duration_cast<Clock::duration>(period);
-    if (!mask && Clock::now() < next) {
-      // Until the next frame is due, or a new mask comes (taken at once, not after this frame).
-      std::unique_lock<std::mutex> lock(mutex_);
-      if (changed_.wait_until(lock, next, [&] { return stop_ || pending_mask_.has_value(); })) {
-        if (stop_) break;
-        mask = std::move(pending_mask_);
-        prepared = pending_prepared_;
-        pending_mask_.reset();
-        pending_prepared_.reset();
-        generation = generation_;
-        mask_frame.wait_ms = MsBetween(mask_posted_, Clock::now());
-      }
-    }
-
-    Status status = OkStatus();
-    if (scene) {
-      RendererOptions renderer_options = options_.renderer;
-      {
-        std::lock_guard<std::mutex> lock(mutex_);
-        if (display_gamma_ > 0) renderer_options.display_gamma = display_gamma_;
-      }
-      Expected<std::unique_ptr<Renderer>> made =
-          Renderer::Create(context->get(), *scene, renderer_options);
-      if (!made.ok()) {
-        ST_LOG(kError) << "render: " << made.status().ToString();
-        std::lock_guard<std::mutex> lock(mutex_);
-        ++summary_.frames_failed;
-        continue;
-      }
-      renderer = std::move(*made);
-      forget_prepared();
-      if (options_.floor_samples > 0) {
-        std::vector<double> floor;
-        for (int i = 0; i < options_.floor_samples; ++i) {
-          Expected<double> ms = renderer->RenderFloor();
-          if (ms.ok()) floor.push_back(*ms);
-        }
-        std::lock_guard<std::mutex> lock(mutex_);
-        summary_.floor_ms = Percentile(std::deque<double>(floor.begin(), floor.end()), 0.5);
-      }
-    }
-    if (scene && !mask) {
+    FrameWork work;
+    const Taken taken = TakeWork(t, &work);
+    if (taken == Taken::kStop) break;
+    if (taken == Taken::kIdle) PrepareStandby(t);
+    if (taken != Taken::kFrame) continue;
+    if (work.scene) {
+      if (!MakeRenderer(t, *work.scene)) continue;
       // A new renderer starts without a mask: the current one (the join's blanking) applies.
       std::lock_guard<std::mutex> lock(mutex_);
-      if (!current_mask_.empty()) mask = current_mask_;
+      if (!work.mask && !current_mask_.empty()) work.mask = current_mask_;
     }
-    // A new mask into the renderer (timed) and kept as the current one: the one prepared for it
-    // swapped in when the renderer holds it, else encoded and uploaded.
-    auto set_mask = [&](const cv::Mat& m, const std::optional<PreparedKey>& key) {
-      if (status.ok()) {
-        const Clock::time_point t0 = Clock::now();
-        const bool ready =
-            key && key->version == prepared_version && prepared_keys.count(key->left) > 0;
-        mask_frame.prepared = ready && renderer->UseMask(key->left).ok();
-        if (!mask_frame.prepared) status = renderer->SetMask(m);
-        mask_frame.set_mask_ms = MsBetween(t0, Clock::now());
-        forget_prepared();
-      }
-      std::lock_guard<std::mutex> lock(mutex_);
-      current_mask_ = m;
-    };
-    if (view) {
-      status = renderer->SetView(*view);
-      forget_prepared();
+    if (work.view) {
+      work.status = t.renderer->SetView(*work.view);
+      ForgetPrepared(t);
     }
-    if (mask) set_mask(*mask, prepared);
-    // Only the mask changed (a re-blend, a join's blanking), or the overlay besides (strokes
-    // being painted): the frame already drawn goes out again under it, the warp pass alone,
-    // instead of waiting for a whole frame; the new strokes follow in the next frame, drawn as
-    // usual. Other new inputs (a pattern, the sun) are drawn whole: a caller of ShowBlend or
-    // ShowMask expects what it set to show under the mask.
-    const bool rewarp = status.ok() && mask && !view && !scene &&
-                        frame_version == drawn_frame_version && renderer->CanRewarp();
-    const int64_t draw_ns = NowNs();
-    const double media_time_s = rewarp ? drawn_media_time_s : timeline.MediaTimeAt(draw_ns);
-    Expected<FrameStats> stats = !status.ok() ? Expected<FrameStats>(status)
-                                 : rewarp     ? renderer->Rewarp()
-                                          : renderer->Render(BuildContent(inputs, media_time_s));
-    if (stats.ok()) drawn_media_time_s = media_time_s;
-    // A new mask that came while this whole frame was drawn (a re-blend after a neighbour left):
-    // the frame does not go out under the old mask first (its read back and show, 10-20 ms
-    // on a loaded machine); the new mask goes over it at once, as a rewarp.
-    std::optional<FrameStats> late_stats;
-    if (!rewarp && stats.ok()) {
-      if (options_.after_render_for_test) options_.after_render_for_test();
-      std::optional<cv::Mat> late;
-      {
-        std::lock_guard<std::mutex> lock(mutex_);
-        if (pending_mask_ && !pending_view_ && !pending_scene_ && renderer->CanRewarp()) {
-          late = std::move(pending_mask_);
-          prepared = pending_prepared_;
-          pending_mask_.reset();
-          pending_prepared_.reset();
-          generation = generation_;
-          mask_frame = MaskFrameTimes{};
-          mask_frame.wait_ms = MsBetween(mask_posted_, Clock::now());
-        }
-      }
-      if (late) {
-        set_mask(*late, prepared);
-        Expected<FrameStats> again =
-            status.ok() ? renderer->Rewarp() : Expected<FrameStats>(status);
-        if (again.ok()) {
-          late_stats = *again;
-        } else {
-          stats = again.status();
-        }
-        mask = std::move(late);
-        mask_frame.late = true;
-      }
-    }
-    const Clock::time_point read_start = Clock::now();
-    Expected<cv::Mat> frame =
-        stats.ok() ? (*context)->ReadOutput() : Expected<cv::Mat>(stats.status());
-    if (!rewarp) last_frame = Clock::now();
-    mask_frame.read_ms = MsBetween(read_start, Clock::now());
-    if (!rewarp) {
-      drawn_version = version;
-      drawn_frame_version = frame_version;
-    }
-    bool shown = false, unchanged = false;
-    const Clock::time_point show_start = Clock::now();
-    if (frame.ok()) {
-      std::lock_guard<std::mutex> showing(show_mutex_);
-      bool suspended = false;
-      {
-        std::lock_guard<std::mutex> lock(mutex_);
-        suspended = suspended_;
-      }
-      const uint64_t hash = FrameHash(*frame);
-      if (suspended) {
-        last_shown_hash_.reset();  // calibration shows its own frames meanwhile
-      } else if (last_shown_hash_ == hash) {
-        shown = true;  // the projector already shows exactly this
-        unchanged = true;
-      } else {
-        Expected<ShownFrame> done = projector_->Show(*frame);
-        if (!done.ok()) {
-          status = done.status();
-          last_shown_hash_.reset();
-        } else {
-          shown = true;
-          last_shown_hash_ = hash;
-        }
-      }
-    } else {
-      status = frame.status();
-    }
-    const double show_ms =
-        std::chrono::duration<double, std::milli>(Clock::now() - show_start).count();
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (!status.ok()) {
-        ++summary_.frames_failed;
-        ST_LOG(kWarning) << "render: frame not shown: " << status.ToString();
-      }
-      if (unchanged) ++summary_.frames_unchanged;
-      if (shown && !unchanged) {
-        ++summary_.frames_shown;
-        // A re-warped frame is one pass, not a frame's work: kept out of the frame times.
-        if (rewarp || late_stats) ++summary_.frames_rewarped;
-        if (!rewarp) Keep(&frame_ms_, stats->frame_ms);
-        Keep(&show_ms_, show_ms);
-        for (int p = 0; p < kPassCount; ++p) summary_.pass_runs[p] += stats->ran[p] ? 1 : 0;
-        summary_.groups_culled += static_cast<uint64_t>(stats->groups_culled);
-      }
-      if (shown && mask) {
-        mask_frame.generation = generation;
-        mask_frame.render_ms = late_stats ? late_stats->frame_ms : stats->frame_ms;
-        mask_frame.rewarped = rewarp || late_stats.has_value();
-        mask_frame.show_ms = show_ms;
-      }
-      if (shown) {
-        summary_.pattern = TestPatternName(inputs.pattern);
-        drawn_generation = generation;
-        shown_generation_ = std::max(shown_generation_, drawn_generation);
-        last_shown_ns_ = NowNs();
-      }
-      if (shown && mask) {
-        mask_frame.shown_ns = last_shown_ns_;
-        last_mask_frame_ = mask_frame;
-      }
-    }
-    if (shown) shown_cv_.notify_all();
-    prepare_standby();  // while the timeline plays the loop is never idle
-    if (shown && !unchanged) {
-      if (log.is_open()) {
-        log << draw_ns << "," << media_time_s << "," << (timeline.playing ? 1 : 0) << ","
-            << stats->frame_ms << "," << timeline.rate << "\n";
-        if (Clock::now() - last_flush > std::chrono::seconds(1)) {
-          log.flush();
-          last_flush = Clock::now();
-        }
-      }
-    }
+    if (work.mask) SetMask(t, work, *work.mask);
+    const Expected<FrameStats> stats = Draw(t, work);
+    ShowFrame(t, work, stats);
+    RecordFrame(work, stats);
+    if (work.shown) shown_cv_.notify_all();
+    PrepareStandby(t);  // while the timeline plays the loop is never idle
+    if (work.shown && !work.unchanged) LogFrame(t, work, *stats);
   }
-  renderer.reset();  // GL objects go while the context is current
+  t.renderer.reset();  // GL objects go while the context is current
 }
 
 }  // namespace sandtable::node

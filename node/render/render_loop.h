@@ -172,7 +172,21 @@ class RenderLoop {
         model_(std::move(model)),
         tracks_(std::move(tracks)),
         options_(options) {}
+  // The render thread (render_loop.cc): its own state, one frame's work, and Run's steps.
+  struct ThreadState;
+  struct FrameWork;
+  enum class Taken { kStop, kNothing, kIdle, kFrame };
   void Run(std::promise<Status>* started);
+  Taken TakeWork(ThreadState& t, FrameWork* work);
+  bool MakeRenderer(ThreadState& t, const Scene& scene);  // false: logged, counted as failed
+  void SetMask(ThreadState& t, FrameWork& work, const cv::Mat& mask);
+  Expected<FrameStats> Draw(ThreadState& t, FrameWork& work);
+  void ShowFrame(ThreadState& t, FrameWork& work, const Expected<FrameStats>& stats);
+  void RecordFrame(FrameWork& work, const Expected<FrameStats>& stats);
+  void LogFrame(ThreadState& t, const FrameWork& work, const FrameStats& stats);
+  void PrepareStandby(ThreadState& t);
+  void ForgetPrepared(ThreadState& t);
+  void PublishPrepared(const ThreadState& t);
   Status WaitForShown(uint64_t generation, std::chrono::milliseconds timeout);
 
   ProjectorOutput* projector_;
