@@ -555,173 +555,208 @@ void BlendService::TellLevel(NodeRuntime& node) {
   for (NodeId peer : sent_to_) SendShare(peer, /*with_field=*/false, /*answer=*/false, node);
 }
 
+// What a worker needs to compose this node's blend and show it (a copy: the worker does not
+// touch the service).
+struct BlendService::ComposeJob {
+  std::shared_ptr<Core> core;
+  RenderLoop* loop = nullptr;
+  double level = 0.0;
+  uint64_t generation = 0;
+  std::string png;  // the alpha mask's picture to write (empty: none)
+  bool to_runner = false, runner_is_self = false;
+  bool match = false;  // black-level matching
+  double black_target = 0.0, own_black = -1.0, max_lift = 0.0;
+  std::map<NodeId, double> blacks;
+  std::map<NodeId, FaceLevels> neighbour_faces;
+};
+
+struct BlendService::ComposedBlend {
+  bool stale = false;        // a newer calibration replaced the blender
+  std::string alpha_png;     // the mask, 8-bit grey PNG (for the MPCDI export at the runner)
+  std::string alpha_values;  // or its values, when this node is the runner (no PNG round trip)
+  int width_px = 0, height_px = 0;
+  Status status = OkStatus();
+  int64_t shown_ns = 0;
+  MaskFrameTimes frame;  // where the time went for the frame that showed it
+  double compose_ms = 0.0;
+  double black_peak = 0.0, black_target = 0.0, lift_max = 0.0;
+  FaceLevels own_faces;  // Blender::FaceLevelBounds at this blend
+  size_t faces_lower = 0;
+  double face_level_min = 0.0;
+};
+
 void BlendService::Compose(NodeRuntime& node, const std::string& cause, NodeId peer,
                            Clock::time_point detected, const char* noticed_by) {
   TellLevel(node);
-  double level = std::numeric_limits<double>::infinity();
-  for (const auto& [unit, bound] : bounds_) level = std::min(level, bound);
-  if (!std::isfinite(level) || level <= 0) return;
+  ComposeJob job;
+  job.level = std::numeric_limits<double>::infinity();
+  for (const auto& [unit, bound] : bounds_) job.level = std::min(job.level, bound);
+  if (!std::isfinite(job.level) || job.level <= 0) return;
   // Black-level matching: the highest black light heard; the worker raises it to its own peak.
-  const bool match = options_.black_match && own_black_ >= 0;
-  double black_target = 0.0;
-  for (const auto& [unit, peak] : black_peaks_) black_target = std::max(black_target, peak);
-  struct Shown {
-    bool stale = false;        // a newer calibration replaced the blender
-    std::string alpha_png;     // the mask, 8-bit grey PNG (for the MPCDI export at the runner)
-    std::string alpha_values;  // or its values, when this node is the runner (no PNG round trip)
-    int width_px = 0, height_px = 0;
-    Status status = OkStatus();
-    int64_t shown_ns = 0;
-    MaskFrameTimes frame;  // where the time went for the frame that showed it
-    double compose_ms = 0.0;
-    double black_peak = 0.0, black_target = 0.0, lift_max = 0.0;
-    FaceLevels own_faces;  // Blender::FaceLevelBounds at this blend
-    size_t faces_lower = 0;
-    double face_level_min = 0.0;
-  };
-  const uint64_t generation = generation_;
-  const std::string png =
-      options_.export_dir.empty() || cause == "left"
-          ? std::string()
-          : (std::filesystem::path(options_.export_dir) / ("blend-" + std::to_string(id_) + ".png"))
-                .string();
-  node.workers().Run<Shown>(
-      [core = core_, loop = loop_, level, generation, png, to_runner = runner_ != kInvalidNodeId,
-       runner_is_self = runner_ == id_, match, black_target, own_black = own_black_,
-       blacks = blacks_, max_lift = options_.max_lift, neighbour_faces = neighbour_faces_] {
-        Shown out;
-        const Clock::time_point start = Clock::now();
-        cv::Mat factor, alpha, lift;
-        {
-          std::lock_guard<std::mutex> lock(core->mutex);
-          if (!core->blender || core->generation != generation) {
-            out.stale = true;
-            return out;
-          }
-          const Blender& blender = *core->blender;
-          const double fill = blender.options().fill_limit;
-          out.own_faces = blender.FaceLevelBounds(level, fill);
-          const FaceLevels faces = LowestFaceLevels(neighbour_faces, out.own_faces);
-          out.faces_lower = faces.size();
-          out.face_level_min = level;
-          for (const auto& [face, l] : faces) out.face_level_min = std::min(out.face_level_min, l);
-          factor = blender.Factor(level, fill, kInvalidNodeId, faces);
-          if (!png.empty()) alpha = core->blender->Alpha();
-          if (match) {
-            out.black_peak = core->blender->BlackPeak(own_black, blacks);
-            out.black_target = std::max(black_target, out.black_peak);
-            lift = core->blender->Lift(out.black_target, own_black, blacks, max_lift);
-            cv::minMaxLoc(lift, nullptr, &out.lift_max);
-          }
-        }
-        out.compose_ms = MsSince(start);
-        if (to_runner) {
-          cv::Mat bytes;
-          factor.convertTo(bytes, CV_8UC1, 255.0);
-          out.width_px = bytes.cols;
-          out.height_px = bytes.rows;
-          std::vector<uchar> encoded;
-          // zlib's fastest level: the masks are smooth and compress well at any level.
-          if (runner_is_self) {
-            out.alpha_values.assign(reinterpret_cast<const char*>(bytes.data), bytes.total());
-          } else if (cv::imencode(".png", bytes, encoded, {cv::IMWRITE_PNG_COMPRESSION, 1})) {
-            out.alpha_png.assign(encoded.begin(), encoded.end());
-          }
-        }
-        if (!alpha.empty()) {
-          cv::Mat picture;
-          alpha.convertTo(picture, CV_8UC1, 255.0);
-          if (Status written = io::WritePngFile(png, picture); !written.ok()) {
-            ST_LOG(kWarning) << "blend: " << written.ToString();
-          }
-        }
-        if (!loop) return out;
-        uint64_t blend_generation = 0;
-        Expected<int64_t> shown =
-            loop->ShowBlend(factor, lift, std::chrono::seconds(10), &blend_generation);
-        if (!shown.ok()) {
-          out.status = shown.status();
-          return out;
-        }
-        out.shown_ns = *shown;
-        out.frame = loop->LastMaskFrame();
-        // The masks for a neighbour leaving: the same composition without it (the level and the
-        // black target as now), prepared in the renderer ahead of time.
-        std::map<NodeId, std::pair<cv::Mat, cv::Mat>> standby;
-        {
-          std::lock_guard<std::mutex> lock(core->mutex);
-          if (!core->blender || core->generation != generation) return out;
-          const Blender& blender = *core->blender;
-          const double fill = blender.options().fill_limit;
-          for (NodeId left : blender.neighbours()) {
-            std::pair<cv::Mat, cv::Mat>& masks = standby[left];
-            const FaceLevels faces =
-                LowestFaceLevels(neighbour_faces, blender.FaceLevelBounds(level, fill, left), left);
-            masks.first = blender.Factor(level, fill, left, faces);
-            if (match) {
-              const double target =
-                  std::max(black_target, blender.BlackPeak(own_black, blacks, left));
-              masks.second = blender.Lift(target, own_black, blacks, max_lift, left);
-            }
-          }
-        }
-        loop->PrepareBlends(blend_generation, std::move(standby));
-        return out;
-      },
-      [this, cause, peer, detected, level, noticed_by, &node](Shown shown) {
-        if (shown.stale) return;
-        if (!shown.status.ok()) {
-          ST_LOG(kWarning) << "blend: " << shown.status.ToString();
-          return;
-        }
-        if (shown.black_peak > 0) {
-          black_peaks_[id_] = std::max(black_peaks_[id_], shown.black_peak);
-          TellLevel(node);
-        }
-        if (!own_faces_ || *own_faces_ != shown.own_faces) {
-          own_faces_ = std::move(shown.own_faces);
-          for (NodeId to : sent_to_) SendShare(to, /*with_field=*/false, /*answer=*/false, node);
-        }
-        if (!shown.alpha_png.empty() || !shown.alpha_values.empty()) {
-          pending_alpha_ = PendingAlpha{shown.width_px, shown.height_px, std::move(shown.alpha_png),
-                                        std::move(shown.alpha_values), Clock::now()};
-        }
-        report::BlendShown line;
-        line.id = id_;
-        if (cause == "left") {
-          line.reblend = true;
-          line.cause = "left";
-          line.peer = peer;
-          line.detected_ns = SteadyNs(detected);
-          if (noticed_by != nullptr) line.noticed_by = noticed_by;
-        } else {
-          line.cause = cause;
-        }
-        line.neighbours.assign(holding_.begin(), holding_.end());
-        // The overlapping units whose field it does not hold yet (a blend still to come).
-        if (neighbours_) {
-          for (NodeId n : *neighbours_) {
-            if (n != id_ && !holding_.count(n) && !dropped_.count(n)) line.waiting_for.push_back(n);
-          }
-        }
-        line.level_per_m2 = level;
-        // Faces shown below the level (walls met past the correction limit), the lowest.
-        line.faces_below_level = shown.faces_lower;
-        line.face_level_min_per_m2 = shown.face_level_min;
-        if (shown.black_target > 0) {
-          line.black_target_per_m2 = shown.black_target;
-          line.lift_max = shown.lift_max;
-        }
-        line.compose_ms = shown.compose_ms;
-        line.cast_ms = cast_ms_;
-        line.shown_ns = shown.shown_ns;
-        line.frame = {shown.frame.wait_ms, shown.frame.set_mask_ms, shown.frame.render_ms,
-                      shown.frame.read_ms, shown.frame.show_ms,     shown.frame.rewarped,
-                      shown.frame.late,    shown.frame.prepared};
-        line.bytes_sent = bytes_sent_;
-        line.bytes_received = bytes_received_;
-        print_(line);
+  job.match = options_.black_match && own_black_ >= 0;
+  for (const auto& [unit, peak] : black_peaks_) job.black_target = std::max(job.black_target, peak);
+  job.core = core_;
+  job.loop = loop_;
+  job.generation = generation_;
+  if (!options_.export_dir.empty() && cause != "left") {
+    job.png =
+        (std::filesystem::path(options_.export_dir) / ("blend-" + std::to_string(id_) + ".png"))
+            .string();
+  }
+  job.to_runner = runner_ != kInvalidNodeId;
+  job.runner_is_self = runner_ == id_;
+  job.own_black = own_black_;
+  job.blacks = blacks_;
+  job.max_lift = options_.max_lift;
+  job.neighbour_faces = neighbour_faces_;
+  const double level = job.level;
+  node.workers().Run<ComposedBlend>(
+      [job = std::move(job)] { return ComposeAndShow(job); },
+      [this, cause, peer, detected, level, noticed_by, &node](ComposedBlend shown) {
+        OnBlendShown(node, cause, peer, detected, level, noticed_by, std::move(shown));
       });
+}
+
+// On a worker: the blend factor (and lift) at the level, sent on to the runner's export, shown,
+// then the masks for each neighbour's leaving prepared in the renderer ahead of time.
+BlendService::ComposedBlend BlendService::ComposeAndShow(const ComposeJob& job) {
+  ComposedBlend out;
+  const Clock::time_point start = Clock::now();
+  cv::Mat factor, alpha, lift;
+  {
+    std::lock_guard<std::mutex> lock(job.core->mutex);
+    if (!job.core->blender || job.core->generation != job.generation) {
+      out.stale = true;
+      return out;
+    }
+    const Blender& blender = *job.core->blender;
+    const double fill = blender.options().fill_limit;
+    out.own_faces = blender.FaceLevelBounds(job.level, fill);
+    const FaceLevels faces = LowestFaceLevels(job.neighbour_faces, out.own_faces);
+    out.faces_lower = faces.size();
+    out.face_level_min = job.level;
+    for (const auto& [face, l] : faces) out.face_level_min = std::min(out.face_level_min, l);
+    factor = blender.Factor(job.level, fill, kInvalidNodeId, faces);
+    if (!job.png.empty()) alpha = blender.Alpha();
+    if (job.match) {
+      out.black_peak = blender.BlackPeak(job.own_black, job.blacks);
+      out.black_target = std::max(job.black_target, out.black_peak);
+      lift = blender.Lift(out.black_target, job.own_black, job.blacks, job.max_lift);
+      cv::minMaxLoc(lift, nullptr, &out.lift_max);
+    }
+  }
+  out.compose_ms = MsSince(start);
+  if (job.to_runner) {
+    cv::Mat bytes;
+    factor.convertTo(bytes, CV_8UC1, 255.0);
+    out.width_px = bytes.cols;
+    out.height_px = bytes.rows;
+    std::vector<uchar> encoded;
+    // zlib's fastest level: the masks are smooth and compress well at any level.
+    if (job.runner_is_self) {
+      out.alpha_values.assign(reinterpret_cast<const char*>(bytes.data), bytes.total());
+    } else if (cv::imencode(".png", bytes, encoded, {cv::IMWRITE_PNG_COMPRESSION, 1})) {
+      out.alpha_png.assign(encoded.begin(), encoded.end());
+    }
+  }
+  if (!alpha.empty()) {
+    cv::Mat picture;
+    alpha.convertTo(picture, CV_8UC1, 255.0);
+    if (Status written = io::WritePngFile(job.png, picture); !written.ok()) {
+      ST_LOG(kWarning) << "blend: " << written.ToString();
+    }
+  }
+  if (!job.loop) return out;
+  uint64_t blend_generation = 0;
+  Expected<int64_t> shown =
+      job.loop->ShowBlend(factor, lift, std::chrono::seconds(10), &blend_generation);
+  if (!shown.ok()) {
+    out.status = shown.status();
+    return out;
+  }
+  out.shown_ns = *shown;
+  out.frame = job.loop->LastMaskFrame();
+  // The masks for a neighbour leaving: the same composition without it (the level and the
+  // black target as now), prepared in the renderer ahead of time.
+  std::map<NodeId, std::pair<cv::Mat, cv::Mat>> standby;
+  {
+    std::lock_guard<std::mutex> lock(job.core->mutex);
+    if (!job.core->blender || job.core->generation != job.generation) return out;
+    const Blender& blender = *job.core->blender;
+    const double fill = blender.options().fill_limit;
+    for (NodeId left : blender.neighbours()) {
+      std::pair<cv::Mat, cv::Mat>& masks = standby[left];
+      const FaceLevels faces = LowestFaceLevels(
+          job.neighbour_faces, blender.FaceLevelBounds(job.level, fill, left), left);
+      masks.first = blender.Factor(job.level, fill, left, faces);
+      if (job.match) {
+        const double target =
+            std::max(job.black_target, blender.BlackPeak(job.own_black, job.blacks, left));
+        masks.second = blender.Lift(target, job.own_black, job.blacks, job.max_lift, left);
+      }
+    }
+  }
+  job.loop->PrepareBlends(blend_generation, std::move(standby));
+  return out;
+}
+
+// On the network thread: the blend shown is told (a black peak, the faces' levels to the
+// neighbours, the alpha to the runner's export) and reported.
+void BlendService::OnBlendShown(NodeRuntime& node, const std::string& cause, NodeId peer,
+                                Clock::time_point detected, double level, const char* noticed_by,
+                                ComposedBlend shown) {
+  if (shown.stale) return;
+  if (!shown.status.ok()) {
+    ST_LOG(kWarning) << "blend: " << shown.status.ToString();
+    return;
+  }
+  if (shown.black_peak > 0) {
+    black_peaks_[id_] = std::max(black_peaks_[id_], shown.black_peak);
+    TellLevel(node);
+  }
+  if (!own_faces_ || *own_faces_ != shown.own_faces) {
+    own_faces_ = std::move(shown.own_faces);
+    for (NodeId to : sent_to_) SendShare(to, /*with_field=*/false, /*answer=*/false, node);
+  }
+  if (!shown.alpha_png.empty() || !shown.alpha_values.empty()) {
+    pending_alpha_ = PendingAlpha{shown.width_px, shown.height_px, std::move(shown.alpha_png),
+                                  std::move(shown.alpha_values), Clock::now()};
+  }
+  report::BlendShown line;
+  line.id = id_;
+  if (cause == "left") {
+    line.reblend = true;
+    line.cause = "left";
+    line.peer = peer;
+    line.detected_ns = SteadyNs(detected);
+    if (noticed_by != nullptr) line.noticed_by = noticed_by;
+  } else {
+    line.cause = cause;
+  }
+  line.neighbours.assign(holding_.begin(), holding_.end());
+  // The overlapping units whose field it does not hold yet (a blend still to come).
+  if (neighbours_) {
+    for (NodeId n : *neighbours_) {
+      if (n != id_ && !holding_.count(n) && !dropped_.count(n)) line.waiting_for.push_back(n);
+    }
+  }
+  line.level_per_m2 = level;
+  // Faces shown below the level (walls met past the correction limit), the lowest.
+  line.faces_below_level = shown.faces_lower;
+  line.face_level_min_per_m2 = shown.face_level_min;
+  if (shown.black_target > 0) {
+    line.black_target_per_m2 = shown.black_target;
+    line.lift_max = shown.lift_max;
+  }
+  line.compose_ms = shown.compose_ms;
+  line.cast_ms = cast_ms_;
+  line.shown_ns = shown.shown_ns;
+  line.frame = {shown.frame.wait_ms, shown.frame.set_mask_ms, shown.frame.render_ms,
+                shown.frame.read_ms, shown.frame.show_ms,     shown.frame.rewarped,
+                shown.frame.late,    shown.frame.prepared};
+  line.bytes_sent = bytes_sent_;
+  line.bytes_received = bytes_received_;
+  print_(line);
 }
 
 Status BlendServiceOptions::Check() const {

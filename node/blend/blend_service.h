@@ -129,6 +129,12 @@ class BlendService : public NodeService {
   // `noticed_by` (a static string, or null): how a neighbour that left was noticed.
   void Compose(NodeRuntime& node, const std::string& cause, NodeId peer,
                std::chrono::steady_clock::time_point detected, const char* noticed_by = nullptr);
+  struct ComposeJob;     // Compose's copy of what the worker needs
+  struct ComposedBlend;  // what the worker composed and showed
+  static ComposedBlend ComposeAndShow(const ComposeJob& job);
+  void OnBlendShown(NodeRuntime& node, const std::string& cause, NodeId peer,
+                    std::chrono::steady_clock::time_point detected, double level,
+                    const char* noticed_by, ComposedBlend shown);
   void SendShare(NodeId to, bool with_field, bool answer, NodeRuntime& node);
   // Looks a neighbour's field up at this projector's pixels (a worker), then recomposes.
   void ApplyField(NodeId from, const DistanceField& field, NodeRuntime& node);
