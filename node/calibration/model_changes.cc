@@ -274,34 +274,16 @@ std::vector<ModelPart> SegmentModelParts(const Scene& model, double structure_he
   return parts;
 }
 
-Expected<ModelChangeReport> DetectModelChanges(const Scene& model,
-                                               std::span<const Eigen::Vector3d> scan_in_table_m,
-                                               const Rigid3d& table_from_model,
-                                               const ModelChangeOptions& options) {
-  ST_RETURN_IF_ERROR(options.Check());
-  const double cpu_start = ThreadCpuSeconds();
-  ModelChangeReport out;
-  const std::vector<ModelPart> parts = SegmentModelParts(model, options.structure_height_m);
-  if (parts.empty()) {
-    out.time_s = ThreadCpuSeconds() - cpu_start;
-    return out;
-  }
-  Eigen::AlignedBox2d region;
-  for (const ModelPart& p : parts) {
-    region.extend(p.bounds_m.min().head<2>());
-    region.extend(p.bounds_m.max().head<2>());
-  }
-  const double margin = options.search_radius_m + 2 * options.cell_m;
-  region.extend(region.min() - Eigen::Vector2d(margin, margin));
-  region.extend(region.max() + Eigen::Vector2d(margin, margin));
-  const Footprints footprints = RasterFootprints(model, parts, region, options.cell_m);
+namespace {
 
-  // Each part's surface for the fit.
+// Each part's surface for the fit.
+std::vector<PartSurface> PartSurfaces(const Scene& model, const std::vector<ModelPart>& parts,
+                                      double sample_spacing_m) {
   std::vector<int> part_of_triangle(model.NumTriangles(), -1);
   for (size_t p = 0; p < parts.size(); ++p) {
     for (int t : parts[p].triangles) part_of_triangle[t] = static_cast<int>(p);
   }
-  const ModelSurface samples = SampleModelSurface(model, options.sample_spacing_m);
+  const ModelSurface samples = SampleModelSurface(model, sample_spacing_m);
   std::vector<PartSurface> surfaces(parts.size());
   for (size_t i = 0; i < samples.points_m.size(); ++i) {
     const int p = part_of_triangle[samples.triangle[i]];
@@ -310,179 +292,176 @@ Expected<ModelChangeReport> DetectModelChanges(const Scene& model,
     surfaces[p].normals.push_back(samples.normals[i]);
   }
   for (PartSurface& s : surfaces) s.Build();
+  return surfaces;
+}
 
-  const Rigid3d model_from_table = table_from_model.Inverse();
-  std::vector<ScanPoint> scan;
-  for (const Eigen::Vector3d& p : scan_in_table_m) {
-    ScanPoint sp;
-    sp.q = model_from_table * p;
-    if (!sp.q.allFinite() || !region.contains(sp.q.head<2>())) continue;
-    sp.up = sp.q.z() > options.structure_height_m;
-    sp.owner = footprints.OwnerAt(sp.q.x(), sp.q.y());
-    scan.push_back(sp);
+// The footprint search's answer for one part: the best translation (the centroid of the
+// equally good ones), its spread, and how many scan points fell on the footprint there.
+struct FootprintFit {
+  Eigen::Vector2d mean_t = Eigen::Vector2d::Zero();
+  Eigen::Vector2d var_t = Eigen::Vector2d::Zero();  // the plateau's spread and the step's
+  int in = 0, up = 0;                               // points on the footprint, of them up
+};
+
+// Footprint search: coarse (4 steps) over the whole radius, then every step around the best
+// coarse translation; the centroid of the best fine translations.
+FootprintFit SearchFootprint(const std::vector<const ScanPoint*>& near,
+                             const Footprints& footprints, int part,
+                             const ModelChangeOptions& options) {
+  auto score_at = [&](const Eigen::Vector2d& t, int* in, int* up) {
+    int score = 0;
+    *in = 0;
+    *up = 0;
+    for (const ScanPoint* sp : near) {
+      if (footprints.OwnerAt(sp->q.x() - t.x(), sp->q.y() - t.y()) != part) continue;
+      ++*in;
+      *up += sp->up;
+      score += sp->up ? 1 : -1;
+    }
+    return score;
+  };
+  const double coarse_step = 4 * options.search_step_m;
+  const int coarse_steps = static_cast<int>(std::floor(options.search_radius_m / coarse_step));
+  int best_coarse = std::numeric_limits<int>::min();
+  Eigen::Vector2d coarse_t = Eigen::Vector2d::Zero();
+  for (int jy = -coarse_steps; jy <= coarse_steps; ++jy) {
+    for (int jx = -coarse_steps; jx <= coarse_steps; ++jx) {
+      const Eigen::Vector2d t(jx * coarse_step, jy * coarse_step);
+      if (t.norm() > options.search_radius_m + 1e-12) continue;
+      int in = 0, up = 0;
+      const int score = score_at(t, &in, &up);
+      if (score > best_coarse || (score == best_coarse && t.norm() < coarse_t.norm())) {
+        best_coarse = score;
+        coarse_t = t;
+      }
+    }
   }
-
-  std::vector<PartPose> found(parts.size());
-  for (size_t p = 0; p < parts.size(); ++p) {
-    const int pi = static_cast<int>(p);
-    const ModelPart& part = parts[p];
-    PartChange change;
-    change.part = pi;
-    change.centre_in_model_m = part.bounds_m.center();
-    change.size_m = part.bounds_m.sizes();
-    const Eigen::Vector2d centre = change.centre_in_model_m.head<2>();
-    // Scan points this part could explain: near it, not on another part's footprint.
-    Eigen::AlignedBox2d reach(part.bounds_m.min().head<2>(), part.bounds_m.max().head<2>());
-    reach.extend(reach.min() - Eigen::Vector2d::Constant(margin));
-    reach.extend(reach.max() + Eigen::Vector2d::Constant(margin));
-    std::vector<const ScanPoint*> near;
-    int up_here = 0;
-    for (const ScanPoint& sp : scan) {
-      if (!reach.contains(sp.q.head<2>())) continue;
-      if (sp.owner >= 0 && sp.owner != pi) continue;
-      near.push_back(&sp);
-      if (sp.owner == pi) {
-        ++change.points_on_footprint;
-        up_here += sp.up;
+  FootprintFit fit;
+  int best_score = std::numeric_limits<int>::min();
+  std::vector<Eigen::Vector2d> tied;
+  for (int jy = -4; jy <= 4; ++jy) {
+    for (int jx = -4; jx <= 4; ++jx) {
+      const Eigen::Vector2d t =
+          coarse_t + Eigen::Vector2d(jx * options.search_step_m, jy * options.search_step_m);
+      int in = 0, up = 0;
+      const int score = score_at(t, &in, &up);
+      if (score > best_score) {
+        best_score = score;
+        fit.in = in;
+        fit.up = up;
+        tied.clear();
       }
+      if (score == best_score) tied.push_back(t);
     }
-    change.support =
-        change.points_on_footprint ? up_here / static_cast<double>(change.points_on_footprint) : 0;
-    // Footprint search: coarse (4 steps) over the whole radius, then every step around the
-    // best coarse translation; the centroid of the best fine translations.
-    auto score_at = [&](const Eigen::Vector2d& t, int* in, int* up) {
-      int score = 0;
-      *in = 0;
-      *up = 0;
-      for (const ScanPoint* sp : near) {
-        if (footprints.OwnerAt(sp->q.x() - t.x(), sp->q.y() - t.y()) != pi) continue;
-        ++*in;
-        *up += sp->up;
-        score += sp->up ? 1 : -1;
-      }
-      return score;
-    };
-    const double coarse_step = 4 * options.search_step_m;
-    const int coarse_steps = static_cast<int>(std::floor(options.search_radius_m / coarse_step));
-    int best_coarse = std::numeric_limits<int>::min();
-    Eigen::Vector2d coarse_t = Eigen::Vector2d::Zero();
-    for (int jy = -coarse_steps; jy <= coarse_steps; ++jy) {
-      for (int jx = -coarse_steps; jx <= coarse_steps; ++jx) {
-        const Eigen::Vector2d t(jx * coarse_step, jy * coarse_step);
-        if (t.norm() > options.search_radius_m + 1e-12) continue;
-        int in = 0, up = 0;
-        const int score = score_at(t, &in, &up);
-        if (score > best_coarse || (score == best_coarse && t.norm() < coarse_t.norm())) {
-          best_coarse = score;
-          coarse_t = t;
-        }
-      }
-    }
-    int best_score = std::numeric_limits<int>::min();
-    int best_in = 0, best_up = 0;
-    std::vector<Eigen::Vector2d> tied;
-    for (int jy = -4; jy <= 4; ++jy) {
-      for (int jx = -4; jx <= 4; ++jx) {
-        const Eigen::Vector2d t =
-            coarse_t + Eigen::Vector2d(jx * options.search_step_m, jy * options.search_step_m);
-        int in = 0, up = 0;
-        const int score = score_at(t, &in, &up);
-        if (score > best_score) {
-          best_score = score;
-          best_in = in;
-          best_up = up;
-          tied.clear();
-        }
-        if (score == best_score) tied.push_back(t);
-      }
-    }
-    // The footprint's estimate and its spread (the plateau of equally good translations, and
-    // the step).
-    Eigen::Vector2d mean_t = Eigen::Vector2d::Zero();
-    for (const Eigen::Vector2d& t : tied) mean_t += t;
-    mean_t /= std::max<size_t>(1, tied.size());
-    Eigen::Vector2d var_t =
-        Eigen::Vector2d::Constant(options.search_step_m * options.search_step_m / 12.0);
-    for (const Eigen::Vector2d& t : tied) {
-      var_t += (t - mean_t).cwiseAbs2() / static_cast<double>(tied.size());
-    }
-    const bool observed_here = change.points_on_footprint >= options.min_points;
-    const double best_support = best_in ? best_up / static_cast<double>(best_in) : 0.0;
-    if (!observed_here && best_in < options.min_points) {
-      change.state = PartState::kUnobserved;
-    } else if (best_in < options.min_points || best_support < options.missing_support) {
-      change.state = PartState::kMissing;
-    } else {
-      PartPose pose;
-      pose.t = mean_t;
-      double rms = 0;
-      int used = 0;
-      Eigen::Matrix3d information;
-      pose =
-          FitPart(surfaces[p], near, centre, pose, options.icp_gate_m, &rms, &used, &information);
-      found[p] = pose;
-      change.moved_by_m = pose.t;
-      change.moved_yaw_deg = pose.yaw_rad * 180.0 / kPi;
-      change.fit_rms_mm = rms * 1e3;
-      change.fit_points = used;
-      // Uncertainty: the fit's information plus the footprint search's (x, y only).
-      Eigen::Matrix3d total = information;
-      total(0, 0) += 1.0 / var_t.x();
-      total(1, 1) += 1.0 / var_t.y();
-      total(2, 2) += 1e-12;  // no yaw from the footprint
-      const Eigen::Matrix3d covariance = total.inverse();
-      change.moved_sigma_mm = std::sqrt(covariance(0, 0) + covariance(1, 1)) * 1e3;
-      change.yaw_sigma_deg = std::sqrt(covariance(2, 2)) * 180.0 / kPi;
-      // Moved: a displacement (translation, or the footprint's corners turned by the yaw)
-      // over the threshold and over 3 sigma of its estimate.
-      const double corner = 0.5 * change.size_m.head<2>().norm();
-      const double shift = pose.t.norm();
-      const double turn = std::abs(pose.yaw_rad) * corner;
-      const bool shifted =
-          shift > options.moved_threshold_m && shift > kSigmas * change.moved_sigma_mm * 1e-3;
-      const bool turned = turn > options.moved_threshold_m &&
-                          std::abs(change.moved_yaw_deg) > kSigmas * change.yaw_sigma_deg;
-      change.state = shifted || turned ? PartState::kMoved : PartState::kPresent;
-      change.displacement_m = std::max(shift, turn);
-      if (change.state == PartState::kPresent ||
-          change.displacement_m <= options.placement_tolerance_m) {
-        ++out.in_place;
-      }
-    }
-    switch (change.state) {
-      case PartState::kPresent:
-        ++out.present;
-        break;
-      case PartState::kMoved:
-        ++out.moved;
-        break;
-      case PartState::kMissing:
-        ++out.missing;
-        break;
-      case PartState::kUnobserved:
-        ++out.unobserved;
-        break;
-    }
-    out.parts.push_back(change);
   }
+  for (const Eigen::Vector2d& t : tied) fit.mean_t += t;
+  fit.mean_t /= std::max<size_t>(1, tied.size());
+  fit.var_t = Eigen::Vector2d::Constant(options.search_step_m * options.search_step_m / 12.0);
+  for (const Eigen::Vector2d& t : tied) {
+    fit.var_t += (t - fit.mean_t).cwiseAbs2() / static_cast<double>(tied.size());
+  }
+  return fit;
+}
 
-  // Up points no part explains, above the model where they stand: extra structure.
+// The fitted pose's uncertainty and whether it moved: a displacement (translation, or the
+// footprint's corners turned by the yaw) over the threshold and over 3 sigma of its estimate.
+void JudgeMove(const PartPose& pose, const Eigen::Matrix3d& information,
+               const Eigen::Vector2d& var_t, const ModelChangeOptions& options,
+               PartChange* change) {
+  // Uncertainty: the fit's information plus the footprint search's (x, y only).
+  Eigen::Matrix3d total = information;
+  total(0, 0) += 1.0 / var_t.x();
+  total(1, 1) += 1.0 / var_t.y();
+  total(2, 2) += 1e-12;  // no yaw from the footprint
+  const Eigen::Matrix3d covariance = total.inverse();
+  change->moved_sigma_mm = std::sqrt(covariance(0, 0) + covariance(1, 1)) * 1e3;
+  change->yaw_sigma_deg = std::sqrt(covariance(2, 2)) * 180.0 / kPi;
+  const double corner = 0.5 * change->size_m.head<2>().norm();
+  const double shift = pose.t.norm();
+  const double turn = std::abs(pose.yaw_rad) * corner;
+  const bool shifted =
+      shift > options.moved_threshold_m && shift > kSigmas * change->moved_sigma_mm * 1e-3;
+  const bool turned = turn > options.moved_threshold_m &&
+                      std::abs(change->moved_yaw_deg) > kSigmas * change->yaw_sigma_deg;
+  change->state = shifted || turned ? PartState::kMoved : PartState::kPresent;
+  change->displacement_m = std::max(shift, turn);
+}
+
+// One part against the scan: unobserved, missing, or found (present or moved) at `*pose`.
+PartChange AssessPart(const ModelPart& part, int pi, const PartSurface& surface,
+                      const std::vector<ScanPoint>& scan, const Footprints& footprints,
+                      double margin, const ModelChangeOptions& options, PartPose* pose) {
+  PartChange change;
+  change.part = pi;
+  change.centre_in_model_m = part.bounds_m.center();
+  change.size_m = part.bounds_m.sizes();
+  const Eigen::Vector2d centre = change.centre_in_model_m.head<2>();
+  // Scan points this part could explain: near it, not on another part's footprint.
+  Eigen::AlignedBox2d reach(part.bounds_m.min().head<2>(), part.bounds_m.max().head<2>());
+  reach.extend(reach.min() - Eigen::Vector2d::Constant(margin));
+  reach.extend(reach.max() + Eigen::Vector2d::Constant(margin));
+  std::vector<const ScanPoint*> near;
+  int up_here = 0;
+  for (const ScanPoint& sp : scan) {
+    if (!reach.contains(sp.q.head<2>())) continue;
+    if (sp.owner >= 0 && sp.owner != pi) continue;
+    near.push_back(&sp);
+    if (sp.owner == pi) {
+      ++change.points_on_footprint;
+      up_here += sp.up;
+    }
+  }
+  change.support =
+      change.points_on_footprint ? up_here / static_cast<double>(change.points_on_footprint) : 0;
+  const FootprintFit fit = SearchFootprint(near, footprints, pi, options);
+  const bool observed_here = change.points_on_footprint >= options.min_points;
+  const double best_support = fit.in ? fit.up / static_cast<double>(fit.in) : 0.0;
+  if (!observed_here && fit.in < options.min_points) {
+    change.state = PartState::kUnobserved;
+    return change;
+  }
+  if (fit.in < options.min_points || best_support < options.missing_support) {
+    change.state = PartState::kMissing;
+    return change;
+  }
+  PartPose start;
+  start.t = fit.mean_t;
+  double rms = 0;
+  int used = 0;
+  Eigen::Matrix3d information;
+  *pose = FitPart(surface, near, centre, start, options.icp_gate_m, &rms, &used, &information);
+  change.moved_by_m = pose->t;
+  change.moved_yaw_deg = pose->yaw_rad * 180.0 / kPi;
+  change.fit_rms_mm = rms * 1e3;
+  change.fit_points = used;
+  JudgeMove(*pose, information, fit.var_t, options, &change);
+  return change;
+}
+
+// Up points no part explains, above the model where they stand, grouped into connected cells:
+// extra structure.
+std::vector<ExtraStructure> FindExtras(const std::vector<ScanPoint>& scan,
+                                       const std::vector<PartChange>& changes,
+                                       const std::vector<PartPose>& found,
+                                       const std::vector<PartSurface>& surfaces,
+                                       const Footprints& footprints,
+                                       const ModelChangeOptions& options) {
   std::map<std::pair<int, int>, std::vector<const ScanPoint*>> cells;
   for (const ScanPoint& sp : scan) {
     if (!sp.up) continue;
     if (sp.q.z() - footprints.TopAt(sp.q.x(), sp.q.y()) <= options.structure_height_m) {
       // At or below the model's surface here: explained unless the part is missing or moved
       // (then the scan should not see it there).
-      if (sp.owner >= 0 && (out.parts[sp.owner].state == PartState::kPresent ||
-                            out.parts[sp.owner].state == PartState::kUnobserved)) {
+      if (sp.owner >= 0 && (changes[sp.owner].state == PartState::kPresent ||
+                            changes[sp.owner].state == PartState::kUnobserved)) {
         continue;
       }
     }
     bool explained = false;
-    for (size_t p = 0; p < parts.size() && !explained; ++p) {
-      const PartState state = out.parts[p].state;
+    for (size_t p = 0; p < changes.size() && !explained; ++p) {
+      const PartState state = changes[p].state;
       if (state != PartState::kPresent && state != PartState::kMoved) continue;
-      const Eigen::Vector3d local = found[p].ToPart(sp.q, out.parts[p].centre_in_model_m.head<2>());
+      const Eigen::Vector3d local = found[p].ToPart(sp.q, changes[p].centre_in_model_m.head<2>());
       size_t k = 0;
       explained = footprints.OwnerAt(local.x(), local.y()) == static_cast<int>(p) ||
                   surfaces[p].Nearest(local, options.icp_gate_m, &k);
@@ -492,6 +471,7 @@ Expected<ModelChangeReport> DetectModelChanges(const Scene& model,
            static_cast<int>(std::floor(sp.q.y() / kExtraCell_m))}]
         .push_back(&sp);
   }
+  std::vector<ExtraStructure> extras;
   std::map<std::pair<int, int>, bool> visited;
   for (const auto& [cell, points] : cells) {
     if (visited[cell]) continue;
@@ -524,8 +504,74 @@ Expected<ModelChangeReport> DetectModelChanges(const Scene& model,
     if (e.points < options.min_extra_points) continue;
     e.centre_in_model_m = box.center();
     e.size_m = box.sizes().head<2>();
-    out.extras.push_back(e);
+    extras.push_back(e);
   }
+  return extras;
+}
+
+}  // namespace
+
+Expected<ModelChangeReport> DetectModelChanges(const Scene& model,
+                                               std::span<const Eigen::Vector3d> scan_in_table_m,
+                                               const Rigid3d& table_from_model,
+                                               const ModelChangeOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
+  const double cpu_start = ThreadCpuSeconds();
+  ModelChangeReport out;
+  const std::vector<ModelPart> parts = SegmentModelParts(model, options.structure_height_m);
+  if (parts.empty()) {
+    out.time_s = ThreadCpuSeconds() - cpu_start;
+    return out;
+  }
+  Eigen::AlignedBox2d region;
+  for (const ModelPart& p : parts) {
+    region.extend(p.bounds_m.min().head<2>());
+    region.extend(p.bounds_m.max().head<2>());
+  }
+  const double margin = options.search_radius_m + 2 * options.cell_m;
+  region.extend(region.min() - Eigen::Vector2d(margin, margin));
+  region.extend(region.max() + Eigen::Vector2d(margin, margin));
+  const Footprints footprints = RasterFootprints(model, parts, region, options.cell_m);
+  const std::vector<PartSurface> surfaces = PartSurfaces(model, parts, options.sample_spacing_m);
+
+  const Rigid3d model_from_table = table_from_model.Inverse();
+  std::vector<ScanPoint> scan;
+  for (const Eigen::Vector3d& p : scan_in_table_m) {
+    ScanPoint sp;
+    sp.q = model_from_table * p;
+    if (!sp.q.allFinite() || !region.contains(sp.q.head<2>())) continue;
+    sp.up = sp.q.z() > options.structure_height_m;
+    sp.owner = footprints.OwnerAt(sp.q.x(), sp.q.y());
+    scan.push_back(sp);
+  }
+
+  std::vector<PartPose> found(parts.size());
+  for (size_t p = 0; p < parts.size(); ++p) {
+    const PartChange change = AssessPart(parts[p], static_cast<int>(p), surfaces[p], scan,
+                                         footprints, margin, options, &found[p]);
+    switch (change.state) {
+      case PartState::kPresent:
+        ++out.present;
+        break;
+      case PartState::kMoved:
+        ++out.moved;
+        break;
+      case PartState::kMissing:
+        ++out.missing;
+        break;
+      case PartState::kUnobserved:
+        ++out.unobserved;
+        break;
+    }
+    const bool found_here =
+        change.state == PartState::kPresent || change.state == PartState::kMoved;
+    if (found_here && (change.state == PartState::kPresent ||
+                       change.displacement_m <= options.placement_tolerance_m)) {
+      ++out.in_place;
+    }
+    out.parts.push_back(change);
+  }
+  out.extras = FindExtras(scan, out.parts, found, surfaces, footprints, options);
   out.time_s = ThreadCpuSeconds() - cpu_start;
   return out;
 }
