@@ -172,23 +172,26 @@ Status BundleOptions::Check() const {
   return OkStatus();
 }
 
-Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
-                                     const std::map<NodeId, Rigid3d>& initial_projector_from_world,
-                                     NodeId root, const BundleOptions& options,
-                                     const BundleWarmStart* warm) {
-  ST_RETURN_IF_ERROR(options.Check());
-  const double cpu_start = ThreadCpuSeconds();
-  std::map<NodeId, UnitBlocks> blocks, factory;
+namespace {
+
+using Points = std::vector<std::array<double, 3>>;
+
+// The parameter blocks each reached unit starts from (a warm start's previous solution where
+// there is one) and the factory's, which the priors pull towards.
+void InitialBlocks(const ClusterObservations& observations,
+                   const std::map<NodeId, Rigid3d>& initial_projector_from_world,
+                   const BundleWarmStart* warm, std::map<NodeId, UnitBlocks>* blocks,
+                   std::map<NodeId, UnitBlocks>* factory) {
   const bool warm_start = warm && warm->previous;
   for (const auto& [id, unit] : observations.units) {
     auto pose = initial_projector_from_world.find(id);
     if (pose == initial_projector_from_world.end()) continue;  // not reached: left out
-    UnitBlocks& b = blocks[id];
+    UnitBlocks& b = (*blocks)[id];
     PoseToArray(pose->second, b.pose);
     PoseToArray(unit.projector_from_camera.Inverse(), b.mount);
     ModelToArrays(unit.projector, b.pk, b.pd);
     ModelToArrays(unit.camera, b.ck, b.cd);
-    factory[id] = b;
+    (*factory)[id] = b;
     if (warm_start && warm->previous->units.count(id)) {
       const UnitModel& w = warm->previous->units.at(id);
       PoseToArray(warm->previous->projector_from_world.at(id), b.pose);
@@ -197,54 +200,48 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
       ModelToArrays(w.camera, b.ck, b.cd);
     }
   }
-  if (!blocks.count(root)) {
-    return InvalidArgumentError("bundle: the root unit " + std::to_string(root) +
-                                " has no initial pose");
-  }
-  BundleResult result;
-  // Triangulate every track from the initial poses.
-  if (warm_start) {
-    result.points_in_world = warm->previous->points_in_world;
-    result.point_track = warm->previous->point_track;
+}
+
+// Every track triangulated from the initial poses (a warm start keeps its previous points).
+void InitialPoints(const ClusterObservations& observations,
+                   const std::map<NodeId, UnitBlocks>& blocks, const BundleWarmStart* warm,
+                   BundleResult* result) {
+  if (warm && warm->previous) {
+    result->points_in_world = warm->previous->points_in_world;
+    result->point_track = warm->previous->point_track;
+    return;
   }
   std::map<NodeId, Rigid3d> initial_poses;
   for (const auto& [id, b] : blocks) initial_poses[id] = PoseFromArray(b.pose);
-  for (size_t t = 0; t < (warm_start ? 0 : observations.tracks.size()); ++t) {
+  for (size_t t = 0; t < observations.tracks.size(); ++t) {
     const std::optional<Eigen::Vector3d> point =
         TriangulateTrack(observations, initial_poses, observations.tracks[t]);
     if (!point) {
-      ++result.report.tracks_untriangulated;
+      ++result->report.tracks_untriangulated;
       continue;
     }
-    result.points_in_world.push_back(*point);
-    result.point_track.push_back(static_cast<int>(t));
+    result->points_in_world.push_back(*point);
+    result->point_track.push_back(static_cast<int>(t));
   }
-  const int n_points = static_cast<int>(result.points_in_world.size());
-  if (n_points < options.min_tracks) {
-    return DegenerateError("bundle: " + std::to_string(n_points) +
-                           " tracks triangulate (at least " + std::to_string(options.min_tracks) +
-                           " needed)");
-  }
-  result.report.tracks_used = n_points;
-  std::vector<std::array<double, 3>> points(n_points);
-  for (int i = 0; i < n_points; ++i) {
-    for (int a = 0; a < 3; ++a) points[i][a] = result.points_in_world[i][a];
-  }
+}
 
-  ceres::Problem::Options problem_options;
-  problem_options.enable_fast_removal = true;
-  ceres::Problem problem(problem_options);
+// One reprojection residual per observation of each point: its projector's pixel and every
+// reached camera's.
+std::vector<Residual> AddObservations(const ClusterObservations& observations,
+                                      const BundleResult& result, const BundleOptions& options,
+                                      std::map<NodeId, UnitBlocks>& blocks, Points& points,
+                                      ceres::Problem* problem) {
   const double inverse_sigma = 1.0 / options.observation_sigma_px;
   std::vector<Residual> residuals;
   ceres::LossFunction* loss =
       options.huber_whitened > 0 ? new ceres::HuberLoss(options.huber_whitened) : nullptr;
-  for (int i = 0; i < n_points; ++i) {
+  for (int i = 0; i < static_cast<int>(points.size()); ++i) {
     const Track& track = observations.tracks[result.point_track[i]];
     UnitBlocks& pb = blocks[track.projector_unit];
     auto* projector_cost = new ceres::AutoDiffCostFunction<ProjectorCost, 2, 6, 4, 5, 3>(
         new ProjectorCost{track.projector_px, inverse_sigma});
     residuals.push_back(
-        {problem.AddResidualBlock(projector_cost, loss, pb.pose, pb.pk, pb.pd, points[i].data()),
+        {problem->AddResidualBlock(projector_cost, loss, pb.pose, pb.pk, pb.pd, points[i].data()),
          track.projector_unit, false, i});
     for (const CameraObservation& o : track.cameras) {
       auto cb = blocks.find(o.camera_unit);
@@ -252,127 +249,133 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
       auto* camera_cost = new ceres::AutoDiffCostFunction<CameraCost, 2, 6, 6, 4, 5, 3>(
           new CameraCost{o.camera_px, inverse_sigma});
       residuals.push_back(
-          {problem.AddResidualBlock(camera_cost, loss, cb->second.pose, cb->second.mount,
-                                    cb->second.ck, cb->second.cd, points[i].data()),
+          {problem->AddResidualBlock(camera_cost, loss, cb->second.pose, cb->second.mount,
+                                     cb->second.ck, cb->second.cd, points[i].data()),
            o.camera_unit, true, i});
     }
   }
-  // The model's surface (second refinement).
-  if (warm_start) {
-    auto* surface_loss = new ceres::HuberLoss(2.0);
-    for (const SurfaceConstraint& s : warm->surface) {
-      if (s.point < 0 || s.point >= n_points) continue;
-      auto* cost = new ceres::AutoDiffCostFunction<PlaneCost, 1, 3>(
-          new PlaneCost{s.on_plane_in_world, s.normal_in_world, 1.0 / warm->surface_sigma_m});
-      problem.AddResidualBlock(cost, surface_loss, points[s.point].data());
-    }
+  return residuals;
+}
+
+// The model's surface (second refinement): points held near the planes they lie on.
+void AddSurface(const BundleWarmStart& warm, Points& points, ceres::Problem* problem) {
+  auto* surface_loss = new ceres::HuberLoss(2.0);
+  for (const SurfaceConstraint& s : warm.surface) {
+    if (s.point < 0 || s.point >= static_cast<int>(points.size())) continue;
+    auto* cost = new ceres::AutoDiffCostFunction<PlaneCost, 1, 3>(
+        new PlaneCost{s.on_plane_in_world, s.normal_in_world, 1.0 / warm.surface_sigma_m});
+    problem->AddResidualBlock(cost, surface_loss, points[s.point].data());
   }
-  // Priors and held groups.
+}
+
+ceres::CostFunction* IntrinsicsPrior(const double* mean, const BundleOptions& options) {
+  auto* p = new PriorCost<4>;
+  for (int i = 0; i < 4; ++i) p->mean[i] = mean[i];
+  p->inverse_sigma[0] = 1.0 / (options.prior_focal_relative * mean[0]);
+  p->inverse_sigma[1] = 1.0 / (options.prior_focal_relative * mean[1]);
+  p->inverse_sigma[2] = p->inverse_sigma[3] = 1.0 / options.prior_principal_point_px;
+  return new ceres::AutoDiffCostFunction<PriorCost<4>, 4, 4>(p);
+}
+
+ceres::CostFunction* DistortionPrior(const double* mean, const BundleOptions& options) {
+  auto* p = new PriorCost<5>;
+  for (int i = 0; i < 5; ++i) p->mean[i] = mean[i];
+  p->inverse_sigma[0] = 1.0 / options.prior_k1;
+  p->inverse_sigma[1] = 1.0 / options.prior_k2;
+  p->inverse_sigma[2] = p->inverse_sigma[3] = 1.0 / options.prior_p;
+  p->inverse_sigma[4] = 1.0 / options.prior_k3;
+  return new ceres::AutoDiffCostFunction<PriorCost<5>, 5, 5>(p);
+}
+
+ceres::CostFunction* MountPrior(const double* mean, const BundleOptions& options) {
   const double rotation_sigma_rad = options.prior_mount_rotation_deg * M_PI / 180.0;
+  auto* p = new PriorCost<6>;
+  for (int i = 0; i < 6; ++i) p->mean[i] = mean[i];
+  for (int i = 0; i < 3; ++i) p->inverse_sigma[i] = 1.0 / rotation_sigma_rad;
+  for (int i = 3; i < 6; ++i) p->inverse_sigma[i] = 1.0 / options.prior_mount_translation_m;
+  return new ceres::AutoDiffCostFunction<PriorCost<6>, 6, 6>(p);
+}
+
+// One side of a unit (its projector or its camera): intrinsics and distortion free under their
+// priors, or held, as the options say; the free ones are listed in the unit's report.
+void FreeLens(double* k, double* d, const double* factory_k, const double* factory_d,
+              bool free_intrinsics, bool free_distortion, const std::string& side,
+              const BundleOptions& options, ceres::Problem* problem, UnitBundleReport* report) {
+  if (free_intrinsics) {
+    problem->AddResidualBlock(IntrinsicsPrior(factory_k, options), nullptr, k);
+    report->free_parameters.push_back(side + " fx fy cx cy");
+  } else {
+    problem->SetParameterBlockConstant(k);
+  }
+  if (free_distortion) {
+    problem->AddResidualBlock(DistortionPrior(factory_d, options), nullptr, d);
+    if (!options.free_k3) problem->SetManifold(d, new ceres::SubsetManifold(5, {4}));
+    report->free_parameters.push_back(side +
+                                      (options.free_k3 ? " k1 k2 p1 p2 k3" : " k1 k2 p1 p2"));
+  } else {
+    problem->SetParameterBlockConstant(d);
+  }
+}
+
+// Priors and held groups: a held unit is constant; the others' lenses and mounts are free under
+// priors towards the factory's, and the root's pose fixes the gauge (unless a warm start or
+// held units do).
+void AddPriors(const std::map<NodeId, UnitBlocks>& factory, NodeId root, bool warm_start,
+               const BundleOptions& options, std::map<NodeId, UnitBlocks>& blocks,
+               ceres::Problem* problem, BundleReport* report) {
   for (auto& [id, b] : blocks) {
+    UnitBundleReport& unit_report = report->units[id];
     if (options.held_units.count(id)) {
       for (double* block : {b.pose, b.mount, b.pk, b.pd, b.ck, b.cd}) {
-        if (problem.HasParameterBlock(block)) problem.SetParameterBlockConstant(block);
+        if (problem->HasParameterBlock(block)) problem->SetParameterBlockConstant(block);
       }
-      result.report.units[id].free_parameters.push_back("none (held)");
+      unit_report.free_parameters.push_back("none (held)");
       continue;
     }
     const UnitBlocks& f = factory.at(id);
-    auto intrinsics_prior = [&](const double* mean) {
-      auto* p = new PriorCost<4>;
-      for (int i = 0; i < 4; ++i) p->mean[i] = mean[i];
-      p->inverse_sigma[0] = 1.0 / (options.prior_focal_relative * mean[0]);
-      p->inverse_sigma[1] = 1.0 / (options.prior_focal_relative * mean[1]);
-      p->inverse_sigma[2] = p->inverse_sigma[3] = 1.0 / options.prior_principal_point_px;
-      return new ceres::AutoDiffCostFunction<PriorCost<4>, 4, 4>(p);
-    };
-    auto distortion_prior = [&](const double* mean) {
-      auto* p = new PriorCost<5>;
-      for (int i = 0; i < 5; ++i) p->mean[i] = mean[i];
-      p->inverse_sigma[0] = 1.0 / options.prior_k1;
-      p->inverse_sigma[1] = 1.0 / options.prior_k2;
-      p->inverse_sigma[2] = p->inverse_sigma[3] = 1.0 / options.prior_p;
-      p->inverse_sigma[4] = 1.0 / options.prior_k3;
-      return new ceres::AutoDiffCostFunction<PriorCost<5>, 5, 5>(p);
-    };
-    auto* mount_prior = new PriorCost<6>;
-    for (int i = 0; i < 6; ++i) mount_prior->mean[i] = f.mount[i];
-    for (int i = 0; i < 3; ++i) mount_prior->inverse_sigma[i] = 1.0 / rotation_sigma_rad;
-    for (int i = 3; i < 6; ++i) {
-      mount_prior->inverse_sigma[i] = 1.0 / options.prior_mount_translation_m;
-    }
-    UnitBundleReport& unit_report = result.report.units[id];
-    const bool has = problem.HasParameterBlock(b.pk);
-    const bool has_camera = problem.HasParameterBlock(b.ck);
+    const bool has = problem->HasParameterBlock(b.pk);
+    const bool has_camera = problem->HasParameterBlock(b.ck);
+    const bool gauge = id == root && !warm_start && options.held_units.empty();
     if (has) {
-      if (options.free_projector_intrinsics) {
-        problem.AddResidualBlock(intrinsics_prior(f.pk), nullptr, b.pk);
-        unit_report.free_parameters.push_back("projector fx fy cx cy");
-      } else {
-        problem.SetParameterBlockConstant(b.pk);
-      }
-      if (options.free_projector_distortion) {
-        problem.AddResidualBlock(distortion_prior(f.pd), nullptr, b.pd);
-        if (!options.free_k3) {
-          problem.SetManifold(b.pd, new ceres::SubsetManifold(5, {4}));
-        }
-        unit_report.free_parameters.push_back(options.free_k3 ? "projector k1 k2 p1 p2 k3"
-                                                              : "projector k1 k2 p1 p2");
-      } else {
-        problem.SetParameterBlockConstant(b.pd);
-      }
-      if (id == root && !warm_start && options.held_units.empty()) {
-        problem.SetParameterBlockConstant(b.pose);
+      FreeLens(b.pk, b.pd, f.pk, f.pd, options.free_projector_intrinsics,
+               options.free_projector_distortion, "projector", options, problem, &unit_report);
+      if (gauge) {
+        problem->SetParameterBlockConstant(b.pose);
       } else {
         unit_report.free_parameters.push_back("pose");
       }
     }
-    if (has_camera) {
-      if (options.free_camera_intrinsics) {
-        problem.AddResidualBlock(intrinsics_prior(f.ck), nullptr, b.ck);
-        unit_report.free_parameters.push_back("camera fx fy cx cy");
-      } else {
-        problem.SetParameterBlockConstant(b.ck);
-      }
-      if (options.free_camera_distortion) {
-        problem.AddResidualBlock(distortion_prior(f.cd), nullptr, b.cd);
-        if (!options.free_k3) problem.SetManifold(b.cd, new ceres::SubsetManifold(5, {4}));
-        unit_report.free_parameters.push_back(options.free_k3 ? "camera k1 k2 p1 p2 k3"
-                                                              : "camera k1 k2 p1 p2");
-      } else {
-        problem.SetParameterBlockConstant(b.cd);
-      }
-      if (options.free_mounts) {
-        problem.AddResidualBlock(new ceres::AutoDiffCostFunction<PriorCost<6>, 6, 6>(mount_prior),
-                                 nullptr, b.mount);
-        unit_report.free_parameters.push_back("mount");
-      } else {
-        delete mount_prior;
-        problem.SetParameterBlockConstant(b.mount);
-      }
-      if (!has && id == root && !warm_start && options.held_units.empty())
-        problem.SetParameterBlockConstant(b.pose);
+    if (!has_camera) continue;
+    FreeLens(b.ck, b.cd, f.ck, f.cd, options.free_camera_intrinsics, options.free_camera_distortion,
+             "camera", options, problem, &unit_report);
+    if (options.free_mounts) {
+      problem->AddResidualBlock(MountPrior(f.mount, options), nullptr, b.mount);
+      unit_report.free_parameters.push_back("mount");
     } else {
-      delete mount_prior;
+      problem->SetParameterBlockConstant(b.mount);
     }
+    if (!has && gauge) problem->SetParameterBlockConstant(b.pose);
   }
+}
 
-  auto rms_px = [&](bool initial) {
-    double sum = 0.0;
-    int n = 0;
-    for (const Residual& r : residuals) {
-      if (!r.id) continue;
-      double cost = 0.0;
-      double v[2];
-      problem.EvaluateResidualBlock(r.id, /*apply_loss_function=*/false, &cost, v, nullptr);
-      sum += (v[0] * v[0] + v[1] * v[1]);
-      ++n;
-    }
-    (void)initial;
-    return n ? std::sqrt(sum / n) * options.observation_sigma_px : 0.0;
-  };
-  result.report.initial_rms_px = rms_px(true);
+// The reprojection residuals' rms, px (the observations kept).
+double RmsPx(ceres::Problem& problem, const std::vector<Residual>& residuals, double sigma_px) {
+  double sum = 0.0;
+  int n = 0;
+  for (const Residual& r : residuals) {
+    if (!r.id) continue;
+    double cost = 0.0;
+    double v[2];
+    problem.EvaluateResidualBlock(r.id, /*apply_loss_function=*/false, &cost, v, nullptr);
+    sum += (v[0] * v[0] + v[1] * v[1]);
+    ++n;
+  }
+  return n ? std::sqrt(sum / n) * sigma_px : 0.0;
+}
 
+// Solves, then drops the observations past outlier_px and solves again, up to options.rounds.
+Status SolveRounds(const BundleOptions& options, std::vector<Residual>& residuals,
+                   ceres::Problem* problem, BundleReport* report) {
   ceres::Solver::Options solver;
   solver.linear_solver_type = ceres::DENSE_SCHUR;
   solver.max_num_iterations = options.max_iterations;
@@ -388,68 +391,71 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
     if (round > 0) {
       // Drop observations the model does not explain; when none is dropped the last round's
       // solution stands.
-      const int dropped_before = result.report.observations_dropped;
+      const int dropped_before = report->observations_dropped;
       for (Residual& r : residuals) {
         if (!r.id) continue;
         double cost = 0.0, v[2];
-        problem.EvaluateResidualBlock(r.id, false, &cost, v, nullptr);
+        problem->EvaluateResidualBlock(r.id, false, &cost, v, nullptr);
         if (std::hypot(v[0], v[1]) * options.observation_sigma_px > options.outlier_px) {
-          problem.RemoveResidualBlock(r.id);
+          problem->RemoveResidualBlock(r.id);
           r.id = nullptr;
-          ++result.report.observations_dropped;
+          ++report->observations_dropped;
         }
       }
       // A handful of dropped observations (under 0.1 %) do not move the solution: the last
       // round stands.
-      if (result.report.observations_dropped - dropped_before <
+      if (report->observations_dropped - dropped_before <
           std::max<int>(1, static_cast<int>(residuals.size() / 1000))) {
         break;
       }
     }
     ceres::Solver::Summary summary;
-    ceres::Solve(solver, &problem, &summary);
-    result.report.iterations += static_cast<int>(summary.iterations.size());
+    ceres::Solve(solver, problem, &summary);
+    report->iterations += static_cast<int>(summary.iterations.size());
     if (options.log_progress) fprintf(stderr, "%s\n", summary.FullReport().c_str());
-    result.report.termination = ceres::TerminationTypeToString(summary.termination_type);
+    report->termination = ceres::TerminationTypeToString(summary.termination_type);
     if (summary.termination_type == ceres::FAILURE || !summary.IsSolutionUsable()) {
-      return NotConvergedError("bundle: Ceres " + result.report.termination + ": " +
-                               summary.message);
+      return NotConvergedError("bundle: Ceres " + report->termination + ": " + summary.message);
     }
   }
-  result.report.final_rms_px = rms_px(false);
-  if (options.estimate_uncertainty) {
-    std::map<NodeId, UnitParameterBlocks> unit_blocks;
-    for (auto& [id, b] : blocks) {
-      unit_blocks[id] = {b.pose, b.mount, b.pk, b.pd, b.ck, b.cd};
-    }
-    std::vector<double*> point_blocks;
-    for (auto& p : points) point_blocks.push_back(p.data());
-    std::vector<ObservationBlock> observed;
-    for (const Residual& r : residuals) {
-      if (!r.id) continue;
-      const Track& track = observations.tracks[result.point_track[r.point]];
-      observed.push_back({r.id, r.unit, r.camera, r.point, track.projector_px});
-    }
-    Expected<BundleUncertainty> uncertainty =
-        EstimateUncertainty(problem, unit_blocks, point_blocks, observed, options, &result.report);
-    if (uncertainty.ok()) {
-      result.uncertainty = std::move(*uncertainty);
-    } else {
-      result.report.uncertainty_note = uncertainty.status().message();
-    }
+  return OkStatus();
+}
+
+void AddUncertainty(const ClusterObservations& observations, const BundleOptions& options,
+                    const std::vector<Residual>& residuals, std::map<NodeId, UnitBlocks>& blocks,
+                    Points& points, ceres::Problem& problem, BundleResult* result) {
+  std::map<NodeId, UnitParameterBlocks> unit_blocks;
+  for (auto& [id, b] : blocks) unit_blocks[id] = {b.pose, b.mount, b.pk, b.pd, b.ck, b.cd};
+  std::vector<double*> point_blocks;
+  for (auto& p : points) point_blocks.push_back(p.data());
+  std::vector<ObservationBlock> observed;
+  for (const Residual& r : residuals) {
+    if (!r.id) continue;
+    const Track& track = observations.tracks[result->point_track[r.point]];
+    observed.push_back({r.id, r.unit, r.camera, r.point, track.projector_px});
   }
-  // Per unit residuals.
+  Expected<BundleUncertainty> uncertainty =
+      EstimateUncertainty(problem, unit_blocks, point_blocks, observed, options, &result->report);
+  if (uncertainty.ok()) {
+    result->uncertainty = std::move(*uncertainty);
+  } else {
+    result->report.uncertainty_note = uncertainty.status().message();
+  }
+}
+
+// Per unit residuals: each unit's projector and camera observations and their rms.
+void ReportPerUnit(ceres::Problem& problem, const std::vector<Residual>& residuals, double sigma_px,
+                   BundleReport* report) {
   std::map<NodeId, std::pair<double, int>> projector_sum, camera_sum;
   for (const Residual& r : residuals) {
     if (!r.id) continue;
     double cost = 0.0, v[2];
     problem.EvaluateResidualBlock(r.id, false, &cost, v, nullptr);
     auto& s = r.camera ? camera_sum[r.unit] : projector_sum[r.unit];
-    s.first +=
-        (v[0] * v[0] + v[1] * v[1]) * options.observation_sigma_px * options.observation_sigma_px;
+    s.first += (v[0] * v[0] + v[1] * v[1]) * sigma_px * sigma_px;
     ++s.second;
   }
-  for (auto& [id, unit_report] : result.report.units) {
+  for (auto& [id, unit_report] : report->units) {
     if (auto it = projector_sum.find(id); it != projector_sum.end() && it->second.second > 0) {
       unit_report.projector_observations = it->second.second;
       unit_report.projector_rms_px = std::sqrt(it->second.first / it->second.second);
@@ -459,6 +465,51 @@ Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
       unit_report.camera_rms_px = std::sqrt(it->second.first / it->second.second);
     }
   }
+}
+
+}  // namespace
+
+Expected<BundleResult> AdjustCluster(const ClusterObservations& observations,
+                                     const std::map<NodeId, Rigid3d>& initial_projector_from_world,
+                                     NodeId root, const BundleOptions& options,
+                                     const BundleWarmStart* warm) {
+  ST_RETURN_IF_ERROR(options.Check());
+  const double cpu_start = ThreadCpuSeconds();
+  std::map<NodeId, UnitBlocks> blocks, factory;
+  const bool warm_start = warm && warm->previous;
+  InitialBlocks(observations, initial_projector_from_world, warm, &blocks, &factory);
+  if (!blocks.count(root)) {
+    return InvalidArgumentError("bundle: the root unit " + std::to_string(root) +
+                                " has no initial pose");
+  }
+  BundleResult result;
+  InitialPoints(observations, blocks, warm, &result);
+  const int n_points = static_cast<int>(result.points_in_world.size());
+  if (n_points < options.min_tracks) {
+    return DegenerateError("bundle: " + std::to_string(n_points) +
+                           " tracks triangulate (at least " + std::to_string(options.min_tracks) +
+                           " needed)");
+  }
+  result.report.tracks_used = n_points;
+  Points points(n_points);
+  for (int i = 0; i < n_points; ++i) {
+    for (int a = 0; a < 3; ++a) points[i][a] = result.points_in_world[i][a];
+  }
+
+  ceres::Problem::Options problem_options;
+  problem_options.enable_fast_removal = true;
+  ceres::Problem problem(problem_options);
+  std::vector<Residual> residuals =
+      AddObservations(observations, result, options, blocks, points, &problem);
+  if (warm_start) AddSurface(*warm, points, &problem);
+  AddPriors(factory, root, warm_start, options, blocks, &problem, &result.report);
+  result.report.initial_rms_px = RmsPx(problem, residuals, options.observation_sigma_px);
+  ST_RETURN_IF_ERROR(SolveRounds(options, residuals, &problem, &result.report));
+  result.report.final_rms_px = RmsPx(problem, residuals, options.observation_sigma_px);
+  if (options.estimate_uncertainty) {
+    AddUncertainty(observations, options, residuals, blocks, points, problem, &result);
+  }
+  ReportPerUnit(problem, residuals, options.observation_sigma_px, &result.report);
   for (const auto& [id, b] : blocks) {
     const UnitModel& in = observations.units.at(id);
     UnitModel out = in;
