@@ -136,269 +136,344 @@ std::vector<NodeId> ResectStarvedUnits(const ClusterObservations& observations,
   return moved;
 }
 
-Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& observations,
-                                       const std::map<NodeId, LocalGeometry>& local,
-                                       const Scene* model, const ClusterSolveOptions& options) {
-  ST_RETURN_IF_ERROR(options.Check());
+StageClock::StageClock(ClusterSolution* out) : out_(out), start_s_(ThreadCpuSeconds()) {}
+
+void StageClock::Done(const std::string& stage) {
+  const double now = ThreadCpuSeconds();
+  out_->stage_time_s[stage] += now - start_s_;
+  start_s_ = now;
+}
+
+namespace {
+
+// One solve of the full path: the bundle from the chained poses (solved again where a unit was
+// starved), the table, the model (its placement chosen building by building, its scale, a
+// second bundle tied to its surface), the units' calibrations.
+class FullSolve {
+ public:
+  FullSolve(NodeId root, const ClusterObservations& observations, const Scene* model,
+            const ClusterSolveOptions& options)
+      : root_(root), observations_(observations), model_(model), options_(options) {}
+
+  Expected<ClusterSolution> Run(const std::map<NodeId, LocalGeometry>& local);
+
+ private:
+  Status SolveBundle(const std::map<NodeId, Rigid3d>& initial);
+  bool Starved(const BundleReport& report) const {
+    return !StarvedUnits(report, options_.bundle_starved_share).empty();
+  }
+  // The table plane through points_ (the root projector's centre, the world origin, above it)
+  // and points_ in its frame.
+  Status FitTableFrame();
+  void PlaceModel(const ModelMatcher& matcher);
+  Expected<ModelRegistration> ChooseCandidate(const ModelMatcher& matcher,
+                                              const std::vector<ModelRegistration>& candidates);
+  Status ScaleFromModel(const ModelMatcher& matcher, const ModelRegistration& found,
+                        Rigid3d* table_from_model);
+  Status RefineWithModel(const ModelMatcher& matcher, Rigid3d* table_from_model);
+  void Finish();
+
+  const NodeId root_;
+  const ClusterObservations& observations_;
+  const Scene* model_;
+  const ClusterSolveOptions& options_;
+  ClusterSolution out_;
+  StageClock clock_{&out_};
+  Status placing_ = OkStatus();  // a failure while the model was placed that ends the solve
+  // The solution so far: poses, units, points, and the bundle whose prediction it keeps.
+  std::map<NodeId, Rigid3d> projector_from_world_;
+  std::map<NodeId, UnitModel> units_;
+  std::vector<Eigen::Vector3d> points_;
+  std::vector<int> point_track_;
+  BundleReport predicting_;
+  std::optional<BundleUncertainty> uncertainty_;
+  bool scale_from_model_ = false;
+  TableFit table_;
+};
+
+Expected<ClusterSolution> FullSolve::Run(const std::map<NodeId, LocalGeometry>& local) {
   const double cpu_start = ThreadCpuSeconds();
-  ClusterSolution out;
-  const std::map<NodeId, Rigid3d> initial = ChainProjectorPoses(root, observations.units, local);
-  for (const auto& [id, unit] : observations.units) {
+  const std::map<NodeId, Rigid3d> initial = ChainProjectorPoses(root_, observations_.units, local);
+  for (const auto& [id, unit] : observations_.units) {
     if (!initial.count(id)) {
-      out.notes.push_back("unit " + std::to_string(id) +
-                          ": no pose relative to the cluster (no camera shares enough points "
-                          "with it); left out");
+      out_.notes.push_back("unit " + std::to_string(id) +
+                           ": no pose relative to the cluster (no camera shares enough points "
+                           "with it); left out");
     }
   }
-  double stage_start = ThreadCpuSeconds();
-  auto stage_done = [&](const std::string& name) {
-    const double now = ThreadCpuSeconds();
-    out.stage_time_s[name] += now - stage_start;
-    stage_start = now;
-  };
-  Expected<BundleResult> bundle = AdjustCluster(observations, initial, root, options.bundle);
+  clock_ = StageClock(&out_);
+  ST_RETURN_IF_ERROR(SolveBundle(initial));
+  ST_RETURN_IF_ERROR(FitTableFrame());
+  clock_.Done("table");
+  if (model_) {
+    const ModelMatcher matcher(*model_, options_.model);
+    PlaceModel(matcher);
+    ST_RETURN_IF_ERROR(placing_);
+  }
+  Finish();
+  out_.time_s = ThreadCpuSeconds() - cpu_start;
+  return std::move(out_);
+}
+
+Status FullSolve::SolveBundle(const std::map<NodeId, Rigid3d>& initial) {
+  Expected<BundleResult> bundle = AdjustCluster(observations_, initial, root_, options_.bundle);
   if (!bundle.ok()) return bundle.status();
-  // Poses chained pair by pair over a long path (grid-12) can start a unit several pixels off:
-  // its tracks fail the triangulation check and the solve sees few of them (grid-12's unit 10:
-  // 33 projector observations of thousands decoded, 22 mm rms). When a unit was so starved,
-  // solve again from the solved poses while they let markedly more tracks in. (Not otherwise:
-  // on sandtable-3, with no unit starved, a second solve took 29 % more tracks, the ones the
-  // first poses rejected, and registered 0.142 mm rms against 0.123.)
-  auto starved = [&](const BundleReport& report) {
-    return !StarvedUnits(report, options.bundle_starved_share).empty();
-  };
-  for (int pass = 1; pass < options.bundle_passes && starved(bundle->report); ++pass) {
-    const int could = TracksThatTriangulate(observations, bundle->projector_from_world);
-    if (could < bundle->report.tracks_used * (1.0 + options.bundle_pass_gain)) break;
+  // Poses chained pair by pair over a long path can start a unit several pixels off: its tracks
+  // fail the triangulation check and the solve sees few of them. When a unit was so starved,
+  // solve again from the solved poses while they let markedly more tracks in (not otherwise: a
+  // second solve with no unit starved takes in the tracks the first poses rejected, and
+  // registers worse).
+  for (int pass = 1; pass < options_.bundle_passes && Starved(bundle->report); ++pass) {
+    const int could = TracksThatTriangulate(observations_, bundle->projector_from_world);
+    if (could < bundle->report.tracks_used * (1.0 + options_.bundle_pass_gain)) break;
     Expected<BundleResult> again =
-        AdjustCluster(observations, bundle->projector_from_world, root, options.bundle);
+        AdjustCluster(observations_, bundle->projector_from_world, root_, options_.bundle);
     if (!again.ok() || again->report.tracks_used <= bundle->report.tracks_used) break;
-    out.notes.push_back(
+    out_.notes.push_back(
         "bundle solved again from its own poses: " + std::to_string(bundle->report.tracks_used) +
         " -> " + std::to_string(again->report.tracks_used) + " tracks");
     bundle = std::move(again);
   }
-  // A unit whose pose was far off, not a few pixels (grid-32 at half resolution: two units 126
-  // and 201 mm off with 43 observations), gains nothing from that. Its projector is resected
-  // instead from the points the other units' cameras triangulate on its light, with its factory
-  // intrinsics, and the bundle solved again from there if that lets more tracks in.
-  if (starved(bundle->report)) {
+  // A unit whose pose was far off, not a few pixels, gains nothing from that. Its projector is
+  // resected instead from the points the other units' cameras triangulate on its light, with
+  // its factory intrinsics, and the bundle solved again from there if that lets more tracks in.
+  if (Starved(bundle->report)) {
     std::map<NodeId, Rigid3d> poses = bundle->projector_from_world;
-    const std::vector<NodeId> moved = ResectStarvedUnits(observations, *bundle, options, &poses);
+    const std::vector<NodeId> moved = ResectStarvedUnits(observations_, *bundle, options_, &poses);
     if (!moved.empty()) {
-      Expected<BundleResult> again = AdjustCluster(observations, poses, root, options.bundle);
+      Expected<BundleResult> again = AdjustCluster(observations_, poses, root_, options_.bundle);
       if (again.ok() && again->report.tracks_used > bundle->report.tracks_used) {
         std::string ids;
         for (NodeId id : moved) ids += (ids.empty() ? "" : ", ") + std::to_string(id);
-        out.notes.push_back("unit(s) " + ids + " resected from the others' points; bundle " +
-                            std::to_string(bundle->report.tracks_used) + " -> " +
-                            std::to_string(again->report.tracks_used) + " tracks");
+        out_.notes.push_back("unit(s) " + ids + " resected from the others' points; bundle " +
+                             std::to_string(bundle->report.tracks_used) + " -> " +
+                             std::to_string(again->report.tracks_used) + " tracks");
         bundle = std::move(again);
       }
     }
   }
-  stage_done("bundle");
-  out.bundle = bundle->report;
-  std::map<NodeId, Rigid3d> projector_from_world = bundle->projector_from_world;
-  std::map<NodeId, UnitModel> units = bundle->units;
-  std::vector<Eigen::Vector3d> points = bundle->points_in_world;
-  // The prediction of the bundle whose points and poses the solution keeps.
-  BundleReport predicting = bundle->report;
-  std::optional<BundleUncertainty> uncertainty = bundle->uncertainty;
-  bool scale_from_model = false;
+  clock_.Done("bundle");
+  out_.bundle = bundle->report;
+  projector_from_world_ = bundle->projector_from_world;
+  units_ = bundle->units;
+  points_ = bundle->points_in_world;
+  point_track_ = bundle->point_track;
+  predicting_ = bundle->report;
+  uncertainty_ = bundle->uncertainty;
+  return OkStatus();
+}
 
-  // The root projector's centre (the world origin) is above the table.
-  Expected<TableFit> table = FitTable(points, options.plane, Eigen::Vector3d::Zero());
+Status FullSolve::FitTableFrame() {
+  Expected<TableFit> table = FitTable(points_, options_.plane, Eigen::Vector3d::Zero());
   if (!table.ok()) return DegenerateError("table plane: " + table.status().message());
-  auto to_table = [&](const TableFit& fit) {
-    out.points_in_table_m.clear();
-    for (const Eigen::Vector3d& p : points)
-      out.points_in_table_m.push_back(fit.table_from_world * p);
-  };
-  to_table(*table);
-  stage_done("table");
+  table_ = *table;
+  out_.points_in_table_m.clear();
+  for (const Eigen::Vector3d& p : points_)
+    out_.points_in_table_m.push_back(table_.table_from_world * p);
+  return OkStatus();
+}
 
-  std::optional<ModelMatcher> matcher;
-  if (model) matcher.emplace(*model, options.model);
-  if (matcher) {
-    Expected<std::vector<ModelRegistration>> candidates =
-        matcher->RegisterCandidates(out.points_in_table_m, options.model_candidates);
-    stage_done("model");
-    Expected<ModelRegistration> found = candidates.ok()
-                                            ? Expected<ModelRegistration>(candidates->front())
-                                            : Expected<ModelRegistration>(candidates.status());
-    // What each candidate placement shows, building by building (in the model frame, so before
-    // its scale is applied: the scan divided by it). Of placements that fit about as well (a
-    // city's regular blocks), the one that puts the most buildings in place (present, or within
-    // the change report's placement tolerance: a wide site's scan is off by some mm here and
-    // there) is taken, the most present first among equals (judged in order, stopping at one
-    // that puts 80 % of them in place).
-    // If even that one leaves most of the buildings it saw further off or missing, the table
-    // matched the table: the model is not what stands there, and neither its placement nor its
-    // scale is used.
-    if (found.ok()) {
-      std::pair<int, int> best_count(-1, -1);  // in place, present
-      for (ModelRegistration candidate : *candidates) {
-        if (candidate.coarse_only) {
-          Expected<ModelRegistration> refined = matcher->Refine(
-              out.points_in_table_m, candidate.table_from_model, options.model.estimate_scale);
-          if (!refined.ok()) continue;
-          refined->coarse_score = candidate.coarse_score;
-          refined->candidates_tried = candidate.candidates_tried;
-          refined->structure_fraction = candidate.structure_fraction;
-          candidate = *refined;
-        }
-        std::vector<Eigen::Vector3d> in_model_scale = out.points_in_table_m;
-        if (candidate.scale > 0) {
-          for (Eigen::Vector3d& p : in_model_scale) p /= candidate.scale;
-        }
-        Expected<ModelChangeReport> changes =
-            DetectModelChanges(*model, in_model_scale, candidate.table_from_model, options.changes);
-        if (!changes.ok()) {
-          out.notes.push_back("change report: " + changes.status().message());
-          break;
-        }
-        const int observed = changes->present + changes->moved + changes->missing;
-        const bool convincing = changes->in_place >= kConvincingPresent * observed;
-        const std::pair<int, int> count(changes->in_place, changes->present);
-        if (count > best_count) {
-          best_count = count;
-          found = candidate;
-          out.changes = std::move(*changes);
-        }
-        if (convincing) break;  // the next candidates only cost time
-      }
-      stage_done("changes");
-      if (out.changes) {
-        const int observed = out.changes->present + out.changes->moved + out.changes->missing;
-        if (observed >= kMinJudgedBuildings && 2 * out.changes->in_place < observed) {
-          found = NotFoundError(
-              "model registration: the model does not match the scanned surface (of " +
-              std::to_string(observed) + " buildings seen, " +
-              std::to_string(out.changes->in_place) + " stand within " +
-              std::to_string(std::lround(options.changes.placement_tolerance_m * 1e3)) +
-              " mm of where the best placement puts them, " +
-              std::to_string(observed - out.changes->in_place - out.changes->missing) +
-              " further off, " + std::to_string(out.changes->missing) + " missing; " +
-              std::to_string(out.changes->extras.size()) + " structures not in the model)");
-        }
-      }
+// What each candidate placement shows, building by building (in the model frame, so before its
+// scale is applied: the scan divided by it). Of placements that fit about as well (a city's
+// regular blocks), the one that puts the most buildings in place (present, or within the change
+// report's placement tolerance: a wide site's scan is off by some mm here and there) is taken,
+// the most present first among equals (judged in order, stopping at one that puts 80 % of them
+// in place). If even that one leaves most of the buildings it saw further off or missing, the
+// table matched the table: the model is not what stands there, and neither its placement nor
+// its scale is used.
+Expected<ModelRegistration> FullSolve::ChooseCandidate(
+    const ModelMatcher& matcher, const std::vector<ModelRegistration>& candidates) {
+  Expected<ModelRegistration> found = candidates.front();
+  std::pair<int, int> best_count(-1, -1);  // in place, present
+  for (ModelRegistration candidate : candidates) {
+    if (candidate.coarse_only) {
+      Expected<ModelRegistration> refined = matcher.Refine(
+          out_.points_in_table_m, candidate.table_from_model, options_.model.estimate_scale);
+      if (!refined.ok()) continue;
+      refined->coarse_score = candidate.coarse_score;
+      refined->candidates_tried = candidate.candidates_tried;
+      refined->structure_fraction = candidate.structure_fraction;
+      candidate = *refined;
     }
-    // A placement that needs the model scaled by more than max_scale_correction is not this
-    // model in metres: its buildings would be drawn at the wrong size and place, so neither its
-    // placement nor its scale is used.
-    if (found.ok() && options.scale_from_model &&
-        !(std::abs(found->scale - 1.0) <= options.max_scale_correction)) {
-      found = NotFoundError("model registration: the best placement needs the model at scale " +
-                            std::to_string(found->scale) + ", more than " +
-                            std::to_string(std::lround(options.max_scale_correction * 100)) +
-                            " % from 1: not this model in metres; not placed");
+    std::vector<Eigen::Vector3d> in_model_scale = out_.points_in_table_m;
+    if (candidate.scale > 0) {
+      for (Eigen::Vector3d& p : in_model_scale) p /= candidate.scale;
     }
-    if (!found.ok()) {
-      out.notes.push_back(found.status().message());
-    } else {
-      double scale = found->scale;
-      std::optional<Rigid3d> table_from_model = found->table_from_model;
-      if (options.scale_from_model) {  // within max_scale_correction: refused above otherwise
-        // Lengths / scale: points, projector translations, mount translations.
-        const double k = 1.0 / scale;
-        for (Eigen::Vector3d& p : points) p *= k;
-        for (auto& [id, pose] : projector_from_world) pose.translation *= k;
-        for (auto& [id, unit] : units) unit.projector_from_camera.translation *= k;
-        out.scale_correction = k;
-        scale_from_model = true;
-        table = FitTable(points, options.plane, Eigen::Vector3d::Zero());
-        if (!table.ok()) return DegenerateError("table plane: " + table.status().message());
-        to_table(*table);
-        Expected<ModelRegistration> refined =
-            matcher->Refine(out.points_in_table_m, found->table_from_model, false);
-        if (refined.ok()) table_from_model = refined->table_from_model;
-      }
-      if (options.refine_with_model && table_from_model) {
-        // Second refinement: the points tied to the model's surface.
-        const Rigid3d world_from_model = table->table_from_world.Inverse() * *table_from_model;
-        const Rigid3d model_from_world = world_from_model.Inverse();
-        BundleResult previous;
-        previous.units = units;
-        previous.projector_from_world = projector_from_world;
-        previous.points_in_world = points;
-        previous.point_track = bundle->point_track;
-        BundleWarmStart warm;
-        warm.previous = &previous;
-        warm.surface_sigma_m = options.model_surface_sigma_m;
-        for (size_t i = 0; i < points.size(); ++i) {
-          Eigen::Vector3d q, n;
-          if (matcher->SurfacePlaneNear(model_from_world * points[i],
-                                        options.model_surface_max_distance_m, &q, &n)) {
-            warm.surface.push_back(
-                {static_cast<int>(i), world_from_model * q, world_from_model.rotation * n});
-          }
-        }
-        stage_done("model");
-        Expected<BundleResult> second =
-            AdjustCluster(observations, projector_from_world, root, options.bundle, &warm);
-        stage_done("model_bundle");
-        if (second.ok()) {
-          out.model_bundle = second->report;
-          predicting = second->report;
-          uncertainty = second->uncertainty;
-          units = second->units;
-          projector_from_world = second->projector_from_world;
-          points = second->points_in_world;
-          table = FitTable(points, options.plane, Eigen::Vector3d::Zero());
-          if (!table.ok()) return DegenerateError("table plane: " + table.status().message());
-          to_table(*table);
-          // The model stands where it was, in the refined world frame.
-          table_from_model = table->table_from_world * world_from_model;
-        } else {
-          out.notes.push_back("refinement against the model: " + second.status().message());
-        }
-      }
-      Expected<ModelRegistration> final_fit =
-          matcher->Refine(out.points_in_table_m, *table_from_model, false);
-      stage_done("model");
-      if (final_fit.ok()) {
-        final_fit->coarse_score = found->coarse_score;
-        final_fit->candidates_tried = found->candidates_tried;
-        final_fit->structure_fraction = found->structure_fraction;
-        final_fit->by_outline = found->by_outline;
-        final_fit->scale = scale;
-        final_fit->relief_scale = found->relief_scale;
-        out.model = *final_fit;
-      } else {
-        out.notes.push_back(final_fit.status().message());
-        out.model = *found;
-      }
+    Expected<ModelChangeReport> changes =
+        DetectModelChanges(*model_, in_model_scale, candidate.table_from_model, options_.changes);
+    if (!changes.ok()) {
+      out_.notes.push_back("change report: " + changes.status().message());
+      break;
+    }
+    const int observed = changes->present + changes->moved + changes->missing;
+    const bool convincing = changes->in_place >= kConvincingPresent * observed;
+    const std::pair<int, int> count(changes->in_place, changes->present);
+    if (count > best_count) {
+      best_count = count;
+      found = candidate;
+      out_.changes = std::move(*changes);
+    }
+    if (convincing) break;  // the next candidates only cost time
+  }
+  clock_.Done("changes");
+  if (!out_.changes) return found;
+  const ModelChangeReport& c = *out_.changes;
+  const int observed = c.present + c.moved + c.missing;
+  if (observed >= kMinJudgedBuildings && 2 * c.in_place < observed) {
+    return NotFoundError("model registration: the model does not match the scanned surface (of " +
+                         std::to_string(observed) + " buildings seen, " +
+                         std::to_string(c.in_place) + " stand within " +
+                         std::to_string(std::lround(options_.changes.placement_tolerance_m * 1e3)) +
+                         " mm of where the best placement puts them, " +
+                         std::to_string(observed - c.in_place - c.missing) + " further off, " +
+                         std::to_string(c.missing) + " missing; " +
+                         std::to_string(c.extras.size()) + " structures not in the model)");
+  }
+  return found;
+}
+
+// Lengths / scale (within max_scale_correction): points, projector translations, mount
+// translations; the table fitted again and the placement refined at the new scale.
+Status FullSolve::ScaleFromModel(const ModelMatcher& matcher, const ModelRegistration& found,
+                                 Rigid3d* table_from_model) {
+  const double k = 1.0 / found.scale;
+  for (Eigen::Vector3d& p : points_) p *= k;
+  for (auto& [id, pose] : projector_from_world_) pose.translation *= k;
+  for (auto& [id, unit] : units_) unit.projector_from_camera.translation *= k;
+  out_.scale_correction = k;
+  scale_from_model_ = true;
+  ST_RETURN_IF_ERROR(FitTableFrame());
+  Expected<ModelRegistration> refined =
+      matcher.Refine(out_.points_in_table_m, found.table_from_model, false);
+  if (refined.ok()) *table_from_model = refined->table_from_model;
+  return OkStatus();
+}
+
+// Second refinement: the points tied to the model's surface.
+Status FullSolve::RefineWithModel(const ModelMatcher& matcher, Rigid3d* table_from_model) {
+  const Rigid3d world_from_model = table_.table_from_world.Inverse() * *table_from_model;
+  const Rigid3d model_from_world = world_from_model.Inverse();
+  BundleResult previous;
+  previous.units = units_;
+  previous.projector_from_world = projector_from_world_;
+  previous.points_in_world = points_;
+  previous.point_track = point_track_;
+  BundleWarmStart warm;
+  warm.previous = &previous;
+  warm.surface_sigma_m = options_.model_surface_sigma_m;
+  for (size_t i = 0; i < points_.size(); ++i) {
+    Eigen::Vector3d q, n;
+    if (matcher.SurfacePlaneNear(model_from_world * points_[i],
+                                 options_.model_surface_max_distance_m, &q, &n)) {
+      warm.surface.push_back(
+          {static_cast<int>(i), world_from_model * q, world_from_model.rotation * n});
     }
   }
-  out.table_from_world = table->table_from_world;
-  out.frame = table->frame;
-  out.table_points = table->table_points;
-  out.table_plane_rms_mm = table->rms_mm;
+  clock_.Done("model");
+  Expected<BundleResult> second =
+      AdjustCluster(observations_, projector_from_world_, root_, options_.bundle, &warm);
+  clock_.Done("model_bundle");
+  if (!second.ok()) {
+    out_.notes.push_back("refinement against the model: " + second.status().message());
+    return OkStatus();
+  }
+  out_.model_bundle = second->report;
+  predicting_ = second->report;
+  uncertainty_ = second->uncertainty;
+  units_ = second->units;
+  projector_from_world_ = second->projector_from_world;
+  points_ = second->points_in_world;
+  ST_RETURN_IF_ERROR(FitTableFrame());
+  // The model stands where it was, in the refined world frame.
+  *table_from_model = table_.table_from_world * world_from_model;
+  return OkStatus();
+}
+
+void FullSolve::PlaceModel(const ModelMatcher& matcher) {
+  Expected<std::vector<ModelRegistration>> candidates =
+      matcher.RegisterCandidates(out_.points_in_table_m, options_.model_candidates);
+  clock_.Done("model");
+  Expected<ModelRegistration> found = candidates.ok()
+                                          ? ChooseCandidate(matcher, *candidates)
+                                          : Expected<ModelRegistration>(candidates.status());
+  // A placement that needs the model scaled by more than max_scale_correction is not this
+  // model in metres: its buildings would be drawn at the wrong size and place, so neither its
+  // placement nor its scale is used.
+  if (found.ok() && options_.scale_from_model &&
+      !(std::abs(found->scale - 1.0) <= options_.max_scale_correction)) {
+    found = NotFoundError("model registration: the best placement needs the model at scale " +
+                          std::to_string(found->scale) + ", more than " +
+                          std::to_string(std::lround(options_.max_scale_correction * 100)) +
+                          " % from 1: not this model in metres; not placed");
+  }
+  if (!found.ok()) {
+    out_.notes.push_back(found.status().message());
+    return;
+  }
+  Rigid3d table_from_model = found->table_from_model;
+  if (options_.scale_from_model) {
+    placing_ = ScaleFromModel(matcher, *found, &table_from_model);
+    if (!placing_.ok()) return;
+  }
+  if (options_.refine_with_model) {
+    placing_ = RefineWithModel(matcher, &table_from_model);
+    if (!placing_.ok()) return;
+  }
+  Expected<ModelRegistration> final_fit =
+      matcher.Refine(out_.points_in_table_m, table_from_model, false);
+  clock_.Done("model");
+  if (!final_fit.ok()) {
+    out_.notes.push_back(final_fit.status().message());
+    out_.model = *found;
+    return;
+  }
+  final_fit->coarse_score = found->coarse_score;
+  final_fit->candidates_tried = found->candidates_tried;
+  final_fit->structure_fraction = found->structure_fraction;
+  final_fit->by_outline = found->by_outline;
+  final_fit->scale = found->scale;
+  final_fit->relief_scale = found->relief_scale;
+  out_.model = *final_fit;
+}
+
+// The table frame's report, the scan's height, each unit's calibration on the table and its
+// predicted error.
+void FullSolve::Finish() {
+  out_.table_from_world = table_.table_from_world;
+  out_.frame = table_.frame;
+  out_.table_points = table_.table_points;
+  out_.table_plane_rms_mm = table_.rms_mm;
   std::vector<double> heights;
-  for (const Eigen::Vector3d& p : out.points_in_table_m) heights.push_back(p.z());
+  for (const Eigen::Vector3d& p : out_.points_in_table_m) heights.push_back(p.z());
   if (!heights.empty()) {
     const size_t k = std::min(heights.size() - 1, static_cast<size_t>(heights.size() * 0.999));
     std::nth_element(heights.begin(), heights.begin() + static_cast<std::ptrdiff_t>(k),
                      heights.end());
-    out.max_height_mm = heights[k] * 1e3;
+    out_.max_height_mm = heights[k] * 1e3;
   }
-  out.planar = out.max_height_mm < options.planar_threshold_mm;
-
-  for (const auto& [id, unit] : units) {
-    out.calibrations[id] = SolvedUnitCalibration(
-        id, unit, out.table_from_world * projector_from_world.at(id).Inverse(), out);
+  out_.planar = out_.max_height_mm < options_.planar_threshold_mm;
+  for (const auto& [id, unit] : units_) {
+    out_.calibrations[id] = SolvedUnitCalibration(
+        id, unit, out_.table_from_world * projector_from_world_.at(id).Inverse(), out_);
   }
-  if (uncertainty) {
+  if (uncertainty_) {
     TablePredictionOptions prediction;
-    prediction.scale_follows_the_model = scale_from_model;
-    PredictOnTable(predicting, *uncertainty, out.points_in_table_m, &out.calibrations, prediction);
+    prediction.scale_follows_the_model = scale_from_model_;
+    PredictOnTable(predicting_, *uncertainty_, out_.points_in_table_m, &out_.calibrations,
+                   prediction);
   }
-  if (!predicting.uncertainty_note.empty()) {
-    out.notes.push_back("predicted error: " + predicting.uncertainty_note);
+  if (!predicting_.uncertainty_note.empty()) {
+    out_.notes.push_back("predicted error: " + predicting_.uncertainty_note);
   }
-  out.time_s = ThreadCpuSeconds() - cpu_start;
-  return out;
+}
+
+}  // namespace
+
+Expected<ClusterSolution> SolveCluster(NodeId root, const ClusterObservations& observations,
+                                       const std::map<NodeId, LocalGeometry>& local,
+                                       const Scene* model, const ClusterSolveOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
+  return FullSolve(root, observations, model, options).Run(local);
 }
 
 Status ClusterSolveOptions::Check() const {

@@ -84,6 +84,18 @@ struct ClusterSolution {
   std::map<std::string, double> stage_time_s;
 };
 
+// Adds the thread CPU time since the last stage (or construction) to a solution's
+// stage_time_s under a stage's name.
+class StageClock {
+ public:
+  explicit StageClock(ClusterSolution* out);
+  void Done(const std::string& stage);
+
+ private:
+  ClusterSolution* out_;
+  double start_s_;
+};
+
 // A unit's calibration from a solve: its (refined) models, its pose on the table, the model's
 // placement when the solution found one, its residuals from the solution's bundle report.
 UnitCalibration SolvedUnitCalibration(NodeId id, const UnitModel& unit,
