@@ -14,6 +14,7 @@
 #include "node/app/self_calibration_runner.h"
 #include "node/calibration/join_solver.h"
 #include "node/calibration/schedule.h"
+#include "node/calibration/site_solve.h"
 #include "proto/convert.h"
 #include "proto/envelope_stamper.h"
 
@@ -286,25 +287,20 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
     bool fell_back = false;
   };
   std::shared_ptr<const Scene> model = model_;
-  const ClusterSolveOptions solve_options = options_.solve;
-  const PlanarSolveOptions planar_options = options_.planar;
+  SiteSolveOptions site_options;
+  site_options.full = options_.solve;
+  site_options.planar = options_.planar;
   node.workers().Run<Solved>(
-      [observations = std::move(observations), local = std::move(local), root, model, solve_options,
-       planar_options, planar] {
+      [observations = std::move(observations), local = std::move(local), root, model, site_options,
+       planar] {
         Solved s;
         const double t0 = ThreadCpuSeconds();
-        Expected<ClusterSolution> solved =
-            planar ? SolvePlanarCluster(root, observations, model.get(), planar_options)
-                   : SolveCluster(root, observations, local, model.get(), solve_options);
-        if (planar && !solved.ok()) {
-          // The full path still has every correspondence.
-          const std::string why = solved.status().message();
-          solved = SolveCluster(root, observations, local, model.get(), solve_options);
-          if (solved.ok()) solved->notes.push_back("planar path failed (" + why + "); full path");
-          s.fell_back = true;
-        }
+        Expected<SiteSolveResult> solved =
+            SolveSite(root, observations, local, model.get(),
+                      planar ? SitePath::kPlanar : SitePath::kFull, site_options);
         if (solved.ok()) {
-          s.solution = std::move(*solved);
+          s.fell_back = solved->fell_back;
+          s.solution = std::move(solved->solution);
           Expected<MpcdiSite> site = SiteAsMpcdi(*s.solution, model.get());
           if (site.ok()) {
             s.mpcdi = std::make_shared<const MpcdiSite>(std::move(*site));

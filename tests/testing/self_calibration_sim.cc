@@ -155,28 +155,15 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
   const Scene model = MovedScene(options.model ? *options.model : scene, options.model_from_table);
   const NodeId root = observations.units.begin()->first;
   if (options.observations_out) *options.observations_out = observations;
-  Expected<node::ClusterSolution> solution = node::ClusterSolution{};
-  if (options.planar_path) {
-    solution = node::SolvePlanarCluster(root, observations, options.use_model ? &model : nullptr,
-                                        options.planar);
-  } else {
-    // Local geometry per node.
-    std::map<NodeId, CameraModel> cameras;
-    for (const auto& [id, unit] : observations.units) cameras[id] = unit.camera;
-    std::map<NodeId, node::LocalGeometry> local;
-    for (const auto& [id, unit] : observations.units) {
-      std::vector<node::Track> own;
-      for (const node::Track& t : observations.tracks) {
-        if (t.projector_unit == id) own.push_back(t);
-      }
-      Expected<node::LocalGeometry> geometry = node::EstimateLocalGeometry(unit, cameras, own);
-      if (geometry.ok()) local[id] = *geometry;
-    }
-    solution = node::SolveCluster(root, observations, local, options.use_model ? &model : nullptr,
-                                  options.solve);
-  }
+  const std::map<NodeId, node::LocalGeometry> local = node::LocalGeometries(observations);
+  node::SiteSolveOptions site_options;
+  site_options.full = options.solve;
+  site_options.planar = options.planar;
+  Expected<node::SiteSolveResult> solution = node::SolveSite(
+      root, observations, local, options.use_model ? &model : nullptr,
+      options.planar_path ? node::SitePath::kPlanar : node::SitePath::kFull, site_options);
   if (!solution.ok()) return solution.status();
-  result.solution = std::move(*solution);
+  result.solution = std::move(solution->solution);
   // Metric.
   std::vector<sim::EstimatedRegistration> estimates;
   for (const auto& [id, c] : result.solution.calibrations) {

@@ -12,6 +12,7 @@
 #include "common/scene/scene.h"
 #include "node/calibration/cluster_solver.h"
 #include "node/calibration/planar_solver.h"
+#include "node/calibration/site_solve.h"
 #include "node/calibration/structured_light_plan.h"
 #include "sim/lab/registration_metric.h"
 #include "sim/site/factory_calibration.h"
