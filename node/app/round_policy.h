@@ -1,8 +1,9 @@
 // RoundPolicy: whether a unit starts a self-calibration round now, and which (docs/calibration.md,
 // "Who runs a round"). A pure function of what the unit knows: the member list and each
 // member's calibration state and link, the rounds it ran, the calibration it holds and who gave
-// it, clocks. SelfCalibrationService gathers the view, asks, and carries the decision out; the
-// table-driven tests in tests/node/app/round_policy_test.cc cover every branch.
+// it, clocks. CalibrationRunner (calibration_runner.h) gathers the view, asks, and carries the
+// decision out; the table-driven tests in tests/node/app/round_policy_test.cc cover every
+// branch.
 //
 // The rules, in order:
 //   - No camera, not registered, or no member list: nothing. A round of its own still running:
@@ -50,7 +51,7 @@ struct RoundMember {
   bool linked = false;  // this unit itself, or a peer whose heartbeat came
 };
 
-// What a unit knows when it asks (SelfCalibrationService::RoundViewNow).
+// What a unit knows when it asks (CalibrationRunner::RoundViewNow).
 struct RoundView {
   NodeId self = kInvalidNodeId;
   bool has_camera = false;

@@ -1,24 +1,25 @@
 // SelfCalibrationService: the node's part in the cluster's structured-light self-calibration
 // (docs/calibration.md), over the peer sockets, with no process outside the nodes deciding.
 //
-// Every node serves the steps of a round: SHOW (black, white or a pattern frame on its
-// projector), CAPTURE (a picture with its camera, kept under a slot; with a reference slot it
-// answers how many pixels are lit against it), DECODE (its captures of one projector's
-// sequence -> projector-grid correspondences, sent to the projecting node, neighbours only),
-// LOCAL (the correspondences of its own projector -> its triangulated footprint and its pose
+// Two classes do the work, and this service routes each message to one of them: the unit's side
+// (calibration_unit.h), on every node, and the runner's (calibration_runner.h), which acts on
+// the node the round policy elects. Every node serves the steps of a round: SHOW (black, white or a
+// pattern frame on its projector), CAPTURE (a picture with its camera, kept under a slot; with a
+// reference slot it answers how many pixels are lit against it), DECODE (its captures of one
+// projector's sequence -> projector-grid correspondences, sent to the projecting node, neighbours
+// only), LOCAL (the correspondences of its own projector -> its triangulated footprint and its pose
 // relative to the cameras that share its points, sent to the runner). Device calls and long
 // work run on the node's workers; the network thread never blocks.
 //
 // Who runs a round and when is the round policy (round_policy.h): the lowest id among the
 // members that have a projector and a camera, once the member list has not changed for
 // `settle` and every member is a linked peer, a rule every node applies to the same member
-// list. The runner runs the pre-pass (one black
-// reference, then each projector white alone: which cameras see which projectors), colours
-// the conflict graph (schedule.h), plans each projector's patterns from what its cameras
-// resolve (structured_light_plan.h), runs the colour classes' sequences, collects the
-// projecting nodes' inputs, solves the cluster on a worker (cluster_solver.h) and sends each
-// node its CalibrationResult. A node that has not answered a step when the stage has made no
-// progress (no answer from any unit) for step_timeout is left out of the rest of the round
+// list. The runner runs the pre-pass (one black reference, then each projector white alone: which
+// cameras see which projectors), colours the conflict graph (schedule.h), plans each projector's
+// patterns from what its cameras resolve (structured_light_plan.h), runs the colour classes'
+// sequences, collects the projecting nodes' inputs, solves the site on a worker (site_solve.h) and
+// sends each node its CalibrationResult. A node that has not answered a step when the stage has
+// made no progress (no answer from any unit) for step_timeout is left out of the rest of the round
 // (its log line and the report name it); the others finish.
 // Lost messages (a lossy link): the runner sends a step again every step_retry while it is
 // unanswered; a node answers a step it has already answered with the same messages again (its
@@ -42,6 +43,7 @@
 #include "common/io/mpcdi.h"
 #include "common/io/unit_calibration_file.h"
 #include "common/scene/scene.h"
+#include "node/app/calibration_link.h"
 #include "node/app/round_policy.h"
 #include "node/calibration/calibration_check.h"
 #include "node/calibration/cluster_solver.h"
@@ -127,7 +129,12 @@ struct SelfCalibrationOutcome {
 Expected<report::Calibrated> ExportSelfCalibration(const SelfCalibrationOutcome& outcome, NodeId id,
                                                    const std::string& export_dir);
 
-class SelfCalibrationService : public NodeService {
+class CalibrationUnit;
+class CalibrationRunner;
+
+// The node's self-calibration: its unit's side (calibration_unit.h) and, on the unit that runs
+// a round, the runner's (calibration_runner.h), over one link to the peers.
+class SelfCalibrationService : public NodeService, private CalibrationLink {
  public:
   using OnCalibrated = std::function<void(const SelfCalibrationOutcome&)>;
   using OnFailed = std::function<void(const std::string&)>;
@@ -144,7 +151,7 @@ class SelfCalibrationService : public NodeService {
   // The node's renderer (node/render/render_loop.h): once calibrated the unit shows the
   // renderer's frames (not the table grid), blanks through its mask during a neighbour's join,
   // and suspends it whenever calibration needs the projector. Set before the runtime starts.
-  void SetRenderLoop(RenderLoop* loop) { render_loop_ = loop; }
+  void SetRenderLoop(RenderLoop* loop);
 
   // A calibration saved by an earlier run (this unit's, with its table pose): checked with two
   // frames (calibration_check.h) once the camera is open and no lower-id unit is checking its
@@ -159,121 +166,16 @@ class SelfCalibrationService : public NodeService {
   void OnPeerMessage(net::Incoming request, NodeRuntime& node) override;
   Status OnStep(NodeRuntime& node) override;
 
-  bool calibrated() const { return calibrated_; }
+  bool calibrated() const;
 
  private:
-  struct Runner;  // the runner's state (self_calibration_runner.cc)
-
-  // Node side.
-  void HandleStep(const wire::CalibrationStep& step, NodeId from, NodeRuntime& node);
-  // One function per action (HandleStep's switch); each answers `done` when the step is done.
-  void StepShow(const wire::CalibrationStep& step, NodeId from, wire::CalibrationStepDone done,
-                NodeRuntime& node);
-  void StepResponse(const wire::CalibrationStep& step, NodeId from, wire::CalibrationStepDone done,
-                    NodeRuntime& node);
-  void StepCapture(const wire::CalibrationStep& step, NodeId from, wire::CalibrationStepDone done,
-                   NodeRuntime& node);
-  void StepDecode(const wire::CalibrationStep& step, NodeId from, wire::CalibrationStepDone done,
-                  NodeRuntime& node);
-  void StepBlank(const wire::CalibrationStep& step, NodeId from, wire::CalibrationStepDone done,
-                 NodeRuntime& node);
-  // Answers `done` as failed with `why` (logged).
-  void FailStep(NodeId from, wire::CalibrationStepDone done, NodeRuntime& node,
-                const std::string& why);
-  void RunDeferred(NodeRuntime& node);
-  void Answer(NodeId to, wire::CalibrationStepDone done, NodeRuntime& node);
-  // False when the message could not be queued (the peer is not linked).
-  bool Send(NodeId to, wire::Envelope envelope, NodeRuntime& node);
+  bool Send(NodeId to, wire::Envelope envelope, NodeRuntime& node) override;
   void Deliver(NodeId from, const wire::Envelope& envelope, NodeRuntime& node);
-  void HandleCorrespondences(const wire::CorrespondenceSet& set);
-  void RunLocal(const wire::CalibrationStep& step, NodeId from, NodeRuntime& node);
-  void HandleResult(const wire::CalibrationResult& result, NodeRuntime& node);
-  const std::vector<cv::Mat>* PatternFrames(const wire::PatternPlan& plan);
 
-  void MaybeVerify(NodeRuntime& node);
-  // An outcome holding `calibration` with this node's compute and traffic so far.
-  SelfCalibrationOutcome Outcome(const UnitCalibration& calibration) const;
-
-  // Runner side (self_calibration_runner.cc).
-  // What the round policy needs to know, now.
-  RoundView RoundViewNow(NodeRuntime& node) const;
-  void MaybeStartRound(NodeRuntime& node);
-  // The round's stages: the pre-pass, then (once it is answered) the sequences.
-  void PlanPrepass(Runner& r);
-  void PlanSequences();
-  void PlanColour(int colour, int colour_count, const std::function<void()>& restore);
-  void RunnerStep(NodeRuntime& node);
-  // The current stage is answered: runs its `after`; false when the round moved on to the
-  // solve (nothing more to send).
-  bool EndStage(NodeRuntime& node);
-  void RunnerDone(NodeId from, const wire::CalibrationStepDone& done, NodeRuntime& node);
-  void RunnerInput(NodeId from, const wire::CalibrationInput& input, NodeRuntime& node);
-  void StartSolve(NodeRuntime& node);
-  void StartJoinSolve(NodeRuntime& node);
-  // The round's inputs as the solvers take them (units that sent none are left out).
-  void CollectInputs(ClusterObservations* observations, std::map<NodeId, LocalGeometry>* local);
-  // True (the round dropped, a new one to start) when units left the round, are back, and
-  // the round's solution (null: failed) has fewer than two units.
-  bool RoundAgainForReturners(const ClusterSolution* solution, NodeRuntime& node);
-  // `solution` is null when the solve failed with `status`.
-  void FinishRound(const ClusterSolution* solution, const Status& status, double solve_cpu_s,
-                   NodeRuntime& node);
-  void SendResults(const ClusterSolution* solution, const Status& status,
-                   const std::string& report_text, NodeRuntime& node);
-
-  UnitCalibration factory_;
-  ProjectorOutput* projector_;
-  RenderLoop* render_loop_ = nullptr;
-  std::unique_ptr<CameraInput> camera_;
-  std::shared_ptr<const Scene> model_;
   SelfCalibrationOptions options_;
-  OnCalibrated on_calibrated_;
-  OnFailed on_failed_;
-
-  // Node side state of the current round.
-  uint64_t round_ = 0;
-  std::map<uint32_t, cv::Mat> slots_;                // captures (8 bit)
-  std::map<NodeId, cv::Mat> lit_masks_;              // per projector, from the pre-pass
-  bool muted_ok_ = true;                             // the last SHOW muted did cut the light
-  std::optional<ProjectorResponseRecord> response_;  // the own projector's, last measured
-  std::map<std::string, std::vector<cv::Mat>> pattern_cache_;
-  std::map<NodeId, wire::CorrespondenceSet> received_;  // by camera, for own projector
-  // This round's answers to the runner by step (sent again when the step comes again) and the
-  // steps still being worked on (a repeated one is ignored).
-  std::map<uint32_t, std::vector<wire::Envelope>> replies_;
-  std::set<uint32_t> working_;
-  std::deque<std::pair<wire::CalibrationStep, NodeId>> deferred_;
-  std::optional<std::pair<wire::CalibrationStep, NodeId>> pending_local_;
-  std::chrono::steady_clock::time_point pending_local_since_{};
-  bool calibrated_ = false;
-  double compute_s_ = 0.0;
-  uint64_t messages_sent_ = 0, messages_received_ = 0, bytes_sent_ = 0, bytes_received_ = 0;
-  std::shared_ptr<const MpcdiSite> site_mpcdi_;  // the runner's, of the last round solved
-  std::optional<UnitCalibration> saved_;
-  // What the unit shows between calibrations (display_frames.h: the table grid of the
-  // calibration it holds), and that calibration; empty until it holds one.
-  cv::Mat display_;
-  std::optional<UnitCalibration> holding_;
-  // Shows the display of `calibration` (on a worker), then runs `then`.
-  void StartDisplay(const UnitCalibration& calibration, NodeRuntime& node,
-                    std::function<void()> then);
-  OnVerification on_verification_;
-  bool verify_started_ = false;
-  NodeId calibrated_by_ = kInvalidNodeId;  // the runner of the round that calibrated it
-
-  std::unique_ptr<Runner> runner_;
-  // The runner's last solved site (every unit it calibrated; joined units are added), which a
-  // join round holds the joining units against.
-  std::shared_ptr<ClusterSolution> last_solution_;
-  const std::chrono::steady_clock::time_point created_ = std::chrono::steady_clock::now();
-  // For the round policy: when a calibrated peer, and a member without a calibration (since
-  // the last time there was none), were first seen; the last decision's words (logged when
-  // they change).
-  std::optional<std::chrono::steady_clock::time_point> first_seen_calibrated_peer_;
-  // When another unit's round last sent this unit a step.
-  std::optional<std::chrono::steady_clock::time_point> last_step_from_other_;
-  std::optional<std::chrono::steady_clock::time_point> first_seen_uncalibrated_member_;
-  std::string last_round_why_;
+  CalibrationLedger ledger_;
+  std::unique_ptr<CalibrationUnit> unit_;
+  std::unique_ptr<CalibrationRunner> runner_;
 };
 
 }  // namespace sandtable::node

@@ -1,4 +1,4 @@
-// The runner's solve (self_calibration_service.h): the round's inputs into the cluster solve
+// The runner's solve (calibration_runner.h): the round's inputs into the cluster solve
 // (or the join solve) on a worker, the round's report, and each unit's result.
 #include <algorithm>
 #include <cmath>
@@ -11,7 +11,7 @@
 #include "common/io/json_codec.h"
 #include "common/io/mpcdi_builder.h"
 #include "common/scene/procedural_scene.h"
-#include "node/app/self_calibration_runner.h"
+#include "node/app/calibration_runner.h"
 #include "node/calibration/join_solver.h"
 #include "node/calibration/schedule.h"
 #include "node/calibration/site_solve.h"
@@ -169,9 +169,9 @@ void AddSolutionToReport(const ClusterSolution& s, nlohmann::json* report,
 
 }  // namespace
 
-void SelfCalibrationService::CollectInputs(ClusterObservations* observations_out,
-                                           std::map<NodeId, LocalGeometry>* local_out) {
-  Runner& r = *runner_;
+void CalibrationRunner::CollectInputs(ClusterObservations* observations_out,
+                                      std::map<NodeId, LocalGeometry>* local_out) {
+  Round& r = *round_;
   ClusterObservations& observations = *observations_out;
   std::map<NodeId, LocalGeometry>& local = *local_out;
   for (const auto& [id, input] : r.inputs) {
@@ -208,8 +208,8 @@ void SelfCalibrationService::CollectInputs(ClusterObservations* observations_out
   }
 }
 
-void SelfCalibrationService::StartJoinSolve(NodeRuntime& node) {
-  Runner& r = *runner_;
+void CalibrationRunner::StartJoinSolve(NodeRuntime& node) {
+  Round& r = *round_;
   r.solving = true;
   r.path = "join";
   r.path_reason = "units joined a calibrated site; the calibrated units are held";
@@ -244,8 +244,8 @@ void SelfCalibrationService::StartJoinSolve(NodeRuntime& node) {
       });
 }
 
-void SelfCalibrationService::StartSolve(NodeRuntime& node) {
-  Runner& r = *runner_;
+void CalibrationRunner::StartSolve(NodeRuntime& node) {
+  Round& r = *round_;
   r.solving = true;
   ClusterObservations observations;
   std::map<NodeId, LocalGeometry> local;
@@ -315,16 +315,15 @@ void SelfCalibrationService::StartSolve(NodeRuntime& node) {
       },
       [this, &node](Solved s) {
         if (RoundAgainForReturners(s.solution ? &*s.solution : nullptr, node)) return;
-        site_mpcdi_ = s.mpcdi;
-        if (s.fell_back) runner_->path = "full";
+        ledger_->site_mpcdi = s.mpcdi;
+        if (s.fell_back) round_->path = "full";
         if (s.solution) last_solution_ = std::make_shared<ClusterSolution>(*s.solution);
         FinishRound(s.solution ? &*s.solution : nullptr, s.status, s.cpu_s, node);
       });
 }
 
-bool SelfCalibrationService::RoundAgainForReturners(const ClusterSolution* solution,
-                                                    NodeRuntime& node) {
-  Runner& r = *runner_;
+bool CalibrationRunner::RoundAgainForReturners(const ClusterSolution* solution, NodeRuntime& node) {
+  Round& r = *round_;
   if (solution && solution->calibrations.size() >= 2) return false;
   std::vector<NodeId> back;
   for (NodeId m : r.departed) {
@@ -338,14 +337,14 @@ bool SelfCalibrationService::RoundAgainForReturners(const ClusterSolution* solut
                    << " and came back before its end; "
                    << (solution ? "solved from one unit alone" : "not solved")
                    << ", so not delivered: calibrating all again";
-  runner_.reset();
+  round_.reset();
   return true;
 }
 
-void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const Status& status,
-                                         double solve_cpu_s, NodeRuntime& node) {
-  Runner& r = *runner_;
-  compute_s_ += solve_cpu_s;
+void CalibrationRunner::FinishRound(const ClusterSolution* solution, const Status& status,
+                                    double solve_cpu_s, NodeRuntime& node) {
+  Round& r = *round_;
+  ledger_->compute_s += solve_cpu_s;
   r.compute_s[r.self] += solve_cpu_s;
   const double period = options_.frame_period_s + options_.capture_latency_s;
   nlohmann::json report{
@@ -427,9 +426,9 @@ void SelfCalibrationService::FinishRound(const ClusterSolution* solution, const 
 
 // Each projecting unit's CalibrationResult: its calibration from `solution`, or why it has
 // none; the round's report with it.
-void SelfCalibrationService::SendResults(const ClusterSolution* solution, const Status& status,
-                                         const std::string& report_text, NodeRuntime& node) {
-  Runner& r = *runner_;
+void CalibrationRunner::SendResults(const ClusterSolution* solution, const Status& status,
+                                    const std::string& report_text, NodeRuntime& node) {
+  Round& r = *round_;
   for (NodeId m : r.projecting) {
     wire::Envelope e;
     wire::CalibrationResult* result = e.mutable_calibration_result();
@@ -485,7 +484,7 @@ void SelfCalibrationService::SendResults(const ClusterSolution* solution, const 
                             : status.message();
       result->set_message(why);
     }
-    Send(m, std::move(e), node);
+    link_->Send(m, std::move(e), node);
   }
 }
 

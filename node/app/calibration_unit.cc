@@ -1,4 +1,4 @@
-// The unit's side of SelfCalibrationService (self_calibration_service.h): the steps a runner
+// The unit's side of the self-calibration (calibration_unit.h): the steps a runner
 // sends (SHOW, RESPONSE, CAPTURE, DECODE, BLANK, LOCAL), each answered once done, and the
 // correspondences its neighbours send it.
 #include <algorithm>
@@ -8,7 +8,8 @@
 
 #include "common/base/log.h"
 #include "common/base/thread_cpu_time.h"
-#include "node/app/self_calibration_runner.h"
+#include "node/app/calibration_runner.h"
+#include "node/app/calibration_unit.h"
 #include "node/app/self_calibration_service.h"
 #include "node/calibration/cluster_initializer.h"
 #include "node/calibration/display_frames.h"
@@ -24,7 +25,7 @@ constexpr auto kLocalWaitForSets = std::chrono::seconds(20);
 
 }  // namespace
 
-const std::vector<cv::Mat>* SelfCalibrationService::PatternFrames(const wire::PatternPlan& plan) {
+const std::vector<cv::Mat>* CalibrationUnit::PatternFrames(const wire::PatternPlan& plan) {
   const std::string key = plan.SerializeAsString();
   auto it = pattern_cache_.find(key);
   if (it != pattern_cache_.end()) return &it->second;
@@ -33,8 +34,9 @@ const std::vector<cv::Mat>* SelfCalibrationService::PatternFrames(const wire::Pa
   return &(pattern_cache_[key] = std::move(*frames));
 }
 
-void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeId from,
-                                        NodeRuntime& node) {
+void CalibrationUnit::HandleStep(const wire::CalibrationStep& step, NodeId from,
+                                 NodeRuntime& node) {
+  if (from != node.id()) last_step_from_other_ = std::chrono::steady_clock::now();
   if (step.round() != round_) {
     // A new round: forget the last one's captures and correspondences.
     round_ = step.round();
@@ -49,7 +51,7 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
   // again, or nothing while it is still being worked on.
   if (auto answered = replies_.find(step.step()); answered != replies_.end()) {
     ST_LOG(kInfo) << "self-calibration: step " << step.step() << " again; answering again";
-    for (const wire::Envelope& e : answered->second) Send(from, e, node);
+    for (const wire::Envelope& e : answered->second) link_->Send(from, e, node);
     return;
   }
   if (!working_.insert(step.step()).second) return;
@@ -77,8 +79,8 @@ void SelfCalibrationService::HandleStep(const wire::CalibrationStep& step, NodeI
   }
 }
 
-void SelfCalibrationService::FailStep(NodeId from, wire::CalibrationStepDone done,
-                                      NodeRuntime& node, const std::string& why) {
+void CalibrationUnit::FailStep(NodeId from, wire::CalibrationStepDone done, NodeRuntime& node,
+                               const std::string& why) {
   done.set_ok(false);
   done.set_message("unit " + std::to_string(node.id()) + ": " + why);
   ST_LOG(kWarning) << "self-calibration step " << done.step() << ": " << why;
@@ -86,8 +88,8 @@ void SelfCalibrationService::FailStep(NodeId from, wire::CalibrationStepDone don
 }
 
 // SHOW: black, white, a grey level, a pattern frame or the light cut, on a worker.
-void SelfCalibrationService::StepShow(const wire::CalibrationStep& step, NodeId from,
-                                      wire::CalibrationStepDone done, NodeRuntime& node) {
+void CalibrationUnit::StepShow(const wire::CalibrationStep& step, NodeId from,
+                               wire::CalibrationStepDone done, NodeRuntime& node) {
   if (!projector_) return FailStep(from, done, node, "no projector");
   cv::Mat frame;
   const cv::Size size = projector_->size();
@@ -137,8 +139,8 @@ void SelfCalibrationService::StepShow(const wire::CalibrationStep& step, NodeId 
 }
 
 // RESPONSE: the own projector's response from the pre-pass captures (projector_response.h).
-void SelfCalibrationService::StepResponse(const wire::CalibrationStep& step, NodeId from,
-                                          wire::CalibrationStepDone done, NodeRuntime& node) {
+void CalibrationUnit::StepResponse(const wire::CalibrationStep& step, NodeId from,
+                                   wire::CalibrationStepDone done, NodeRuntime& node) {
   // The own projector's response from the pre-pass captures (projector_response.h).
   auto slot = [&](uint32_t s) {
     auto it = slots_.find(s);
@@ -181,8 +183,8 @@ void SelfCalibrationService::StepResponse(const wire::CalibrationStep& step, Nod
 }
 
 // CAPTURE: a picture kept under a slot; with a reference slot, the pixels lit against it.
-void SelfCalibrationService::StepCapture(const wire::CalibrationStep& step, NodeId from,
-                                         wire::CalibrationStepDone done, NodeRuntime& node) {
+void CalibrationUnit::StepCapture(const wire::CalibrationStep& step, NodeId from,
+                                  wire::CalibrationStepDone done, NodeRuntime& node) {
   if (!camera_) {
     deferred_.emplace_back(step, from);  // the camera is still opening
     working_.erase(step.step());         // handled afresh when it has
@@ -230,8 +232,8 @@ void SelfCalibrationService::StepCapture(const wire::CalibrationStep& step, Node
 }
 
 // DECODE: the captures of one projector's sequence into grid correspondences, sent to it.
-void SelfCalibrationService::StepDecode(const wire::CalibrationStep& step, NodeId from,
-                                        wire::CalibrationStepDone done, NodeRuntime& node) {
+void CalibrationUnit::StepDecode(const wire::CalibrationStep& step, NodeId from,
+                                 wire::CalibrationStepDone done, NodeRuntime& node) {
   std::vector<cv::Mat> captures;
   for (uint32_t i = 0; i < step.frames(); ++i) {
     auto it = slots_.find(step.slot() + i);
@@ -268,7 +270,7 @@ void SelfCalibrationService::StepDecode(const wire::CalibrationStep& step, NodeI
         return d;
       },
       [this, from, done, step, &node](Decoded d) mutable {
-        compute_s_ += d.cpu_s;
+        ledger_->compute_s += d.cpu_s;
         done.set_compute_s(d.cpu_s);
         if (!d.points.ok()) {
           done.set_ok(false);
@@ -288,7 +290,7 @@ void SelfCalibrationService::StepDecode(const wire::CalibrationStep& step, NodeI
         ST_LOG(kInfo) << "self-calibration: projector " << step.projector_id() << " decoded "
                       << d.report.decode.decoded_pixels << " camera px -> " << d.points->size()
                       << " grid points (" << d.cpu_s << " s)";
-        Send(step.projector_id(), std::move(e), node);  // to the projecting node only
+        link_->Send(step.projector_id(), std::move(e), node);  // to the projecting node only
         done.set_ok(true);
         done.set_points(static_cast<uint32_t>(d.points->size()));
         Answer(from, done, node);
@@ -297,8 +299,8 @@ void SelfCalibrationService::StepDecode(const wire::CalibrationStep& step, NodeI
 }
 
 // BLANK: during a neighbour's join, its light blanked from what this unit displays.
-void SelfCalibrationService::StepBlank(const wire::CalibrationStep& step, NodeId from,
-                                       wire::CalibrationStepDone done, NodeRuntime& node) {
+void CalibrationUnit::StepBlank(const wire::CalibrationStep& step, NodeId from,
+                                wire::CalibrationStepDone done, NodeRuntime& node) {
   // A calibrated unit while a joining neighbour captures: its display blanked where that
   // neighbour's light fell in this unit's camera, or restored.
   auto lit = lit_masks_.find(step.about_projector());
@@ -350,7 +352,7 @@ void SelfCalibrationService::StepBlank(const wire::CalibrationStep& step, NodeId
         return b;
       },
       [this, from, done, step, &node](Blanked b) mutable {
-        compute_s_ += b.cpu_s;
+        ledger_->compute_s += b.cpu_s;
         done.set_compute_s(b.cpu_s);
         done.set_ok(b.status.ok());
         if (!b.status.ok()) done.set_message(b.status.message());
@@ -364,7 +366,7 @@ void SelfCalibrationService::StepBlank(const wire::CalibrationStep& step, NodeId
   return;
 }
 
-void SelfCalibrationService::HandleCorrespondences(const wire::CorrespondenceSet& set) {
+void CalibrationUnit::HandleCorrespondences(const wire::CorrespondenceSet& set) {
   if (set.projector_id() != factory_.unit_id) return;  // not ours
   if (set.camera_px_xy_size() != set.projector_px_xy_size() || set.camera_px_xy_size() % 2 ||
       set.camera_px_xy_size() > 2 * kMaxCorrespondencesPerSet) {
@@ -376,7 +378,7 @@ void SelfCalibrationService::HandleCorrespondences(const wire::CorrespondenceSet
   received_[set.camera_id()] = set;
 }
 
-void SelfCalibrationService::RunDeferred(NodeRuntime& node) {
+void CalibrationUnit::RunDeferred(NodeRuntime& node) {
   if (camera_) {
     while (!deferred_.empty()) {
       auto [step, from] = deferred_.front();
@@ -395,8 +397,7 @@ void SelfCalibrationService::RunDeferred(NodeRuntime& node) {
   }
 }
 
-void SelfCalibrationService::RunLocal(const wire::CalibrationStep& step, NodeId from,
-                                      NodeRuntime& node) {
+void CalibrationUnit::RunLocal(const wire::CalibrationStep& step, NodeId from, NodeRuntime& node) {
   // Tracks of our projector from every camera's set; factory cameras of the senders.
   std::map<NodeId, std::vector<ProjectorGridPoint>> by_camera;
   std::map<NodeId, CameraModel> cameras;
@@ -442,7 +443,7 @@ void SelfCalibrationService::RunLocal(const wire::CalibrationStep& step, NodeId 
         return l;
       },
       [this, e = std::move(e), step, from, &node](Local l) mutable {
-        compute_s_ += l.cpu_s;
+        ledger_->compute_s += l.cpu_s;
         wire::CalibrationInput* in = e.mutable_calibration_input();
         wire::PlanarityProbe* probe = in->mutable_planarity();
         probe->set_ok(l.probe.ok());
@@ -482,7 +483,7 @@ void SelfCalibrationService::RunLocal(const wire::CalibrationStep& step, NodeId 
           }
         }
         if (step.round() == round_) replies_[step.step()].push_back(e);
-        Send(from, std::move(e), node);
+        link_->Send(from, std::move(e), node);
         wire::CalibrationStepDone done;
         done.set_round(step.round());
         done.set_step(step.step());
@@ -490,6 +491,16 @@ void SelfCalibrationService::RunLocal(const wire::CalibrationStep& step, NodeId 
         done.set_compute_s(l.cpu_s);
         Answer(from, done, node);
       });
+}
+
+void CalibrationUnit::Answer(NodeId to, wire::CalibrationStepDone done, NodeRuntime& node) {
+  wire::Envelope e;
+  *e.mutable_calibration_step_done() = std::move(done);
+  if (e.calibration_step_done().round() == round_) {
+    replies_[e.calibration_step_done().step()].push_back(e);
+    working_.erase(e.calibration_step_done().step());
+  }
+  link_->Send(to, std::move(e), node);
 }
 
 }  // namespace sandtable::node

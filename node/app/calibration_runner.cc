@@ -1,4 +1,4 @@
-// The runner side of SelfCalibrationService (self_calibration_service.h).
+// The runner's side of the self-calibration (calibration_runner.h): the round's start and stages.
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -10,7 +10,7 @@
 #include "common/io/json_codec.h"
 #include "common/io/mpcdi_builder.h"
 #include "common/scene/procedural_scene.h"
-#include "node/app/self_calibration_runner.h"
+#include "node/app/calibration_runner.h"
 #include "node/calibration/join_solver.h"
 #include "node/calibration/schedule.h"
 #include "proto/convert.h"
@@ -33,10 +33,23 @@ wire::CalibrationStep MakeStep(uint64_t round, wire::CalibrationAction action) {
 
 }  // namespace
 
-RoundView SelfCalibrationService::RoundViewNow(NodeRuntime& node) const {
+CalibrationRunner::CalibrationRunner(const SelfCalibrationOptions& options,
+                                     std::shared_ptr<const Scene> model,
+                                     const CalibrationUnit& unit, CalibrationLink* link,
+                                     CalibrationLedger* ledger)
+    : options_(options), model_(std::move(model)), unit_(unit), link_(link), ledger_(ledger) {}
+
+CalibrationRunner::~CalibrationRunner() = default;
+
+void CalibrationRunner::OnStep(NodeRuntime& node) {
+  MaybeStartRound(node);
+  RunnerStep(node);
+}
+
+RoundView CalibrationRunner::RoundViewNow(NodeRuntime& node) const {
   RoundView v;
   v.self = node.id();
-  v.has_camera = camera_ != nullptr;
+  v.has_camera = unit_.has_camera();
   v.registered = node.registered();
   v.now = std::chrono::steady_clock::now();
   v.started = created_;
@@ -61,23 +74,23 @@ RoundView SelfCalibrationService::RoundViewNow(NodeRuntime& node) const {
               [](const RoundMember& a, const RoundMember& b) { return a.id < b.id; });
     v.member_list_age = node.member_list_age();
   }
-  v.round_running = runner_ && !runner_->finished;
-  v.ran_round = runner_ && runner_->finished;
+  v.round_running = round_ && !round_->finished;
+  v.ran_round = round_ && round_->finished;
   v.holds_site_solution = v.ran_round && last_solution_ != nullptr;
   v.site_units = last_solution_ ? last_solution_->calibrations.size() : 0;
-  if (runner_) {
-    v.last_round_members = runner_->members;
-    v.departed = runner_->departed;
+  if (round_) {
+    v.last_round_members = round_->members;
+    v.departed = round_->departed;
   }
-  v.calibrated = calibrated_;
-  v.calibrated_by = calibrated_by_;
+  v.calibrated = unit_.calibrated();
+  v.calibrated_by = unit_.calibrated_by();
   v.first_seen_calibrated_peer = first_seen_calibrated_peer_;
-  v.last_step_from_other = last_step_from_other_;
+  v.last_step_from_other = unit_.last_step_from_other();
   v.first_seen_uncalibrated_member = first_seen_uncalibrated_member_;
   return v;
 }
 
-void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
+void CalibrationRunner::MaybeStartRound(NodeRuntime& node) {
   const RoundView view = RoundViewNow(node);
   const RoundDecision d = DecideRound(view, options_.RoundPolicy());
   if (d.saw_calibrated_peer && !first_seen_calibrated_peer_) first_seen_calibrated_peer_ = view.now;
@@ -101,8 +114,8 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
     sizes[m.node_id()] = {static_cast<int>(c.projector_width_px()),
                           static_cast<int>(c.projector_height_px())};
   }
-  runner_ = std::make_unique<Runner>();
-  Runner& r = *runner_;
+  round_ = std::make_unique<Round>();
+  Round& r = *round_;
   r.round = static_cast<uint64_t>(proto::SteadyNowNs());
   r.self = node.id();
   r.members = d.members;
@@ -118,11 +131,11 @@ void SelfCalibrationService::MaybeStartRound(NodeRuntime& node) {
 
 // Pre-pass: the projecting units black, a black reference on every camera, then each
 // projecting unit white alone, and its response by its own camera.
-void SelfCalibrationService::PlanPrepass(Runner& r) {
+void CalibrationRunner::PlanPrepass(Round& r) {
   // (In a join round the calibrated units go on showing what they show: the reference holds
   // it.)
   const std::vector<NodeId>& members = r.members;
-  Runner::Stage black, reference;
+  Round::Stage black, reference;
   black.label = "pre-pass black";
   reference.label = "pre-pass reference";
   for (NodeId m : r.projecting) {
@@ -139,7 +152,7 @@ void SelfCalibrationService::PlanPrepass(Runner& r) {
   r.stages.push_back(reference);
   r.prepass_frames = 1;
   for (NodeId p : r.projecting) {
-    Runner::Stage white, capture, off;
+    Round::Stage white, capture, off;
     white.label = "pre-pass white " + std::to_string(p);
     wire::CalibrationStep show = MakeStep(r.round, wire::CALIBRATION_ACTION_SHOW);
     show.set_show(wire::SHOW_WHAT_WHITE);
@@ -168,7 +181,7 @@ void SelfCalibrationService::PlanPrepass(Runner& r) {
       muted.set_show(wire::SHOW_WHAT_MUTED);
       shows.emplace_back(muted, kMutedSlot);
       for (const auto& [show_step, slot] : shows) {
-        Runner::Stage show_stage, capture_stage;
+        Round::Stage show_stage, capture_stage;
         show_stage.label = "pre-pass response " + std::to_string(p);
         show_stage.commands.push_back({p, show_step});
         capture_stage.label = show_stage.label + " capture";
@@ -178,7 +191,7 @@ void SelfCalibrationService::PlanPrepass(Runner& r) {
         r.stages.push_back(show_stage);
         r.stages.push_back(capture_stage);
       }
-      Runner::Stage fit;
+      Round::Stage fit;
       fit.label = "pre-pass response fit " + std::to_string(p);
       wire::CalibrationStep f = MakeStep(r.round, wire::CALIBRATION_ACTION_RESPONSE);
       f.set_reference_slot(kBlackSlot);
@@ -202,8 +215,8 @@ void SelfCalibrationService::PlanPrepass(Runner& r) {
 
 // After the pre-pass: who sees whom, the schedule, the plans, one sequence per colour class,
 // the decodes and the local geometry; then the solve.
-void SelfCalibrationService::PlanSequences() {
-  Runner& rr = *runner_;
+void CalibrationRunner::PlanSequences() {
+  Round& rr = *round_;
   // Who sees whom, the schedule, the plans.
   for (NodeId p : rr.projecting) {
     if (!rr.Active(p)) continue;
@@ -243,7 +256,7 @@ void SelfCalibrationService::PlanSequences() {
                 << colour_count << " colours";
   // A join round: the calibrated neighbours whose cameras saw a joining projector's light
   // blank it in what they display while its sequence is captured (and only then).
-  Runner::Stage blank, restore;
+  Round::Stage blank, restore;
   blank.label = "neighbours blank";
   restore.label = "neighbours restore";
   if (rr.join) {
@@ -273,7 +286,7 @@ void SelfCalibrationService::PlanSequences() {
       if (!restore.commands.empty()) rr.stages.push_back(restore);
     });
   }
-  Runner::Stage local;
+  Round::Stage local;
   local.label = "local geometry";
   for (const auto& [p, seeing] : rr.cameras_seeing) {
     wire::CalibrationStep s = MakeStep(rr.round, wire::CALIBRATION_ACTION_LOCAL);
@@ -283,7 +296,7 @@ void SelfCalibrationService::PlanSequences() {
     local.commands.push_back({p, s});
   }
   local.after = [this](NodeRuntime& n2) {
-    if (runner_->join) {
+    if (round_->join) {
       StartJoinSolve(n2);
     } else {
       StartSolve(n2);
@@ -294,9 +307,9 @@ void SelfCalibrationService::PlanSequences() {
 
 // One colour class's sequence: its projectors show their frames together, every camera that
 // sees one of them captures each; then the projectors go dark and the cameras decode.
-void SelfCalibrationService::PlanColour(int colour, int colour_count,
-                                        const std::function<void()>& restore) {
-  Runner& rr = *runner_;
+void CalibrationRunner::PlanColour(int colour, int colour_count,
+                                   const std::function<void()>& restore) {
+  Round& rr = *round_;
   std::vector<NodeId> projectors;
   std::set<NodeId> cameras;
   int frames = 0;
@@ -310,7 +323,7 @@ void SelfCalibrationService::PlanColour(int colour, int colour_count,
   }
   const uint32_t base = 1000u * static_cast<uint32_t>(colour + 1);
   for (int f = 0; f < frames; ++f) {
-    Runner::Stage show, capture;
+    Round::Stage show, capture;
     show.label = "colour " + std::to_string(colour) + " frame " + std::to_string(f);
     capture.label = show.label + " capture";
     for (NodeId p : projectors) {
@@ -334,7 +347,7 @@ void SelfCalibrationService::PlanColour(int colour, int colour_count,
   }
   rr.site_frames += frames;
   if (colour == colour_count - 1) restore();
-  Runner::Stage off, decode;
+  Round::Stage off, decode;
   off.label = "colour " + std::to_string(colour) + " off";
   decode.label = "colour " + std::to_string(colour) + " decode";
   for (NodeId p : projectors) {
@@ -360,8 +373,8 @@ void SelfCalibrationService::PlanColour(int colour, int colour_count,
   rr.stages.push_back(decode);
 }
 
-bool SelfCalibrationService::EndStage(NodeRuntime& node) {
-  Runner& r = *runner_;
+bool CalibrationRunner::EndStage(NodeRuntime& node) {
+  Round& r = *round_;
   r.stage_active = false;
   if (r.current_after) {
     auto after = std::move(r.current_after);
@@ -371,9 +384,9 @@ bool SelfCalibrationService::EndStage(NodeRuntime& node) {
   return !r.solving && !r.finished;
 }
 
-void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
-  if (!runner_ || runner_->finished || runner_->solving) return;
-  Runner& r = *runner_;
+void CalibrationRunner::RunnerStep(NodeRuntime& node) {
+  if (!round_ || round_->finished || round_->solving) return;
+  Round& r = *round_;
   const auto now = std::chrono::steady_clock::now();
   if (r.stage_active) {
     // Members that left, or did not answer in time, are left out of the rest of the round.
@@ -397,7 +410,7 @@ void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
           *e.mutable_calibration_step() = it->second.step;
           it->second.sent_at = now;
           ++it->second.resends;
-          if (Send(to, std::move(e), node)) {
+          if (link_->Send(to, std::move(e), node)) {
             r.unsent.erase(it->first);
             ST_LOG(kInfo) << "self-calibration: step " << it->first << " sent again to unit " << to;
           }
@@ -425,13 +438,13 @@ void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
     if (!EndStage(node)) return;
   }
   while (!r.stage_active && !r.stages.empty()) {
-    Runner::Stage stage = std::move(r.stages.front());
+    Round::Stage stage = std::move(r.stages.front());
     r.stages.pop_front();
     r.current_after = stage.after;
     r.stage_active = true;
     r.stage_started = now;
-    std::vector<Runner::Command> to_send;
-    for (Runner::Command& c : stage.commands) {
+    std::vector<Round::Command> to_send;
+    for (Round::Command& c : stage.commands) {
       if (!r.Active(c.to)) continue;
       if (c.step.action() == wire::CALIBRATION_ACTION_LOCAL) {
         // The sets the projecting node waits for: from the cameras still in the round (one
@@ -445,23 +458,23 @@ void SelfCalibrationService::RunnerStep(NodeRuntime& node) {
       r.awaiting[c.step.step()] = c;
       to_send.push_back(c);
     }
-    for (const Runner::Command& c : to_send) {
+    for (const Round::Command& c : to_send) {
       wire::Envelope e;
       *e.mutable_calibration_step() = c.step;
-      if (!Send(c.to, std::move(e), node)) r.unsent.insert(c.step.step());
+      if (!link_->Send(c.to, std::move(e), node)) r.unsent.insert(c.step.step());
     }
     if (r.awaiting.empty() && !EndStage(node)) return;  // nothing to wait for
   }
 }
 
-void SelfCalibrationService::RunnerDone(NodeId from, const wire::CalibrationStepDone& done,
-                                        NodeRuntime& node) {
+void CalibrationRunner::HandleDone(NodeId from, const wire::CalibrationStepDone& done,
+                                   NodeRuntime& node) {
   (void)node;
-  if (!runner_ || done.round() != runner_->round) return;
-  Runner& r = *runner_;
+  if (!round_ || done.round() != round_->round) return;
+  Round& r = *round_;
   auto it = r.awaiting.find(done.step());
   if (it == r.awaiting.end() || it->second.to != from) return;
-  const Runner::Command command = it->second;
+  const Round::Command command = it->second;
   if (done.ok() && command.step.action() == wire::CALIBRATION_ACTION_LOCAL &&
       !r.inputs.count(from) && !r.left_out.count(from)) {
     // A unit sends its CalibrationInput before the done, on the same connection: a done without
@@ -516,16 +529,16 @@ void SelfCalibrationService::RunnerDone(NodeId from, const wire::CalibrationStep
   }
 }
 
-void SelfCalibrationService::RunnerInput(NodeId from, const wire::CalibrationInput& input,
-                                         NodeRuntime& node) {
+void CalibrationRunner::HandleInput(NodeId from, const wire::CalibrationInput& input,
+                                    NodeRuntime& node) {
   (void)node;
-  if (!runner_ || input.round() != runner_->round || input.unit_id() != from) return;
+  if (!round_ || input.round() != round_->round || input.unit_id() != from) return;
   if (!input.ok()) {
-    runner_->left_out[from] = input.message();
+    round_->left_out[from] = input.message();
     return;
   }
-  if (!input.message().empty()) runner_->notes.push_back(input.message());
-  runner_->inputs[from] = input;
+  if (!input.message().empty()) round_->notes.push_back(input.message());
+  round_->inputs[from] = input;
 }
 
 }  // namespace sandtable::node
