@@ -3,10 +3,20 @@
 #include <algorithm>
 #include <string>
 
+#include "common/base/check.h"
+
 namespace sandtable::proto {
 
+Status SequenceTrackerOptions::Check() const {
+  if (max_senders < 1) return InvalidArgumentError("sequence tracker: max_senders must be >= 1");
+  if (idle_expiry.count() <= 0) {
+    return InvalidArgumentError("sequence tracker: idle_expiry must be > 0");
+  }
+  return OkStatus();
+}
+
 SequenceTracker::SequenceTracker(SequenceTrackerOptions options) : options_(options) {
-  options_.max_senders = std::max<size_t>(1, options_.max_senders);
+  ST_CHECK(options_.Check().ok()) << options_.Check().ToString();
 }
 
 void SequenceTracker::Forget(uint32_t sender_id) {

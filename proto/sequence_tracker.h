@@ -32,12 +32,14 @@ namespace sandtable::proto {
 struct SequenceTrackerOptions {
   size_t max_senders = 4096;                     // kMaxTrackedSenders
   std::chrono::milliseconds idle_expiry{60000};  // kSenderIdleExpiry
+  Status Check() const;
 };
 
 class SequenceTracker {
  public:
   using Clock = std::chrono::steady_clock;
 
+  // `options` must pass Check(): the constructor refuses others (a programming error).
   explicit SequenceTracker(SequenceTrackerOptions options = {});
 
   // OK when in order (and records it); PARSE_ERROR counted as kOutOfOrder otherwise.

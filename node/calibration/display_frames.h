@@ -3,10 +3,10 @@
 //
 // TableGridFrame: the operator's registration pattern, lines every spacing_m in the table
 // frame's x and y drawn where the unit's calibrated projector puts them on the table plane
-// (z = 0; on buildings they appear displaced by the parallax: the renderer's grid, issue 12,
-// will drape them on the model). Lines line_px wide, level 255 on 0; GRAY8 of the projector's
-// size. Until the renderer lands this is what a calibrated unit shows, so a live join has a
-// display to keep.
+// (z = 0; on buildings they appear displaced by the parallax; the renderer's grid pattern
+// drapes its lines on the model). Lines line_px wide, level 255 on 0; GRAY8 of the projector's
+// size. A calibrated unit without a render loop (a node started with no show) shows this, so a
+// live join has a display to keep.
 //
 // JoinBlankMask: the pixels of this unit's projector that land where a joining projector's
 // light was seen by this unit's camera (its pre-pass lit mask of that projector): every

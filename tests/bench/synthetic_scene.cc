@@ -24,8 +24,19 @@ Rigid3d CameraLookingAtTable(double distance_m, double tilt_deg) {
   return Rigid3d(rotation, -rotation * centre_in_table);
 }
 
+Status PointDataOptions::Check() const {
+  if (num_points < 1 || !(noise_px >= 0.0) || !(half_extent_m > 0.0) || !(z_spread_m >= 0.0) ||
+      !(outlier_ratio >= 0.0 && outlier_ratio <= 1.0)) {
+    return InvalidArgumentError(
+        "point data: num_points >= 1, noise >= 0, half extent > 0, z spread >= 0, outlier "
+        "ratio in [0, 1]");
+  }
+  return OkStatus();
+}
+
 PointData MakePointData(const CameraModel& camera, const Rigid3d& camera_from_table,
                         const PointDataOptions& options) {
+  ST_CHECK(options.Check().ok()) << options.Check().ToString();
   std::mt19937_64 rng(options.seed);
   std::uniform_real_distribution<double> xy(-options.half_extent_m, options.half_extent_m);
   std::uniform_real_distribution<double> z(0.0, 1.0);

@@ -11,6 +11,7 @@
 
 #include <Eigen/Core>
 
+#include "common/base/status.h"
 #include "common/camera/camera_model.h"
 #include "common/geometry/rigid3.h"
 
@@ -37,6 +38,7 @@ struct PointDataOptions {
   double z_spread_m = 0.3;     // z uniform in [0, z_spread_m] (0: all on the table)
   double outlier_ratio = 0.0;  // fraction replaced by a uniform pixel anywhere in the image
   uint64_t seed = 0;
+  Status Check() const;
 };
 
 // Points whose true projection lies in the image (rejection sampling; ST_CHECKs that the

@@ -55,6 +55,13 @@ TEST(SequenceTrackerBoundTest, IdleSendersExpireActiveOnesStay) {
   EXPECT_EQ(tracker.size(), 0u);
 }
 
+TEST(SequenceTrackerBoundTest, OptionsCheckRefusesNoRoomAndNoExpiry) {
+  EXPECT_TRUE(SequenceTrackerOptions{}.Check().ok());
+  EXPECT_FALSE((SequenceTrackerOptions{0, milliseconds(1000)}).Check().ok());
+  EXPECT_FALSE((SequenceTrackerOptions{16, milliseconds(0)}).Check().ok());
+  EXPECT_FALSE((SequenceTrackerOptions{16, milliseconds(-5)}).Check().ok());
+}
+
 // A forger on another connection claiming a sender's id and incarnation with high sequence
 // numbers does not make the sender's own next message look out of order.
 TEST(SequenceTrackerBoundTest, ConnectionsAreTrackedApart) {

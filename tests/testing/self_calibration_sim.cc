@@ -7,8 +7,19 @@
 #include "sim/transport/world.h"
 
 namespace sandtable::testing {
+Status SimCalibrationOptions::Check() const {
+  ST_RETURN_IF_ERROR(plan.Check());
+  ST_RETURN_IF_ERROR(grid.Check());
+  ST_RETURN_IF_ERROR(solve.Check());
+  ST_RETURN_IF_ERROR(factory_error.Check());
+  ST_RETURN_IF_ERROR(planar.Check());
+  if (metric_samples < 1) return InvalidArgumentError("sim calibration: metric_samples >= 1");
+  return OkStatus();
+}
+
 Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Scene& scene,
                                                  const SimCalibrationOptions& options) {
+  ST_RETURN_IF_ERROR(options.Check());
   Expected<std::unique_ptr<sim::World>> created = sim::World::Create(site, scene);
   if (!created.ok()) return created.status();
   sim::World& world = **created;

@@ -42,6 +42,7 @@ struct SimCalibrationOptions {
   node::PlanarSolveOptions planar;
   // When set: the observations the solve was given (the nodes' tracks and factory models).
   node::ClusterObservations* observations_out = nullptr;
+  Status Check() const;
 };
 
 struct SimCalibrationResult {
