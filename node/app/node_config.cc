@@ -74,6 +74,9 @@ void AddSiteFlags(CLI::App& app, NodeConfig& c) {
         return v.find(',') == std::string::npos ? std::string("needs REQUESTS,EVENTS") : "";
       });
   app.add_option("--bind", c.peer_bind, "own ROUTER for peers")->check(cli::Endpoint());
+  app.add_option("--advertise", c.peer_advertise,
+                 "the host (name or address) peers connect to; default: the bound address, or "
+                 "with tcp://*:PORT the interface facing the coordinator");
   app.add_option("--curve-keys", c.curve_keys_path,
                  "site CURVE key file (sandtable-coordinator "
                  "--generate-curve-keys)")
@@ -228,6 +231,7 @@ NodeOptions NodeConfig::RuntimeOptions() const {
   o.coordinator_requests = coordinator_requests;
   o.coordinator_events = coordinator_events;
   o.peer_bind = peer_bind;
+  o.peer_advertise_host = peer_advertise;
   o.heartbeat_period = std::chrono::milliseconds(heartbeat_ms);
   o.coordinator_timeout = std::max(o.coordinator_timeout, 5 * o.heartbeat_period);
   o.time_sync_period = std::max(o.time_sync_period, o.heartbeat_period);

@@ -33,6 +33,7 @@ struct NodeConfig {
   NodeId id = kInvalidNodeId;                            // required, below kFirstReservedSenderId
   std::string coordinator_requests, coordinator_events;  // required
   std::string peer_bind = NodeOptions{}.peer_bind;
+  std::string peer_advertise;   // the host peers connect to (empty: chosen; docs/deploy.md)
   std::string curve_keys_path;  // the site's CURVE key file (empty: no CURVE)
   int heartbeat_ms = 100;
   int worker_threads = NodeOptions{}.worker_threads;

@@ -1,5 +1,7 @@
 #include "node/net/node_runtime.h"
 
+#include "net/endpoint.h"
+
 #include <cmath>
 #include <cstring>
 
@@ -118,7 +120,14 @@ Status NodeRuntime::Start() {
   }
   Expected<std::string> bound = (*router)->Bind(options_.peer_bind);
   if (!bound.ok()) return bound.status().WithContext("peer socket");
-  peer_endpoint_ = *bound;
+  Expected<net::Advertised> advertised =
+      net::AdvertisedEndpoint(*bound, options_.coordinator_requests, options_.peer_advertise_host);
+  if (!advertised.ok()) return advertised.status().WithContext("peer socket");
+  peer_endpoint_ = advertised->endpoint;
+  if (!advertised->note.empty()) {
+    ST_LOG(kInfo) << "peer socket bound to " << *bound << ", advertised as " << peer_endpoint_
+                  << ": " << advertised->note;
+  }
   peer_router_ = std::make_unique<net::Channel>(std::move(*router), options_.id, incarnation_,
                                                 &counters_, options_.limits);
   ST_RETURN_IF_ERROR(peer_router_->SetFaults(options_.faults));
@@ -242,6 +251,22 @@ void NodeRuntime::SendTimers(Clock::time_point now) {
   if (!registered_ && now >= next_hello_) {
     (void)SendToCoordinator(MakeHello());
     next_hello_ = now + options_.coordinator_timeout;
+    if (hellos_unanswered_++ == 0) {
+      unanswered_since_ = now;
+      unanswered_log_gap_ = std::chrono::seconds(5);
+      next_unanswered_log_ = now + unanswered_log_gap_;
+    }
+  }
+  if (!registered_ && hellos_unanswered_ > 0 && now >= next_unanswered_log_) {
+    const auto waited = std::chrono::duration_cast<std::chrono::seconds>(now - unanswered_since_);
+    ST_LOG(kWarning) << "no answer from the coordinator at " << options_.coordinator_requests
+                     << " for " << waited.count() << " s (" << hellos_unanswered_
+                     << " hellos sent): is it running, is the address right"
+                     << (options_.curve ? ", does its CURVE key match this site's key file" : "")
+                     << "? Still trying";
+    unanswered_log_gap_ =
+        std::min<std::chrono::seconds>(2 * unanswered_log_gap_, std::chrono::seconds(60));
+    next_unanswered_log_ = now + unanswered_log_gap_;
   }
   if (now >= next_heartbeat_) {
     next_heartbeat_ = now + options_.heartbeat_period;
@@ -389,7 +414,13 @@ void NodeRuntime::HandleCoordinatorReply(const wire::Envelope& in) {
   switch (in.body_case()) {
     case wire::Envelope::kHelloAck:
       if (in.hello_ack().accepted()) {
-        if (!registered_) ST_LOG(kInfo) << "registered with the coordinator";
+        if (!registered_) {
+          ST_LOG(kInfo) << "registered with the coordinator"
+                        << (hellos_unanswered_ > 1
+                                ? " after " + std::to_string(hellos_unanswered_) + " hellos"
+                                : std::string());
+        }
+        hellos_unanswered_ = 0;
         SetRegistered(true);
       } else {
         ST_LOG(kWarning) << "coordinator refused us: " << in.hello_ack().reason();

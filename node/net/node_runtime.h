@@ -77,7 +77,10 @@ struct NodeOptions {
   NodeId id = kInvalidNodeId;                   // below kFirstReservedSenderId
   std::string coordinator_requests;             // coordinator ROUTER endpoint
   std::string coordinator_events;               // coordinator PUB endpoint
-  std::string peer_bind = "tcp://127.0.0.1:*";  // own ROUTER for peers (advertised as bound)
+  std::string peer_bind = "tcp://127.0.0.1:*";  // own ROUTER for peers
+  // The host peers are told to connect to (empty: the bound address, or when bound to every
+  // interface the one facing the coordinator; net/endpoint.h, docs/deploy.md).
+  std::string peer_advertise_host;
   std::chrono::milliseconds heartbeat_period{100};
   std::chrono::milliseconds coordinator_timeout{500};  // silent this long: coordinator down
   std::chrono::milliseconds peer_timeout{500};         // silent this long: peer down
@@ -207,6 +210,11 @@ class NodeRuntime {
   Clock::time_point member_list_changed_{};
   Clock::time_point last_coordinator_message_{};
   Clock::time_point next_heartbeat_{}, next_time_sync_{}, next_hello_{};
+  // Unanswered Hellos: since when (the first one sent unregistered), how many, and when the
+  // next log line says so (the gap doubles up to a minute).
+  Clock::time_point unanswered_since_{}, next_unanswered_log_{};
+  uint64_t hellos_unanswered_ = 0;
+  std::chrono::seconds unanswered_log_gap_{5};
   Clock::time_point next_peer_drain_{}, next_peer_heartbeat_{};
   bool drain_all_peers_ = false;  // a drain stopped at its cap, or a peer was linked
 };

@@ -5,6 +5,11 @@
 // the flag.
 #include <gtest/gtest.h>
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
 
@@ -146,13 +151,76 @@ TEST_F(NodeProgramTest, BadFlagsAndFilesExitTwoNamingTheFlag) {
   }
 }
 
+// A free TCP port on loopback (bound once by the kernel, then released).
+int FreePort() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t length = sizeof(address);
+  const bool ok = ::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address)) == 0 &&
+                  ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length) == 0;
+  ::close(fd);
+  return ok ? ntohs(address.sin_port) : -1;
+}
+
+// Reads the child's lines until one holds `text` (true) or the deadline passes; all of them
+// are appended to `seen`.
+bool ReadUntil(ChildProcess& child, const std::string& text, milliseconds deadline,
+               std::string* seen) {
+  const auto end = std::chrono::steady_clock::now() + deadline;
+  while (std::chrono::steady_clock::now() < end) {
+    const auto left =
+        std::chrono::duration_cast<milliseconds>(end - std::chrono::steady_clock::now());
+    std::optional<std::string> line = child.ReadLine(left);
+    if (!line) return false;
+    *seen += *line + "\n";
+    if (line->find(text) != std::string::npos) return true;
+  }
+  return false;
+}
+
+// A node whose coordinator is not there yet: it advertises a reachable peer address (bound to
+// every interface, never 0.0.0.0), says within seconds that nobody answers and what to check,
+// and registers as soon as the coordinator starts.
+TEST_F(NodeProgramTest, ANodeWithNoCoordinatorSaysSoAndRegistersWhenItComes) {
+  const int requests_port = FreePort(), events_port = FreePort();
+  ASSERT_GT(requests_port, 0);
+  ASSERT_GT(events_port, 0);
+  const std::string requests = "tcp://127.0.0.1:" + std::to_string(requests_port);
+  const std::string events = "tcp://127.0.0.1:" + std::to_string(events_port);
+  ChildProcess node({SANDTABLE_NODE_BIN, "--id", "1", "--coordinator", requests + "," + events,
+                     "--bind", "tcp://*:*"},
+                    testing::ChildOutput::kStdoutAndStderr);
+  std::string seen;
+  ASSERT_TRUE(ReadUntil(node, "\"ready\"", kStartDeadline, &seen)) << seen;
+  EXPECT_EQ(seen.find("\"peer\":\"tcp://0.0.0.0"), std::string::npos) << seen;
+  EXPECT_NE(seen.find("\"peer\":\"tcp://127.0.0.1:"), std::string::npos) << seen;
+  ASSERT_TRUE(
+      ReadUntil(node, "no answer from the coordinator at " + requests, milliseconds(15000), &seen))
+      << seen;
+  EXPECT_NE(seen.find("is the address right"), std::string::npos) << seen;
+
+  ChildProcess coordinator({SANDTABLE_COORDINATOR_BIN, "--requests", requests, "--events", events});
+  std::string error;
+  ASSERT_TRUE(testing::ReadReadyLine(coordinator, "sandtable-coordinator", kStartDeadline, &error))
+      << error;
+  EXPECT_TRUE(ReadUntil(node, "registered with the coordinator after", kStartDeadline, &seen))
+      << seen;
+  node.Signal(SIGTERM);
+  EXPECT_EQ(node.Wait(), 0);
+  coordinator.Signal(SIGTERM);
+  EXPECT_EQ(coordinator.Wait(), 0);
+}
+
 TEST_F(NodeProgramTest, HelpListsEveryFlag) {
   ChildProcess node({SANDTABLE_NODE_BIN, "--help"});
   std::string output;
   ASSERT_EQ(testing::RunToEnd(node, milliseconds(10000), &output), 0);
-  for (const char* flag : {"--id", "--coordinator", "--bind", "--curve-keys", "--heartbeat-ms",
-                           "--workers", "--world", "--projector", "--camera", "--factory",
-                           "--true-pose", "--export-dir", "--expect-units", "calibrate-unit"}) {
+  for (const char* flag :
+       {"--id", "--coordinator", "--bind", "--curve-keys", "--heartbeat-ms", "--workers",
+        "--advertise", "--world", "--projector", "--camera", "--factory", "--true-pose",
+        "--export-dir", "--expect-units", "calibrate-unit"}) {
     EXPECT_NE(output.find(flag), std::string::npos) << flag << " missing from:\n" << output;
   }
 }
