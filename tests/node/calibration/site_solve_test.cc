@@ -63,7 +63,6 @@ TEST(SiteSolve, PlanarPathFallsBackToTheFullPathWhenItFails) {
   EXPECT_EQ(fallen->path, node::SitePath::kFull);
   EXPECT_TRUE(HasNote(fallen->solution, "planar path failed"));
   EXPECT_EQ(fallen->solution.calibrations.size(), 4u);
-
 }
 
 TEST(SiteSolve, RefusesBadOptionsAndEmptyObservations) {
