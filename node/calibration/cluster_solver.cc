@@ -162,6 +162,14 @@ class FullSolve {
   bool Starved(const BundleReport& report) const {
     return !StarvedUnits(report, options_.bundle_starved_share).empty();
   }
+  // The solution so far becomes `bundle`'s: its poses, units and points, and its prediction.
+  void Adopt(const BundleResult& bundle) {
+    projector_from_world_ = bundle.projector_from_world;
+    units_ = bundle.units;
+    points_ = bundle.points_in_world;
+    predicting_ = bundle.report;
+    uncertainty_ = bundle.uncertainty;
+  }
   // The table plane through points_ (the root projector's centre, the world origin, above it)
   // and points_ in its frame.
   Status FitTableFrame();
@@ -254,12 +262,8 @@ Status FullSolve::SolveBundle(const std::map<NodeId, Rigid3d>& initial) {
   }
   clock_.Done("bundle");
   out_.bundle = bundle->report;
-  projector_from_world_ = bundle->projector_from_world;
-  units_ = bundle->units;
-  points_ = bundle->points_in_world;
   point_track_ = bundle->point_track;
-  predicting_ = bundle->report;
-  uncertainty_ = bundle->uncertainty;
+  Adopt(*bundle);
   return OkStatus();
 }
 
@@ -378,11 +382,7 @@ Status FullSolve::RefineWithModel(const ModelMatcher& matcher, Rigid3d* table_fr
     return OkStatus();
   }
   out_.model_bundle = second->report;
-  predicting_ = second->report;
-  uncertainty_ = second->uncertainty;
-  units_ = second->units;
-  projector_from_world_ = second->projector_from_world;
-  points_ = second->points_in_world;
+  Adopt(*second);
   ST_RETURN_IF_ERROR(FitTableFrame());
   // The model stands where it was, in the refined world frame.
   *table_from_model = table_.table_from_world * world_from_model;
