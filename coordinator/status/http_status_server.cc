@@ -8,11 +8,11 @@
 #include <unistd.h>
 
 #include <cstdlib>
+#include <memory>
 
-// httplib's default listen backlog is 5: a burst of connections (held-open clients) while its
-// accept loop starts overflowed it, and the kernel then made a real client retry its SYN after
-// 1 s. Only this file includes httplib.h.
-#define CPPHTTPLIB_LISTEN_BACKLOG 1024
+// Only this file includes httplib.h. Its listen backlog (5) is compiled into Debian's
+// libcpp-httplib, so a define here does not change it: HttpStatusServer::Start listens again on
+// the bound socket with kListenBacklog.
 #include <httplib.h>
 
 #include "common/base/file_io.h"
@@ -188,6 +188,15 @@ Expected<std::unique_ptr<HttpStatusServer>> HttpStatusServer::Start(const std::s
   server->set_payload_max_length(kMaxPayloadBytes);
   server->set_default_headers({{"Cache-Control", "no-store"}});
 
+  // The listening socket, seen as it is made: SO_REUSEADDR (a restart binds again at once),
+  // not httplib's SO_REUSEPORT, which would let a second process bind the same port and take a
+  // share of its connections.
+  auto listening_fd = std::make_shared<int>(-1);
+  server->set_socket_options([listening_fd](socket_t sock) {
+    int yes = 1;
+    ::setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
+    *listening_fd = sock;
+  });
   int port = -1;
   if (parsed->port == 0) {
     port = server->bind_to_any_port(parsed->host);
@@ -198,6 +207,11 @@ Expected<std::unique_ptr<HttpStatusServer>> HttpStatusServer::Start(const std::s
     return UnavailableError("status: cannot listen on " + parsed->host + ":" +
                             std::to_string(parsed->port) +
                             " (in use? choose another port, or 0 for any free one)");
+  }
+  // Listening again on a listening socket sets its backlog (Linux listen(2)).
+  if (*listening_fd < 0 || ::listen(*listening_fd, kListenBacklog) != 0) {
+    return UnavailableError("status: cannot set the listen backlog of " + parsed->host + ":" +
+                            std::to_string(port) + " to " + std::to_string(kListenBacklog));
   }
   return std::unique_ptr<HttpStatusServer>(new HttpStatusServer(
       std::move(server), parsed->host, static_cast<uint16_t>(port), std::move(options.token)));

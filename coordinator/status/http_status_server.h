@@ -37,6 +37,11 @@ class Server;
 
 namespace sandtable::coordinator {
 
+// The status socket's listen backlog: a burst of connections (held-open clients, a scanner)
+// while the accept loop is busy waits in the kernel's queue instead of being made to retry its
+// SYN a second later (5, httplib's own, made 2 000 connects take 175 s).
+inline constexpr int kListenBacklog = 1024;
+
 struct HttpStatusCounters {
   std::atomic<uint64_t> ok{0};
   std::atomic<uint64_t> not_found{0};

@@ -2,9 +2,12 @@
 // and clients served concurrently (held-open and slow clients do not block the page).
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <thread>
 #include <vector>
 
@@ -199,6 +202,36 @@ TEST(HttpStatusServerTest, TokenIsRequiredWhenSetAndBeyondLoopbackNeedsOne) {
   EXPECT_TRUE(IsLoopbackAddress("8080"));
   EXPECT_TRUE(IsLoopbackAddress("127.0.0.1:0"));
   EXPECT_FALSE(IsLoopbackAddress("0.0.0.0:80"));
+}
+
+// The status socket's kernel queue holds kListenBacklog connections, not the 5 compiled into
+// the system's httplib (ss reports a listening socket's backlog as its Send-Q; capped by
+// net.core.somaxconn), and a second server cannot bind the same port beside it.
+TEST(HttpStatusServerTest, ListenBacklogIsOursAndThePortIsNotShared) {
+  Expected<std::unique_ptr<HttpStatusServer>> server = HttpStatusServer::Start("127.0.0.1:0");
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  const uint16_t port = (*server)->port();
+  int somaxconn = 4096;
+  if (std::ifstream limit("/proc/sys/net/core/somaxconn"); limit) limit >> somaxconn;
+  const std::string command = "ss -Hltn 'sport = :" + std::to_string(port) + "' 2>/dev/null";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  std::string text;
+  char buffer[512];
+  while (std::fgets(buffer, sizeof(buffer), pipe) != nullptr) text += buffer;
+  const int rc = ::pclose(pipe);
+  if (rc != 0 || text.empty()) GTEST_SKIP() << "ss (iproute2) cannot list sockets here: " << text;
+  std::istringstream fields(text);
+  std::string state;
+  long recv_q = -1, send_q = -1;
+  fields >> state >> recv_q >> send_q;
+  EXPECT_EQ(state, "LISTEN") << text;
+  EXPECT_EQ(send_q, std::min(kListenBacklog, somaxconn)) << text;
+
+  Expected<std::unique_ptr<HttpStatusServer>> again =
+      HttpStatusServer::Start("127.0.0.1:" + std::to_string(port));
+  ASSERT_FALSE(again.ok());
+  EXPECT_EQ(again.status().code(), StatusCode::kUnavailable);
 }
 
 TEST(HttpStatusServerTest, TokenFileIsCheckedLikeAKey) {
