@@ -25,6 +25,9 @@ pkg_check_modules(HTTPLIB REQUIRED IMPORTED_TARGET GLOBAL cpp-httplib)
 if(NOT TARGET httplib::httplib)
   add_library(httplib::httplib ALIAS PkgConfig::HTTPLIB)
 endif()
+# LAN discovery (net/discovery.h): CZMQ's zbeacon UDP beacon (Debian libczmq-dev), through its
+# pkg-config file.
+pkg_check_modules(CZMQ REQUIRED IMPORTED_TARGET libczmq)         # PkgConfig::CZMQ
 # MPCDI export and import (common/io/mpcdi.h): the ZIP container and the XML descriptor, through
 # their pkg-config files (Debian libminizip-dev, libtinyxml2-dev).
 pkg_check_modules(MINIZIP REQUIRED IMPORTED_TARGET minizip)     # PkgConfig::MINIZIP

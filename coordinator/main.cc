@@ -1,13 +1,15 @@
 // sandtable-coordinator: the site's rendezvous (membership), time reference and event hub.
 //
 //   sandtable-coordinator [--requests tcp://127.0.0.1:*] [--events tcp://127.0.0.1:*]
-//                         [--curve-keys site.key] [--heartbeat-ms 100] [--misses 5]
+//                         [--curve-keys site.key | --insecure] [--heartbeat-ms 100] [--misses 5]
 //                         [--annotations FILE.db] [--annotation-sync full|normal]
 //                         [--export-session FILE.jsonl | --import-session FILE.jsonl]
 //                         [--timeline TRACKS.csv] [--status PORT|IPv4:PORT]
 //                         [--status-token-file FILE] [--max-members 256]
 //                         [--tracker-replay FILE.traj|FILE.csv [--table-from-tracker FILE.json]
 //                          | --virtual-wand SCRIPT.txt] [--scene SCENE.gltf|SCENE.glb]
+//                         [--beacon 5670 [--site-name NAME]]  (LAN discovery, net/discovery.h)
+//   sandtable-coordinator --site-config site.json [flags that win over it] (docs/config-file.md)
 //   sandtable-coordinator --generate-curve-keys site.key
 //
 // Flags are parsed by CLI11 (common/cli/command_line.h): --help lists them all; a bad value
@@ -63,6 +65,7 @@
 #include "common/base/log.h"
 #include "common/base/main_guard.h"
 #include "common/cli/command_line.h"
+#include "common/cli/config_file.h"
 #include "common/scene/gltf_loader.h"
 #include "coordinator/annotations/annotation_service.h"
 #include "coordinator/annotations/session_file.h"
@@ -74,6 +77,8 @@
 #include "coordinator/tracker/replay_source.h"
 #include "coordinator/tracker/virtual_wand.h"
 #include "coordinator/wand/wand_service.h"
+#include "net/discovery.h"
+#include "net/endpoint.h"
 
 namespace {
 
@@ -90,6 +95,8 @@ struct CoordinatorFlags {
   std::string export_path, import_path, timeline_path, status_address;
   std::string tracker_replay_path, table_from_tracker_path, virtual_wand_path, scene_path;
   std::string curve_keys_path, generate_keys_path, sync_name = "full", status_token_path;
+  int beacon_port = 0;  // the LAN beacon's UDP port (0: no beacon)
+  std::string site_name = "sandtable";
   int heartbeat_ms = static_cast<int>(options.membership.heartbeat_period.count());
   int misses = options.membership.misses_allowed;
 };
@@ -102,6 +109,15 @@ CLI::Option* AddFlags(CLI::App& app, CoordinatorFlags& f) {
   app.add_option("--events", f.options.event_endpoint, "PUB endpoint of the events")
       ->check(cli::Endpoint());
   app.add_option("--curve-keys", f.curve_keys_path, "site CURVE key file: require CURVE");
+  app.add_option("--beacon", f.beacon_port,
+                 "broadcast the site's beacon on this UDP port (5670 is the nodes' default), so "
+                 "that nodes started with --coordinator discover find it; needs --requests and "
+                 "--events beyond loopback")
+      ->check(cli::Integer(1, 65535));
+  app.add_option("--site-name", f.site_name, "the site's name in its beacon");
+  app.add_flag("--insecure", f.options.insecure,
+               "allow --requests/--events beyond loopback without --curve-keys (an open site: "
+               "anyone on the network may join it; logged every minute)");
   CLI::Option* generate = app.add_option("--generate-curve-keys", f.generate_keys_path,
                                          "write a new site key file and exit");
   app.add_option("--heartbeat-ms", f.heartbeat_ms, "heartbeat period of the members, ms")
@@ -257,7 +273,12 @@ static int Run(int argc, char** argv) {
       "stop it.",
       "sandtable-coordinator");
   CLI::Option* generate = AddFlags(app, f);
-  if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
+  cli::AddConfigFileFlags(app, cli::ConfigProgram::kCoordinator);
+  // The site's configuration file, read into flags the command line overrides.
+  Expected<std::vector<std::string>> args = cli::ExpandConfigFiles(
+      std::vector<std::string>(argv + 1, argv + argc), cli::ConfigProgram::kCoordinator);
+  if (!args.ok()) return cli::UsageError(app, args.status().message());
+  if (std::optional<int> exit = cli::Parse(app, *args)) return *exit;
   if (generate->count() > 0) {
     Expected<net::CurveKeyPair> keys = net::GenerateCurveKeyPair();
     Status written =
@@ -290,6 +311,19 @@ static int Run(int argc, char** argv) {
       return cli::UsageError(app, "--status " + f.status_address +
                                       " is beyond loopback: it needs --status-token-file");
     }
+  }
+  for (const std::string* endpoint : {&f.options.request_endpoint, &f.options.event_endpoint}) {
+    if (!f.options.curve && !f.options.insecure && net::BeyondLoopback(*endpoint)) {
+      return cli::UsageError(app, *endpoint +
+                                      " is beyond loopback: it needs --curve-keys (or --insecure "
+                                      "for an open site anyone on the network may join)");
+    }
+  }
+  if (f.beacon_port > 0 && !(net::BeyondLoopback(f.options.request_endpoint) &&
+                             net::BeyondLoopback(f.options.event_endpoint))) {
+    return cli::UsageError(app,
+                           "--beacon: --requests and --events must listen beyond loopback, or "
+                           "the nodes that hear the beacon cannot reach them");
   }
   f.options.membership.heartbeat_period = std::chrono::milliseconds(f.heartbeat_ms);
   f.options.membership.misses_allowed = f.misses;
@@ -358,6 +392,26 @@ static int Run(int argc, char** argv) {
   if (!started.ok()) {
     ST_LOG(kError) << "cannot start: " << started.ToString();
     return 1;
+  }
+  std::unique_ptr<net::BeaconPublisher> beacon;
+  if (f.beacon_port > 0) {
+    net::SiteBeacon site;
+    site.site = f.site_name;
+    if (f.options.curve) site.curve_key = f.options.curve->public_key_z85;
+    const std::optional<net::TcpEndpoint> requests =
+        net::ParseTcpEndpoint(server.request_endpoint());
+    const std::optional<net::TcpEndpoint> events = net::ParseTcpEndpoint(server.event_endpoint());
+    site.requests_port = requests ? std::atoi(requests->port.c_str()) : 0;
+    site.events_port = events ? std::atoi(events->port.c_str()) : 0;
+    Expected<std::unique_ptr<net::BeaconPublisher>> started_beacon =
+        net::BeaconPublisher::Start(f.beacon_port, site);
+    if (!started_beacon.ok()) {
+      ST_LOG(kError) << "--beacon: " << started_beacon.status().ToString();
+      return 1;
+    }
+    beacon = std::move(*started_beacon);
+    ST_LOG(kInfo) << "beacon: site " << site.site << " on UDP port " << f.beacon_port << " from "
+                  << beacon->host() << " (" << (site.curve_key.empty() ? "open" : "CURVE") << ")";
   }
   report::CoordinatorReady ready{server.request_endpoint(), server.event_endpoint(), ""};
   if (http) {

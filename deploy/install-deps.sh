@@ -18,7 +18,7 @@ PACKAGES=(
   # world ray casting
   libembree-dev
   # protocol and transport
-  libprotobuf-dev protobuf-compiler libzmq3-dev cppzmq-dev zlib1g-dev
+  libprotobuf-dev protobuf-compiler libzmq3-dev cppzmq-dev zlib1g-dev libczmq-dev
   # storage, devices
   libsqlite3-dev sqlite3 libusb-1.0-0-dev
   # command lines, HTTP, k-d trees
@@ -29,6 +29,8 @@ PACKAGES=(
   libcmark-gfm-dev libcmark-gfm-extensions-dev
   # tests, benchmarks, plots
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox python3
+  # sites across hosts: network namespaces, veth, sockets' backlogs (ip, ss)
+  iproute2
 )
 
 missing=()

@@ -9,6 +9,8 @@
 #include <cerrno>
 #include <cstring>
 
+#include "common/base/log.h"
+
 namespace sandtable::net {
 namespace {
 
@@ -84,6 +86,18 @@ bool IsWildcardHost(std::string_view host) {
 
 bool IsLoopbackHost(std::string_view host) {
   return host == "localhost" || host == "::1" || host.substr(0, 4) == "127.";
+}
+
+bool BeyondLoopback(std::string_view endpoint) {
+  const std::optional<TcpEndpoint> e = ParseTcpEndpoint(endpoint);
+  return e && !IsLoopbackHost(e->host);
+}
+
+void InsecureNotice::Tick(std::chrono::steady_clock::time_point now) {
+  if (said_ > 0 && now < next_) return;
+  ST_LOG(kWarning) << text_;
+  ++said_;
+  next_ = now + period_;
 }
 
 Expected<std::string> LocalAddressFacing(const std::string& host, const std::string& port) {

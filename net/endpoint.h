@@ -3,6 +3,7 @@
 // can reach (never 0.0.0.0).
 #pragma once
 
+#include <chrono>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -24,6 +25,26 @@ std::optional<TcpEndpoint> ParseTcpEndpoint(std::string_view endpoint);
 bool IsWildcardHost(std::string_view host);
 // "localhost", 127.0.0.0/8 or ::1.
 bool IsLoopbackHost(std::string_view host);
+
+// A tcp endpoint other hosts may reach: its host is not loopback (every interface included).
+bool BeyondLoopback(std::string_view endpoint);
+
+// What an open site (--insecure: beyond loopback without CURVE) logs at start and every
+// `period` after, so that a log read at any time shows it.
+class InsecureNotice {
+ public:
+  explicit InsecureNotice(std::string text, std::chrono::seconds period = std::chrono::seconds(60))
+      : text_(std::move(text)), period_(period) {}
+  // Logs the notice when it is due (the first call logs it).
+  void Tick(std::chrono::steady_clock::time_point now);
+  int times_said() const { return said_; }
+
+ private:
+  std::string text_;
+  std::chrono::seconds period_;
+  std::chrono::steady_clock::time_point next_{};
+  int said_ = 0;
+};
 
 // The local address this host's routing table uses to reach `host`:`port` (a name is resolved
 // first): a UDP socket connected to it, no packet sent, asked for its own address. The

@@ -2,7 +2,9 @@
 // and runs the NodeApp (node/app/node_app.h: the devices, the runtime, the render loop and the
 // services, their start and stop order).
 //
-//   sandtable-node --id N --coordinator REQUESTS,EVENTS [--world ENDPOINT] [--factory FILE]
+//   sandtable-node [--site-config FILE] [--unit-config FILE] (docs/config-file.md; flags win)
+//   sandtable-node --id N --coordinator REQUESTS,EVENTS|discover [--world ENDPOINT] [--factory
+//   FILE]
 //                  [--true-pose FILE] [--export-dir DIR] [--projector SPEC] [--camera SPEC]
 //                  [--model FILE] [--saved-calibration FILE] [--grid-step-px N]
 //                  [--calibration-path auto|full] [--expect-units N] [--phase-steps N]
@@ -45,6 +47,9 @@
 #include "common/base/log.h"
 #include "common/base/main_guard.h"
 #include "common/cli/command_line.h"
+#include "common/cli/config_file.h"
+#include "net/curve.h"
+#include "net/discovery.h"
 #include "node/app/node_app.h"
 #include "node/app/node_config.h"
 #include "node/calibration/calibrate_unit_command.h"
@@ -54,6 +59,35 @@ namespace {
 
 std::atomic<bool> g_stop{false};
 void OnSignal(int) { g_stop = true; }
+
+// --coordinator discover: listens for the site's beacon until one it trusts is heard (the key
+// of its --curve-keys file, or an open site with --insecure) and takes the coordinator's
+// endpoints from it. An exit code when it should not go on (stopped, or a bad key file).
+std::optional<int> Discover(const CLI::App& app, sandtable::node::NodeConfig& config) {
+  using namespace sandtable;
+  net::DiscoveryOptions options;
+  options.port = config.discovery_port;
+  options.site = config.site_name;
+  options.accept_open_site = config.insecure;
+  if (!config.curve_keys_path.empty()) {
+    Expected<net::CurveKeyPair> keys = net::ReadCurveKeyFile(config.curve_keys_path);
+    if (!keys.ok()) return cli::UsageError(app, "--curve-keys: " + keys.status().ToString());
+    options.trusted_key = keys->public_key_z85;
+  }
+  if (Status s = options.Check(); !s.ok()) return cli::UsageError(app, s.message());
+  ST_LOG(kInfo) << "discovery: listening for the site's beacon on UDP port " << options.port;
+  Expected<net::SiteBeacon> found = net::DiscoverSite(options, &g_stop);
+  if (!found.ok()) {
+    if (g_stop) return 0;
+    std::cerr << "sandtable-node: " << found.status().message() << "\n";
+    return cli::kExitFailure;
+  }
+  ST_LOG(kInfo) << "discovery: site " << found->site << " at " << found->host << " ("
+                << (found->curve_key.empty() ? "open" : "CURVE key trusted") << ")";
+  config.coordinator_requests = found->RequestsEndpoint();
+  config.coordinator_events = found->EventsEndpoint();
+  return std::nullopt;
+}
 
 }  // namespace
 
@@ -74,7 +108,12 @@ static int Run(int argc, char** argv) {
   render_frame->set_help_flag();
   node::NodeConfig config;
   node::AddNodeFlags(app, config);
-  if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
+  cli::AddConfigFileFlags(app, cli::ConfigProgram::kNode);
+  // The site's and the unit's configuration files, read into flags the command line overrides.
+  Expected<std::vector<std::string>> args = cli::ExpandConfigFiles(
+      std::vector<std::string>(argv + 1, argv + argc), cli::ConfigProgram::kNode);
+  if (!args.ok()) return cli::UsageError(app, args.status().message());
+  if (std::optional<int> exit = cli::Parse(app, *args)) return *exit;
   if (calibrate->parsed()) return node::RunCalibrateUnit(calibrate->remaining());
   if (render_frame->parsed()) return node::RunRenderFrame(render_frame->remaining());
   if (config.id != kInvalidNodeId) SetLogTag("node-" + std::to_string(config.id));
@@ -84,6 +123,9 @@ static int Run(int argc, char** argv) {
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
 
+  if (config.coordinator_requests == node::kDiscover) {
+    if (std::optional<int> exit = Discover(app, config)) return *exit;
+  }
   Expected<std::unique_ptr<node::NodeApp>> node = node::NodeApp::Create(
       std::move(config),
       [](const report::ReportLine& line) { report::WriteReportLine(std::cout, line); });

@@ -3,6 +3,7 @@
 #include <thread>
 
 #include "common/base/log.h"
+#include "net/endpoint.h"
 
 namespace sandtable::coordinator {
 namespace {
@@ -19,6 +20,15 @@ Status CoordinatorOptions::Check() const {
     return InvalidArgumentError("coordinator: step_period must be > 0 ms");
   if (republish_period.count() <= 0) {
     return InvalidArgumentError("coordinator: republish_period must be > 0 ms");
+  }
+  for (const std::string* endpoint : {&request_endpoint, &event_endpoint}) {
+    if (!curve && !insecure && net::BeyondLoopback(*endpoint)) {
+      return InvalidArgumentError(
+          "coordinator: " + *endpoint +
+          " is beyond loopback without CURVE: anyone on the network could join the site, read "
+          "its events and write its annotations; give --curve-keys, or --insecure for an open "
+          "site");
+    }
   }
   return OkStatus();
 }
@@ -47,6 +57,12 @@ Status CoordinatorServer::MonitorHandshakes(net::Socket* socket, const char* nam
 
 Status CoordinatorServer::Start() {
   ST_RETURN_IF_ERROR(options_.Check());
+  if (!options_.curve && (net::BeyondLoopback(options_.request_endpoint) ||
+                          net::BeyondLoopback(options_.event_endpoint))) {
+    open_notice_ = std::make_unique<net::InsecureNotice>(
+        "OPEN SITE (--insecure): the coordinator listens beyond loopback without CURVE; anyone "
+        "on the network may join the site, read its events and write its annotations");
+  }
   net::SocketOptions socket_options;
   socket_options.max_message_bytes = static_cast<int64_t>(options_.limits.max_message_bytes);
   if (options_.curve) {
@@ -146,6 +162,7 @@ Status CoordinatorServer::Step(std::chrono::milliseconds max_wait) {
   const auto wait = std::min(max_wait, options_.membership.heartbeat_period / 2);
   ST_RETURN_IF_ERROR(loop_.RunOnce(wait));
   ST_RETURN_IF_ERROR(ServeSubscriptions());
+  if (open_notice_) open_notice_->Tick(Clock::now());
   for (CoordinatorService* service : services_) {
     // A service's failure (e.g. a publish over the codec limit) is logged, not fatal.
     if (Status stepped = service->OnStep(*this); !stepped.ok()) {

@@ -31,6 +31,7 @@
 #include "coordinator/membership/membership_table.h"
 #include "net/channel.h"
 #include "net/curve.h"
+#include "net/endpoint.h"
 #include "net/handshake_monitor.h"
 #include "net/server_loop.h"
 #include "net/subscription_filter.h"
@@ -60,6 +61,9 @@ struct CoordinatorOptions {
   // Longest wait for requests in Run(): services polling a tracker at 100 Hz need <= 5 ms.
   std::chrono::milliseconds step_period{50};
   std::optional<net::CurveKeyPair> curve;  // site keys: require CURVE on both sockets
+  // Without CURVE the sockets stay on loopback unless this is set (an open site: anyone on the
+  // network may join it, read its events and write its annotations; logged every minute).
+  bool insecure = false;
   proto::CodecLimits limits;
   net::SubscriptionLimits subscriptions;  // what the PUB accepts from subscribers
 
@@ -123,6 +127,7 @@ class CoordinatorServer {
   std::vector<CoordinatorService*> services_;
   net::SocketOptions socket_options_;
   net::SubscriptionFilter subscription_filter_;
+  std::unique_ptr<net::InsecureNotice> open_notice_;  // an open site's repeated warning
   uint64_t publish_failures_ = 0;
   uint64_t published_version_ = ~uint64_t{0};
   Clock::time_point last_publish_{};

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "common/cli/command_line.h"
+#include "net/endpoint.h"
 #include "node/devices/device_factory.h"
 
 namespace sandtable::node {
@@ -12,8 +13,8 @@ namespace {
 
 Status Bad(const std::string& why) { return InvalidArgumentError(why); }
 
-// A flag's range: checked as it parses (and shown in --help) and again by NodeConfig::Check,
-// which a configuration file's values go through too.
+// A flag's range: checked as it parses (a configuration file's values too: they are read into
+// flags), shown in --help, and again by NodeConfig::Check for a NodeConfig filled in code.
 template <typename T>
 struct Limit {
   const char* flag;
@@ -65,14 +66,27 @@ void AddSiteFlags(CLI::App& app, NodeConfig& c) {
   app.add_option_function<std::string>(
          "--coordinator",
          [&c](const std::string& v) {
+           if (v == kDiscover) {
+             c.coordinator_requests = kDiscover;
+             c.coordinator_events.clear();
+             return;
+           }
            const size_t comma = v.find(',');
            c.coordinator_requests = v.substr(0, comma);
            c.coordinator_events = v.substr(comma + 1);
          },
-         "the coordinator's REQUESTS,EVENTS endpoints (its ready line)")
+         "the coordinator's REQUESTS,EVENTS endpoints (its ready line), or 'discover': its "
+         "beacon on the LAN (--discovery-port, --site-name)")
       ->check([](const std::string& v) {
-        return v.find(',') == std::string::npos ? std::string("needs REQUESTS,EVENTS") : "";
+        return v == kDiscover || v.find(',') != std::string::npos
+                   ? std::string()
+                   : std::string("needs REQUESTS,EVENTS or discover");
       });
+  app.add_option("--site-name", c.site_name,
+                 "with --coordinator discover: join only the site of this name");
+  app.add_option("--discovery-port", c.discovery_port,
+                 "with --coordinator discover: the UDP port of the coordinator's beacon")
+      ->check(cli::Integer(1, 65535));
   app.add_option("--bind", c.peer_bind, "own ROUTER for peers")->check(cli::Endpoint());
   app.add_option("--advertise", c.peer_advertise,
                  "the host (name or address) peers connect to; default: the bound address, or "
@@ -81,6 +95,9 @@ void AddSiteFlags(CLI::App& app, NodeConfig& c) {
                  "site CURVE key file (sandtable-coordinator "
                  "--generate-curve-keys)")
       ->check(CLI::ExistingFile);
+  app.add_flag("--insecure", c.insecure,
+               "allow --bind beyond loopback without --curve-keys (an open site: anyone on the "
+               "network may talk to the node; logged every minute)");
   AddLimited(app, kHeartbeatMs, c.heartbeat_ms, "heartbeat period in ms");
   AddLimited(app, kWorkers, c.worker_threads, "worker threads for long work");
   AddLimited(app, kDropShare, c.faults.drop_share,
@@ -179,14 +196,20 @@ void AddShowFlags(CLI::App& app, NodeConfig& c) {
 Status NodeConfig::Check() const {
   if (id == kInvalidNodeId) return Bad("--id is required");
   if (id >= kFirstReservedSenderId) return Bad("--id must be below 4294967280");
-  if (coordinator_requests.empty() || coordinator_events.empty()) {
-    return Bad("--coordinator is required (REQUESTS,EVENTS)");
+  if (coordinator_requests != kDiscover &&
+      (coordinator_requests.empty() || coordinator_events.empty())) {
+    return Bad("--coordinator is required (REQUESTS,EVENTS, or discover)");
   }
   if (!true_pose_path.empty() && factory_path.empty()) {
     return Bad("--true-pose needs --factory (the pose goes beside the factory intrinsics)");
   }
   if (!saved_calibration_path.empty() && factory_path.empty()) {
     return Bad("--saved-calibration needs --factory");
+  }
+  if (curve_keys_path.empty() && !insecure && net::BeyondLoopback(peer_bind)) {
+    return Bad("--bind " + peer_bind +
+               " is beyond loopback: it needs --curve-keys (or --insecure for an open site anyone "
+               "on the network may talk to)");
   }
   for (const Status& s :
        {InRange(kHeartbeatMs, heartbeat_ms), InRange(kWorkers, worker_threads),
@@ -232,6 +255,7 @@ NodeOptions NodeConfig::RuntimeOptions() const {
   o.coordinator_events = coordinator_events;
   o.peer_bind = peer_bind;
   o.peer_advertise_host = peer_advertise;
+  o.insecure = insecure;
   o.heartbeat_period = std::chrono::milliseconds(heartbeat_ms);
   o.coordinator_timeout = std::max(o.coordinator_timeout, 5 * o.heartbeat_period);
   o.time_sync_period = std::max(o.time_sync_period, o.heartbeat_period);

@@ -1,7 +1,8 @@
 // NodeConfig: everything a sandtable-node process is told at start, as plain values (paths,
-// endpoints, numbers, enums). The command line fills it (AddNodeFlags); a site configuration
-// file is to fill the same struct. Check() says what is wrong, naming the flag, before anything
-// is opened; NodeApp (node_app.h) loads the files it names and opens the devices.
+// endpoints, numbers, enums). The command line fills it (AddNodeFlags), the site's and the
+// unit's configuration files read into the same flags first (common/cli/config_file.h,
+// docs/config-file.md). Check() says what is wrong, naming the flag, before anything is opened;
+// NodeApp (node_app.h) loads the files it names and opens the devices.
 #pragma once
 
 #include <cstdint>
@@ -28,13 +29,21 @@ enum class RenderMode { kAuto, kOn, kOff };
 // factory models held).
 enum class BundleFree { kAll, kPoses };
 
+// --coordinator's value that asks for discovery instead of an address.
+inline constexpr char kDiscover[] = "discover";
+
 struct NodeConfig {
   // The site and the network (node/net/node_runtime.h).
   NodeId id = kInvalidNodeId;                            // required, below kFirstReservedSenderId
-  std::string coordinator_requests, coordinator_events;  // required
+  std::string coordinator_requests, coordinator_events;  // required, or kDiscover
+  // --coordinator discover: found on the LAN by its beacon (net/discovery.h) before the app
+  // starts; only a site of this name (empty: any) on this UDP port.
+  std::string site_name;
+  int discovery_port = 5670;
   std::string peer_bind = NodeOptions{}.peer_bind;
   std::string peer_advertise;   // the host peers connect to (empty: chosen; docs/deploy.md)
   std::string curve_keys_path;  // the site's CURVE key file (empty: no CURVE)
+  bool insecure = false;        // --bind beyond loopback without CURVE allowed (an open site)
   int heartbeat_ms = 100;
   int worker_threads = NodeOptions{}.worker_threads;
   net::ChannelFaults faults;  // lab chaos only

@@ -1,7 +1,5 @@
 #include "node/net/node_runtime.h"
 
-#include "net/endpoint.h"
-
 #include <cmath>
 #include <cstring>
 
@@ -43,6 +41,11 @@ Status NodeOptions::Check() const {
     return InvalidArgumentError("node: worker_threads must be in [1, 64]");
   }
   if (Status f = faults.Check(); !f.ok()) return InvalidArgumentError("node: " + f.message());
+  if (!curve && !insecure && net::BeyondLoopback(peer_bind)) {
+    return InvalidArgumentError("node: --bind " + peer_bind +
+                                " is beyond loopback without CURVE: give --curve-keys, or "
+                                "--insecure for an open site anyone on the network may join");
+  }
   if (coordinator_requests.empty() || coordinator_events.empty()) {
     return InvalidArgumentError(
         "node: coordinator endpoints are required (--coordinator REQUESTS,EVENTS)");
@@ -124,6 +127,11 @@ Status NodeRuntime::Start() {
       net::AdvertisedEndpoint(*bound, options_.coordinator_requests, options_.peer_advertise_host);
   if (!advertised.ok()) return advertised.status().WithContext("peer socket");
   peer_endpoint_ = advertised->endpoint;
+  if (!options_.curve && net::BeyondLoopback(options_.peer_bind)) {
+    open_notice_ = std::make_unique<net::InsecureNotice>(
+        "OPEN SITE (--insecure): this node's peer socket " + *bound +
+        " listens beyond loopback without CURVE; anyone on the network may talk to it");
+  }
   if (!advertised->note.empty()) {
     ST_LOG(kInfo) << "peer socket bound to " << *bound << ", advertised as " << peer_endpoint_
                   << ": " << advertised->note;
@@ -248,6 +256,7 @@ NodeService* NodeRuntime::CoordinatorServiceFor(wire::Envelope::BodyCase body) c
 }
 
 void NodeRuntime::SendTimers(Clock::time_point now) {
+  if (open_notice_) open_notice_->Tick(now);
   if (!registered_ && now >= next_hello_) {
     (void)SendToCoordinator(MakeHello());
     next_hello_ = now + options_.coordinator_timeout;

@@ -41,6 +41,7 @@
 #include "common/base/ids.h"
 #include "net/channel.h"
 #include "net/curve.h"
+#include "net/endpoint.h"
 #include "net/handshake_monitor.h"
 #include "net/server_loop.h"
 #include "node/net/clock_offset_estimator.h"
@@ -89,6 +90,9 @@ struct NodeOptions {
   int max_peer_links = 32;  // kMaxPeerLinks: peers linked at most (sockets)
   NodeCapabilities capabilities;
   std::optional<net::CurveKeyPair> curve;
+  // Without CURVE the peer socket stays on loopback unless this is set (an open site; logged
+  // every minute).
+  bool insecure = false;
   proto::CodecLimits limits;
   // Lab chaos only (--fault-*): faults on every link this node sends on (its peer router, its
   // links to peers, its requests to the coordinator); net/channel.h.
@@ -214,6 +218,7 @@ class NodeRuntime {
   // next log line says so (the gap doubles up to a minute).
   Clock::time_point unanswered_since_{}, next_unanswered_log_{};
   uint64_t hellos_unanswered_ = 0;
+  std::unique_ptr<net::InsecureNotice> open_notice_;  // an open site's repeated warning
   std::chrono::seconds unanswered_log_gap_{5};
   Clock::time_point next_peer_drain_{}, next_peer_heartbeat_{};
   bool drain_all_peers_ = false;  // a drain stopped at its cap, or a peer was linked

@@ -3,15 +3,11 @@
 // coordinator (checked in a network namespace of its own with two veth interfaces).
 #include "net/endpoint.h"
 
-#include <sched.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
-#include <cstdio>
-#include <cstdlib>
 #include <string>
 
 #include <gtest/gtest.h>
+
+#include "tests/testing/network_namespace.h"
 
 namespace sandtable::net {
 namespace {
@@ -78,48 +74,49 @@ TEST(EndpointTest, AdvertisesWhatPeersCanReach) {
   EXPECT_NE(a.status().message().find("no-such-host.invalid"), std::string::npos);
 }
 
-// In a network namespace of its own (a child process), two interfaces on two subnets: the
-// advertised address is the one on the coordinator's subnet, whichever it is.
+TEST(EndpointTest, BeyondLoopbackAndTheOpenSiteNoticeRepeats) {
+  EXPECT_TRUE(BeyondLoopback("tcp://*:7000"));
+  EXPECT_TRUE(BeyondLoopback("tcp://0.0.0.0:7000"));
+  EXPECT_TRUE(BeyondLoopback("tcp://10.0.0.1:7000"));
+  EXPECT_FALSE(BeyondLoopback("tcp://127.0.0.1:7000"));
+  EXPECT_FALSE(BeyondLoopback("tcp://localhost:7000"));
+  EXPECT_FALSE(BeyondLoopback("ipc:///tmp/x"));
+  EXPECT_FALSE(BeyondLoopback("inproc://x"));
+  InsecureNotice notice("open site", std::chrono::seconds(60));
+  const auto t0 = std::chrono::steady_clock::time_point{} + std::chrono::hours(1);
+  notice.Tick(t0);  // said at once
+  notice.Tick(t0 + std::chrono::seconds(59));
+  EXPECT_EQ(notice.times_said(), 1);
+  notice.Tick(t0 + std::chrono::seconds(60));  // and every period after
+  notice.Tick(t0 + std::chrono::seconds(61));
+  EXPECT_EQ(notice.times_said(), 2);
+}
+
+// In a network namespace of its own, two interfaces on two subnets: the advertised address is
+// the one on the coordinator's subnet, whichever it is.
 TEST(EndpointTest, OnTwoInterfacesAdvertisesTheOneFacingTheCoordinator) {
-  int pipe_fds[2];
-  ASSERT_EQ(::pipe(pipe_fds), 0);
-  const pid_t child = ::fork();
-  ASSERT_GE(child, 0);
-  if (child == 0) {
-    ::close(pipe_fds[0]);
-    auto say = [&](const std::string& text, int code) {
-      const ssize_t written = ::write(pipe_fds[1], text.data(), text.size());
-      (void)written;
-      ::_exit(code);
-    };
-    if (::unshare(CLONE_NEWNET) != 0) say("no network namespace: unshare failed", 77);
-    // Two veth pairs (both ends up, so each subnet has its route), one address on each.
-    const char* setup =
-        "ip link add site0 type veth peer name site0p && "
-        "ip link add site1 type veth peer name site1p && "
-        "ip addr add 10.61.0.2/24 dev site0 && ip addr add 10.62.0.2/24 dev site1 && "
-        "ip link set site0p up && ip link set site1p up && "
-        "ip link set site0 up && ip link set site1 up";
-    if (std::system(setup) != 0) say("no veth interfaces: ip link add ... type veth failed", 77);
-    Expected<Advertised> first = AdvertisedEndpoint("tcp://0.0.0.0:41000", "tcp://10.61.0.1:7000");
-    Expected<Advertised> second = AdvertisedEndpoint("tcp://0.0.0.0:41000", "tcp://10.62.0.1:7000");
-    if (!first.ok() || !second.ok()) {
-      say((first.ok() ? second : first).status().ToString(), 1);
-    }
-    say(first->endpoint + " " + second->endpoint, 0);
-  }
-  ::close(pipe_fds[1]);
-  std::string text;
-  char buffer[256];
-  ssize_t n = 0;
-  while ((n = ::read(pipe_fds[0], buffer, sizeof(buffer))) > 0) text.append(buffer, n);
-  ::close(pipe_fds[0]);
-  int status = 0;
-  ASSERT_EQ(::waitpid(child, &status, 0), child);
-  ASSERT_TRUE(WIFEXITED(status));
-  if (WEXITSTATUS(status) == 77) GTEST_SKIP() << text;
-  ASSERT_EQ(WEXITSTATUS(status), 0) << text;
-  EXPECT_EQ(text, "tcp://10.61.0.2:41000 tcp://10.62.0.2:41000");
+  // Two veth pairs (both ends up, so each subnet has its route), one address on each.
+  const test_support::NamespaceRun run = test_support::InOwnNetworkNamespace(
+      "ip link add site0 type veth peer name site0p && "
+      "ip link add site1 type veth peer name site1p && "
+      "ip addr add 10.61.0.2/24 dev site0 && ip addr add 10.62.0.2/24 dev site1 && "
+      "ip link set site0p up && ip link set site1p up && "
+      "ip link set site0 up && ip link set site1 up",
+      [](std::string* text) {
+        Expected<Advertised> first =
+            AdvertisedEndpoint("tcp://0.0.0.0:41000", "tcp://10.61.0.1:7000");
+        Expected<Advertised> second =
+            AdvertisedEndpoint("tcp://0.0.0.0:41000", "tcp://10.62.0.1:7000");
+        if (!first.ok() || !second.ok()) {
+          *text = (first.ok() ? second : first).status().ToString();
+          return 1;
+        }
+        *text = first->endpoint + " " + second->endpoint;
+        return 0;
+      });
+  if (run.code == test_support::NamespaceRun::kSkipped) GTEST_SKIP() << run.text;
+  ASSERT_EQ(run.code, 0) << run.text;
+  EXPECT_EQ(run.text, "tcp://10.61.0.2:41000 tcp://10.62.0.2:41000");
 }
 
 }  // namespace

@@ -18,6 +18,7 @@
 #include "common/io/unit_calibration_file.h"
 #include "node/app/calibration_service.h"
 #include "tests/coordinator/membership/child_process.h"
+#include "tests/testing/network_namespace.h"
 
 namespace sandtable::node {
 namespace {
@@ -139,6 +140,8 @@ TEST_F(NodeProgramTest, BadFlagsAndFilesExitTwoNamingTheFlag) {
       {{"--id", "1", "--coordinator", "tcp://a:1,tcp://a:2", "--projector", "beamer:3"},
        "--projector"},
       {{"--id", "1", "--coordinator", "tcp://a:1,tcp://a:2", "--camera", "eye:1"}, "--camera"},
+      {{"--id", "1", "--coordinator", "tcp://a:1,tcp://a:2", "--bind", "tcp://*:7100"},
+       "--curve-keys"},
   };
   for (const Case& c : cases) {
     std::vector<std::string> argv{SANDTABLE_NODE_BIN};
@@ -190,7 +193,7 @@ TEST_F(NodeProgramTest, ANodeWithNoCoordinatorSaysSoAndRegistersWhenItComes) {
   const std::string requests = "tcp://127.0.0.1:" + std::to_string(requests_port);
   const std::string events = "tcp://127.0.0.1:" + std::to_string(events_port);
   ChildProcess node({SANDTABLE_NODE_BIN, "--id", "1", "--coordinator", requests + "," + events,
-                     "--bind", "tcp://*:*"},
+                     "--bind", "tcp://*:*", "--insecure"},
                     testing::ChildOutput::kStdoutAndStderr);
   std::string seen;
   ASSERT_TRUE(ReadUntil(node, "\"ready\"", kStartDeadline, &seen)) << seen;
@@ -200,6 +203,7 @@ TEST_F(NodeProgramTest, ANodeWithNoCoordinatorSaysSoAndRegistersWhenItComes) {
       ReadUntil(node, "no answer from the coordinator at " + requests, milliseconds(15000), &seen))
       << seen;
   EXPECT_NE(seen.find("is the address right"), std::string::npos) << seen;
+  EXPECT_NE(seen.find("OPEN SITE (--insecure)"), std::string::npos) << seen;  // said at start
 
   ChildProcess coordinator({SANDTABLE_COORDINATOR_BIN, "--requests", requests, "--events", events});
   std::string error;
@@ -211,6 +215,110 @@ TEST_F(NodeProgramTest, ANodeWithNoCoordinatorSaysSoAndRegistersWhenItComes) {
   EXPECT_EQ(node.Wait(), 0);
   coordinator.Signal(SIGTERM);
   EXPECT_EQ(coordinator.Wait(), 0);
+}
+
+// One site file for both programs and a unit file for the node (docs/config-file.md): the
+// coordinator listens where the file says, the node finds it there with no --coordinator, takes
+// its id from its unit file, and a flag on its command line wins over the file's.
+TEST_F(NodeProgramTest, SiteAndUnitFilesStartACoordinatorAndANodeThatFindsIt) {
+  const int requests_port = FreePort(), events_port = FreePort();
+  ASSERT_GT(requests_port, 0);
+  ASSERT_GT(events_port, 0);
+  const fs::path site = dir_ / "site.json";
+  std::ofstream(site) << "{\"format\": \"sandtable.site_config\", \"version\": 1,\n"
+                      << " \"coordinator\": {\"host\": \"127.0.0.1\", \"listen\": \"127.0.0.1\","
+                      << " \"requests_port\": " << requests_port
+                      << ", \"events_port\": " << events_port << "},\n"
+                      << " \"heartbeat_ms\": 80, \"node_flags\": {\"workers\": 2}}\n";
+  const fs::path unit = dir_ / "unit-7.json";
+  std::ofstream(unit) << R"({"format": "sandtable.unit_config", "version": 1, "id": 7,
+                            "bind": "tcp://127.0.0.1:*"})";
+  ChildProcess coordinator({SANDTABLE_COORDINATOR_BIN, "--site-config", site.string()});
+  std::string error;
+  std::optional<nlohmann::json> c =
+      testing::ReadReadyLine(coordinator, "sandtable-coordinator", kStartDeadline, &error);
+  ASSERT_TRUE(c.has_value()) << error;
+  EXPECT_EQ(testing::ReadyString(*c, "requests"),
+            "tcp://127.0.0.1:" + std::to_string(requests_port));
+  ChildProcess node({SANDTABLE_NODE_BIN, "--site-config", site.string(), "--unit-config",
+                     unit.string(), "--heartbeat-ms", "60"},
+                    testing::ChildOutput::kStdoutAndStderr);
+  std::string seen;
+  ASSERT_TRUE(ReadUntil(node, "\"ready\"", kStartDeadline, &seen)) << seen;
+  EXPECT_NE(seen.find("\"id\":7"), std::string::npos) << seen;
+  EXPECT_TRUE(ReadUntil(node, "registered with the coordinator", kStartDeadline, &seen)) << seen;
+  node.Signal(SIGTERM);
+  EXPECT_EQ(node.Wait(), 0);
+  coordinator.Signal(SIGTERM);
+  EXPECT_EQ(coordinator.Wait(), 0);
+
+  // A file that does not hold what it should: exit 2 naming the file and the key.
+  const fs::path bad = dir_ / "bad-site.json";
+  std::ofstream(bad) << R"({"format": "sandtable.site_config", "version": 1, "heartbeat": 5})";
+  for (const char* program : {SANDTABLE_NODE_BIN, SANDTABLE_COORDINATOR_BIN}) {
+    ChildProcess refused({program, "--site-config", bad.string()},
+                         testing::ChildOutput::kStdoutAndStderr);
+    std::string output;
+    EXPECT_EQ(testing::RunToEnd(refused, milliseconds(10000), &output), 2) << output;
+    EXPECT_NE(output.find("\"heartbeat\": unknown key"), std::string::npos) << output;
+  }
+}
+
+// A coordinator that would listen beyond loopback without CURVE is refused (exit 2 naming
+// --curve-keys); with --insecure it starts and says it is an open site.
+TEST_F(NodeProgramTest, AnOpenCoordinatorIsRefusedUnlessAskedFor) {
+  ChildProcess refused(
+      {SANDTABLE_COORDINATOR_BIN, "--requests", "tcp://0.0.0.0:*", "--events", "tcp://127.0.0.1:*"},
+      testing::ChildOutput::kStdoutAndStderr);
+  std::string output;
+  EXPECT_EQ(testing::RunToEnd(refused, milliseconds(10000), &output), 2) << output;
+  EXPECT_NE(output.find("--curve-keys"), std::string::npos) << output;
+  ChildProcess open({SANDTABLE_COORDINATOR_BIN, "--requests", "tcp://0.0.0.0:*", "--events",
+                     "tcp://127.0.0.1:*", "--insecure"},
+                    testing::ChildOutput::kStdoutAndStderr);
+  std::string seen;
+  EXPECT_TRUE(ReadUntil(open, "OPEN SITE (--insecure)", kStartDeadline, &seen)) << seen;
+  open.Signal(SIGTERM);
+  EXPECT_EQ(open.Wait(), 0);
+}
+
+// LAN discovery with the two programs, in a network namespace of their own: a coordinator that
+// beacons its site and a node given no address at all but the site's key file; the node hears
+// the beacon, trusts the key, and registers.
+TEST_F(NodeProgramTest, ANodeWithNoAddressFindsItsSiteByTheBeacon) {
+  const std::string keys = (dir_ / "site.keys").string();
+  ChildProcess generate({SANDTABLE_COORDINATOR_BIN, "--generate-curve-keys", keys});
+  ASSERT_EQ(testing::RunToEnd(generate, milliseconds(10000)), 0);
+  const test_support::NamespaceRun run = test_support::InOwnNetworkNamespace(
+      "ip link add site0 type veth peer name site0p && "
+      "ip addr add 10.64.0.1/24 dev site0 && ip addr add 10.64.0.2/24 dev site0p && "
+      "ip link set site0p up && ip link set site0 up",
+      [&](std::string* text) {
+        ChildProcess coordinator(
+            {SANDTABLE_COORDINATOR_BIN, "--requests", "tcp://*:7000", "--events", "tcp://*:7001",
+             "--curve-keys", keys, "--beacon", "5673", "--site-name", "lab-1"},
+            testing::ChildOutput::kStdoutAndStderr);
+        std::string seen;
+        if (!ReadUntil(coordinator, "\"ready\"", kStartDeadline, &seen)) {
+          *text = "coordinator: " + seen;
+          return 1;
+        }
+        ChildProcess node({SANDTABLE_NODE_BIN, "--id", "4", "--coordinator", "discover",
+                           "--discovery-port", "5673", "--curve-keys", keys, "--bind", "tcp://*:*"},
+                          testing::ChildOutput::kStdoutAndStderr);
+        const bool registered =
+            ReadUntil(node, "registered with the coordinator", kStartDeadline, &seen);
+        node.Signal(SIGTERM);
+        const int node_exit = node.Wait();
+        coordinator.Signal(SIGTERM);
+        const int coordinator_exit = coordinator.Wait();
+        *text = seen;
+        return registered && node_exit == 0 && coordinator_exit == 0 ? 0 : 1;
+      });
+  if (run.code == test_support::NamespaceRun::kSkipped) GTEST_SKIP() << run.text;
+  ASSERT_EQ(run.code, 0) << run.text;
+  EXPECT_NE(run.text.find("discovery: site lab-1 at 10.64.0."), std::string::npos) << run.text;
+  EXPECT_NE(run.text.find("CURVE key trusted"), std::string::npos) << run.text;
 }
 
 TEST_F(NodeProgramTest, HelpListsEveryFlag) {
