@@ -260,6 +260,69 @@ int MakeWand(CoordinatorFlags& f, std::unique_ptr<coordinator::WandService>* wan
   return 0;
 }
 
+// The key files read (CURVE, status token) and the flags checked against each other: an exit
+// code when the program must stop (a usage error, already printed).
+std::optional<int> ReadKeysAndCheck(const CLI::App& app, CoordinatorFlags& f,
+                                    sandtable::coordinator::HttpStatusOptions* status_options) {
+  using namespace sandtable;
+  if (!f.curve_keys_path.empty()) {
+    Expected<net::CurveKeyPair> keys = net::ReadCurveKeyFile(f.curve_keys_path);
+    if (!keys.ok()) return cli::UsageError(app, "--curve-keys: " + keys.status().ToString());
+    f.options.curve = *keys;
+  }
+  if (!f.status_token_path.empty()) {
+    Expected<std::string> token = coordinator::LoadStatusToken(f.status_token_path);
+    if (!token.ok())
+      return cli::UsageError(app, "--status-token-file: " + token.status().ToString());
+    status_options->token = *token;
+  }
+  if (!f.status_address.empty() && status_options->token.empty()) {
+    if (f.options.curve) {
+      return cli::UsageError(app,
+                             "--status on a CURVE site (--curve-keys) needs --status-token-file");
+    }
+    if (!coordinator::IsLoopbackAddress(f.status_address)) {
+      return cli::UsageError(app, "--status " + f.status_address +
+                                      " is beyond loopback: it needs --status-token-file");
+    }
+  }
+  for (const std::string* endpoint : {&f.options.request_endpoint, &f.options.event_endpoint}) {
+    if (!f.options.curve && !f.options.insecure && net::BeyondLoopback(*endpoint)) {
+      return cli::UsageError(app, *endpoint +
+                                      " is beyond loopback: it needs --curve-keys (or --insecure "
+                                      "for an open site anyone on the network may join)");
+    }
+  }
+  if (f.beacon_port > 0 && !(net::BeyondLoopback(f.options.request_endpoint) &&
+                             net::BeyondLoopback(f.options.event_endpoint))) {
+    return cli::UsageError(app,
+                           "--beacon: --requests and --events must listen beyond loopback, or "
+                           "the nodes that hear the beacon cannot reach them");
+  }
+  return std::nullopt;
+}
+
+// The LAN beacon (--beacon): the site's name, the ports the server bound and its CURVE key.
+sandtable::Expected<std::unique_ptr<sandtable::net::BeaconPublisher>> StartBeacon(
+    const CoordinatorFlags& f, const sandtable::coordinator::CoordinatorServer& server) {
+  using namespace sandtable;
+  net::SiteBeacon site;
+  site.site = f.site_name;
+  if (f.options.curve) site.curve_key = f.options.curve->public_key_z85;
+  const std::optional<net::TcpEndpoint> requests = net::ParseTcpEndpoint(server.request_endpoint());
+  const std::optional<net::TcpEndpoint> events = net::ParseTcpEndpoint(server.event_endpoint());
+  site.requests_port = requests ? std::atoi(requests->port.c_str()) : 0;
+  site.events_port = events ? std::atoi(events->port.c_str()) : 0;
+  Expected<std::unique_ptr<net::BeaconPublisher>> beacon =
+      net::BeaconPublisher::Start(f.beacon_port, site);
+  if (beacon.ok()) {
+    ST_LOG(kInfo) << "beacon: site " << site.site << " on UDP port " << f.beacon_port << " from "
+                  << (*beacon)->host() << " (" << (site.curve_key.empty() ? "open" : "CURVE")
+                  << ")";
+  }
+  return beacon;
+}
+
 }  // namespace
 
 static int Run(int argc, char** argv) {
@@ -290,41 +353,8 @@ static int Run(int argc, char** argv) {
     std::cout << "wrote " << f.generate_keys_path << "\n";
     return 0;
   }
-  if (!f.curve_keys_path.empty()) {
-    Expected<net::CurveKeyPair> keys = net::ReadCurveKeyFile(f.curve_keys_path);
-    if (!keys.ok()) return cli::UsageError(app, "--curve-keys: " + keys.status().ToString());
-    f.options.curve = *keys;
-  }
   coordinator::HttpStatusOptions status_options;
-  if (!f.status_token_path.empty()) {
-    Expected<std::string> token = coordinator::LoadStatusToken(f.status_token_path);
-    if (!token.ok())
-      return cli::UsageError(app, "--status-token-file: " + token.status().ToString());
-    status_options.token = *token;
-  }
-  if (!f.status_address.empty() && status_options.token.empty()) {
-    if (f.options.curve) {
-      return cli::UsageError(app,
-                             "--status on a CURVE site (--curve-keys) needs --status-token-file");
-    }
-    if (!coordinator::IsLoopbackAddress(f.status_address)) {
-      return cli::UsageError(app, "--status " + f.status_address +
-                                      " is beyond loopback: it needs --status-token-file");
-    }
-  }
-  for (const std::string* endpoint : {&f.options.request_endpoint, &f.options.event_endpoint}) {
-    if (!f.options.curve && !f.options.insecure && net::BeyondLoopback(*endpoint)) {
-      return cli::UsageError(app, *endpoint +
-                                      " is beyond loopback: it needs --curve-keys (or --insecure "
-                                      "for an open site anyone on the network may join)");
-    }
-  }
-  if (f.beacon_port > 0 && !(net::BeyondLoopback(f.options.request_endpoint) &&
-                             net::BeyondLoopback(f.options.event_endpoint))) {
-    return cli::UsageError(app,
-                           "--beacon: --requests and --events must listen beyond loopback, or "
-                           "the nodes that hear the beacon cannot reach them");
-  }
+  if (std::optional<int> exit = ReadKeysAndCheck(app, f, &status_options)) return *exit;
   f.options.membership.heartbeat_period = std::chrono::milliseconds(f.heartbeat_ms);
   f.options.membership.misses_allowed = f.misses;
   f.store_options.sync =
@@ -395,23 +425,12 @@ static int Run(int argc, char** argv) {
   }
   std::unique_ptr<net::BeaconPublisher> beacon;
   if (f.beacon_port > 0) {
-    net::SiteBeacon site;
-    site.site = f.site_name;
-    if (f.options.curve) site.curve_key = f.options.curve->public_key_z85;
-    const std::optional<net::TcpEndpoint> requests =
-        net::ParseTcpEndpoint(server.request_endpoint());
-    const std::optional<net::TcpEndpoint> events = net::ParseTcpEndpoint(server.event_endpoint());
-    site.requests_port = requests ? std::atoi(requests->port.c_str()) : 0;
-    site.events_port = events ? std::atoi(events->port.c_str()) : 0;
-    Expected<std::unique_ptr<net::BeaconPublisher>> started_beacon =
-        net::BeaconPublisher::Start(f.beacon_port, site);
+    Expected<std::unique_ptr<net::BeaconPublisher>> started_beacon = StartBeacon(f, server);
     if (!started_beacon.ok()) {
       ST_LOG(kError) << "--beacon: " << started_beacon.status().ToString();
       return 1;
     }
     beacon = std::move(*started_beacon);
-    ST_LOG(kInfo) << "beacon: site " << site.site << " on UDP port " << f.beacon_port << " from "
-                  << beacon->host() << " (" << (site.curve_key.empty() ? "open" : "CURVE") << ")";
   }
   report::CoordinatorReady ready{server.request_endpoint(), server.event_endpoint(), ""};
   if (http) {
