@@ -1,6 +1,7 @@
 #include "net/discovery.h"
 
 #include <czmq.h>
+#include <zmq.h>
 
 #include <algorithm>
 #include <cctype>
@@ -33,12 +34,12 @@ bool ValidSiteName(std::string_view name) {
   });
 }
 
+// A CURVE public key as libzmq writes it: 40 characters of Z85 (32 bytes).
 bool ValidKey(std::string_view key) {
   if (key.size() != kCurveKeyChars) return false;
-  static const std::string kZ85 =
-      "0123456789abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ.-:+=^!/*?&<>()[]{}@%$#";
-  return std::all_of(key.begin(), key.end(),
-                     [](char c) { return kZ85.find(c) != std::string::npos; });
+  const std::string text(key);
+  uint8_t decoded[32];
+  return zmq_z85_decode(decoded, text.c_str()) != nullptr;
 }
 
 bool ParsePort(std::string_view text, int* port) {
