@@ -28,11 +28,11 @@
 // Test patterns (docs/render.md): test_pattern_request on the ROUTER, site-wide or per node,
 // published as test_pattern_state.
 // --timeline: personnel tracks (CSV, docs/coordinator.md) replayed with play/pause/seek/rate
-// requests and a timeline_clock on the PUB. --status: JSON at http://HOST:PORT/status (port 0:
-// any free port; a bare PORT binds loopback). --status-token-file: a token (one line, 16..256
-// printable characters, file mode 0600) every status request must send as "Authorization:
-// Bearer TOKEN"; required with --curve-keys and for any address beyond loopback (exit 2
-// otherwise). --max-members: the site's size; Hellos past it are refused (default 256).
+// requests and a timeline_clock on the events socket. --status: JSON at http://HOST:PORT/status
+// (port 0: any free port; a bare PORT binds loopback). --status-token-file: a token (one
+// line, 16..256 printable characters, file mode 0600) every status request must send as
+// "Authorization: Bearer TOKEN"; required with --curve-keys and for any address beyond loopback
+// (exit 2 otherwise). --max-members: the site's size; Hellos past it are refused (default 256).
 // Limits against hostile peers: docs/reliability.md.
 //
 // --tracker-replay: replays a recorded tracker trajectory (FASTRAK .traj at 100 Hz, or the CSV
@@ -106,7 +106,8 @@ CLI::Option* AddFlags(CLI::App& app, CoordinatorFlags& f) {
   cli::Configure(app);
   app.add_option("--requests", f.options.request_endpoint, "ROUTER endpoint the nodes connect to")
       ->check(cli::Endpoint());
-  app.add_option("--events", f.options.event_endpoint, "PUB endpoint of the events")
+  app.add_option("--events", f.options.event_endpoint,
+                 "endpoint of the events (subscribers connect to it)")
       ->check(cli::Endpoint());
   app.add_option("--curve-keys", f.curve_keys_path, "site CURVE key file: require CURVE");
   app.add_option("--beacon", f.beacon_port,

@@ -14,10 +14,7 @@ Channel::Channel(std::unique_ptr<Socket> socket, uint32_t sender_id, uint64_t in
   ST_CHECK(counters_ != nullptr) << "Channel needs message counters";
 }
 
-void Channel::ReplaceSocket(std::unique_ptr<Socket> socket) { socket_ = std::move(socket); }
-
-Status Channel::Send(wire::Envelope envelope, const std::string& routing_id) {
-  if (socket_ == nullptr) return UnavailableError("channel: socket closed (being rebuilt)");
+Expected<std::optional<std::string>> Channel::StampAndEncode(wire::Envelope envelope) {
   wire::Envelope header = stamper_.Next();
   envelope.set_protocol_version(header.protocol_version());
   envelope.set_sender_id(header.sender_id());
@@ -26,12 +23,11 @@ Status Channel::Send(wire::Envelope envelope, const std::string& routing_id) {
   envelope.set_send_time_ns(header.send_time_ns());
   Expected<std::string> bytes = proto::EncodeEnvelope(std::move(envelope), limits_);
   if (!bytes.ok()) return bytes.status();
-  const size_t size = bytes->size();
   if (faults_.active()) {
     const double u = std::uniform_real_distribution<double>(0.0, 1.0)(fault_random_);
     if (u < faults_.drop_share) {
       ++fault_counts_.dropped;
-      return OkStatus();  // a lossy link: the sender cannot tell
+      return std::optional<std::string>();  // a lossy link: the sender cannot tell
     }
     if (u < faults_.drop_share + faults_.corrupt_share && !bytes->empty()) {
       ++fault_counts_.corrupted;
@@ -43,14 +39,39 @@ Status Channel::Send(wire::Envelope envelope, const std::string& routing_id) {
       }
     }
   }
+  return std::optional<std::string>(std::move(*bytes));
+}
+
+Status Channel::Send(wire::Envelope envelope, const std::string& routing_id) {
+  Expected<std::optional<std::string>> bytes = StampAndEncode(std::move(envelope));
+  if (!bytes.ok()) return bytes.status();
+  if (!bytes->has_value()) return OkStatus();
+  const size_t size = (*bytes)->size();
   Status sent = socket_->type() == SocketType::kRouter
-                    ? socket_->Send({routing_id, std::move(*bytes)})
-                    : socket_->Send({std::move(*bytes)});
+                    ? socket_->Send({routing_id, std::move(**bytes)})
+                    : socket_->Send({std::move(**bytes)});
   if (sent.ok()) {
     ++stats_.messages_sent;
     stats_.bytes_sent += size;
   }
   return sent;
+}
+
+Status Channel::SendToEach(wire::Envelope envelope, const std::vector<std::string>& routing_ids,
+                           std::vector<Status>* results) {
+  ST_CHECK(socket_->type() == SocketType::kRouter) << "Channel::SendToEach needs a ROUTER";
+  results->assign(routing_ids.size(), OkStatus());
+  Expected<std::optional<std::string>> bytes = StampAndEncode(std::move(envelope));
+  if (!bytes.ok()) return bytes.status();
+  if (!bytes->has_value()) return OkStatus();
+  for (size_t i = 0; i < routing_ids.size(); ++i) {
+    (*results)[i] = socket_->Send({routing_ids[i], **bytes});
+    if ((*results)[i].ok()) {
+      ++stats_.messages_sent;
+      stats_.bytes_sent += (*bytes)->size();
+    }
+  }
+  return OkStatus();
 }
 
 Status ChannelFaults::Check() const {

@@ -12,6 +12,7 @@
 #include <optional>
 #include <random>
 #include <string>
+#include <vector>
 
 #include "common/base/status.h"
 #include "net/socket.h"
@@ -79,6 +80,12 @@ class Channel {
   // Fills the header of `envelope` (whose body the caller has set) and sends it. For ROUTER
   // sockets `routing_id` names the receiver. UNAVAILABLE when it cannot be queued.
   Status Send(wire::Envelope envelope, const std::string& routing_id = {});
+  // ROUTER only: sends one envelope to each of `routing_ids`, stamped and encoded once, so that
+  // every receiver sees the same sequence number; (*results)[i] is the send to routing_ids[i]
+  // (NOT_FOUND: not connected; UNAVAILABLE: its queue is full). An encoding failure is the
+  // error.
+  Status SendToEach(wire::Envelope envelope, const std::vector<std::string>& routing_ids,
+                    std::vector<Status>* results);
 
   // One message if one is waiting and valid; nullopt when none is waiting. A rejected message
   // returns its Status (already counted); the caller logs it and carries on.
@@ -92,11 +99,6 @@ class Channel {
   // Senders whose sequence state is kept (bounded, proto/sequence_tracker.h).
   size_t tracked_senders() const { return tracker_.size(); }
 
-  // Replaces the socket (e.g. a publisher rebuilt to shed its subscribers' state) keeping the
-  // numbering of sent messages, so receivers see one sender with one incarnation. nullptr
-  // closes it: Send() is then UNAVAILABLE, and socket() must not be called until replaced.
-  void ReplaceSocket(std::unique_ptr<Socket> socket);
-
   // Turns fault injection on (or off with both shares 0). INVALID_ARGUMENT from Check().
   Status SetFaults(const ChannelFaults& faults);
   const ChannelFaultCounts& fault_counts() const { return fault_counts_; }
@@ -106,6 +108,9 @@ class Channel {
   proto::MessageCounters& counters() { return *counters_; }
 
  private:
+  // Stamps the header and encodes; nullopt when fault injection drops the message (counted).
+  Expected<std::optional<std::string>> StampAndEncode(wire::Envelope envelope);
+
   std::unique_ptr<Socket> socket_;
   proto::EnvelopeStamper stamper_;
   proto::SequenceTracker tracker_;

@@ -1,8 +1,8 @@
 // CURVE security: site key files and a ZAP handler that refuses unknown clients.
 //
 // Site scheme (docs/protocol.md): every process of a site is given the same site key file
-// (`sandtable-coordinator --generate-curve-keys site.key`). Servers (bound ROUTER/PUB sockets)
-// use it as their CURVE key pair; clients (DEALER/SUB) use it as their own key pair and as the
+// (`sandtable-coordinator --generate-curve-keys site.key`). Servers (bound ROUTER sockets)
+// use it as their CURVE key pair; clients (DEALERs) use it as their own key pair and as the
 // server's public key. A ZAP handler accepts a client only if its public key is in the
 // authorized set (the site key, plus any extra keys). Clients without CURVE, or with another
 // key pair, get no connection; the refusal is logged and counted.

@@ -25,7 +25,7 @@ struct SiteBeacon {
   std::string site;       // the site's name: 1..64 of [A-Za-z0-9_.-]
   std::string curve_key;  // the coordinator's CURVE public key (Z85, 40 chars); empty: open site
   int requests_port = 0;  // the coordinator's ROUTER
-  int events_port = 0;    // the coordinator's PUB
+  int events_port = 0;    // the coordinator's events socket
   std::string host;       // where the beacon came from (set by the listener)
 
   std::string RequestsEndpoint() const;  // tcp://HOST:REQUESTS

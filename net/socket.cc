@@ -17,8 +17,8 @@ zmq::socket_type ToZmq(SocketType type) {
       return zmq::socket_type::sub;
     case SocketType::kPair:
       return zmq::socket_type::pair;
-    case SocketType::kXPub:
-      return zmq::socket_type::xpub;
+    case SocketType::kEventSubscriber:
+      return zmq::socket_type::dealer;
   }
   return zmq::socket_type::pair;
 }
@@ -64,7 +64,12 @@ Expected<std::unique_ptr<Socket>> Socket::Create(zmq::context_t* context, Socket
       socket.set(zmq::sockopt::router_mandatory, 1);
       socket.set(zmq::sockopt::router_handover, 0);
     }
-    if (type == SocketType::kXPub) socket.set(zmq::sockopt::xpub_manual, 1);
+    if (type == SocketType::kEventSubscriber) {
+      // The probe is written when a pipe is attached; with ZMQ_IMMEDIATE each connection (also
+      // after the publisher restarts) gets a new pipe, so it subscribes again.
+      socket.set(zmq::sockopt::probe_router, 1);
+      socket.set(zmq::sockopt::immediate, 1);
+    }
     if (!options.routing_id.empty()) socket.set(zmq::sockopt::routing_id, options.routing_id);
     if (type == SocketType::kSub && options.subscribe_all) socket.set(zmq::sockopt::subscribe, "");
     if (options.curve.enabled) {
@@ -127,20 +132,6 @@ Status Socket::Send(const std::vector<std::string>& frames) {
       return NotFoundError("socket: routing id not connected (peer gone); message dropped");
     }
     return FromZmq(e, "socket: send");
-  }
-}
-
-Status Socket::Subscribe(const std::string& topic, bool subscribe) {
-  if (type_ != SocketType::kXPub) return InvalidArgumentError("socket: Subscribe needs an XPUB");
-  try {
-    if (subscribe) {
-      socket_.set(zmq::sockopt::subscribe, topic);
-    } else {
-      socket_.set(zmq::sockopt::unsubscribe, topic);
-    }
-    return OkStatus();
-  } catch (const zmq::error_t& e) {
-    return FromZmq(e, "socket: subscribe");
   }
 }
 

@@ -23,10 +23,11 @@
 
 namespace sandtable::net {
 
-// kXPub: a PUB whose subscriptions the owner applies itself (ZMQ_XPUB_MANUAL): it receives
-// each subscription message ("\x01topic", "\x00topic" to cancel) and calls Subscribe() for
-// the ones it accepts (net/subscription_filter.h), so subscribers cannot grow its memory.
-enum class SocketType { kRouter, kDealer, kPub, kSub, kPair, kXPub };
+// kEventSubscriber: a DEALER that sends one empty message each time its connection is made
+// (ZMQ_PROBE_ROUTER with ZMQ_IMMEDIATE, so also after a reconnection), the subscription that a
+// net::EventPublisher's ROUTER registers (net/event_publisher.h). It receives the events as a SUB
+// would, one frame each.
+enum class SocketType { kRouter, kDealer, kPub, kSub, kPair, kEventSubscriber };
 
 // CURVE settings of one socket (net/curve.h loads them from site key files). Keys are Z85
 // text (40 characters).
@@ -74,10 +75,6 @@ class Socket {
   // OK also on timeout (all false) and on EINTR (a signal arrived: the caller checks it).
   static Status Poll(const std::vector<Socket*>& sockets, std::chrono::milliseconds timeout,
                      std::vector<bool>* readable);
-
-  // kXPub only: applies (or cancels) `topic` for the subscriber whose subscription message
-  // was received last.
-  Status Subscribe(const std::string& topic, bool subscribe = true);
 
   zmq::socket_t& raw() { return socket_; }
   SocketType type() const { return type_; }

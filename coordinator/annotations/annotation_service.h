@@ -1,5 +1,5 @@
 // AnnotationService: serves annotation requests on the coordinator's ROUTER and publishes the
-// sequenced events on its PUB.
+// sequenced events on the events socket.
 //
 // Requests: annotation_request (an AnnotationEvent with event_sequence 0) -> after the batch
 // is durable (AnnotationStore::Commit, one transaction per server step: group commit) the

@@ -5,7 +5,7 @@
 // reason}. A site-wide request sets the site's pattern and clears every node's own; a node
 // request sets (or with "" clears) that node's. Unknown pattern names are refused, naming them;
 // at most kMaxNodePatterns node patterns are held (more is refused).
-// Events on the PUB: test_pattern_state (the whole state) at once after every accepted request
+// Events: test_pattern_state (the whole state) at once after every accepted request
 // and every republish_period, so a node that joined late or lost an event has it within a
 // period. Nodes apply their own pattern, or the site's (node/events/event_state_service.h).
 #pragma once

@@ -9,13 +9,13 @@ namespace sandtable::coordinator {
 namespace {
 
 // Subscription messages queued per subscriber connection before libzmq stops reading it.
-constexpr int kPublisherReceiveHighWaterMark = 64;
 
 }  // namespace
 
 Status CoordinatorOptions::Check() const {
   ST_RETURN_IF_ERROR(membership.Check());
   ST_RETURN_IF_ERROR(limits.Check());
+  ST_RETURN_IF_ERROR(events.Check());
   if (step_period.count() <= 0)
     return InvalidArgumentError("coordinator: step_period must be > 0 ms");
   if (republish_period.count() <= 0) {
@@ -34,9 +34,7 @@ Status CoordinatorOptions::Check() const {
 }
 
 CoordinatorServer::CoordinatorServer(CoordinatorOptions options)
-    : options_(std::move(options)),
-      members_(options_.membership),
-      subscription_filter_(options_.subscriptions) {}
+    : options_(std::move(options)), members_(options_.membership) {}
 
 CoordinatorServer::~CoordinatorServer() {
   for (auto& monitor : handshake_monitors_) monitor->Stop();
@@ -75,7 +73,6 @@ Status CoordinatorServer::Start() {
   Expected<std::unique_ptr<net::Socket>> router =
       net::Socket::Create(&context_, net::SocketType::kRouter, socket_options);
   if (!router.ok()) return router.status();
-  socket_options_ = socket_options;
   ST_RETURN_IF_ERROR(MonitorHandshakes(router->get(), "coordinator requests"));
   Expected<std::string> request_endpoint = (*router)->Bind(options_.request_endpoint);
   if (!request_endpoint.ok()) return request_endpoint.status().WithContext("requests");
@@ -83,60 +80,17 @@ Status CoordinatorServer::Start() {
   requests_ = std::make_unique<net::Channel>(std::move(*router), kCoordinatorSenderId, incarnation,
                                              &counters_, options_.limits);
 
-  Expected<std::unique_ptr<net::Socket>> pub =
-      CreatePublisher(options_.event_endpoint, &event_endpoint_);
-  if (!pub.ok()) return pub.status();
-  events_ = std::make_unique<net::Channel>(std::move(*pub), kCoordinatorSenderId, incarnation,
-                                           &counters_, options_.limits);
+  Expected<std::unique_ptr<net::EventPublisher>> events =
+      net::EventPublisher::Bind(&context_, socket_options, options_.events, options_.event_endpoint,
+                                kCoordinatorSenderId, incarnation, &counters_, options_.limits);
+  if (!events.ok()) return events.status().WithContext("events");
+  events_ = std::move(*events);
+  event_endpoint_ = events_->endpoint();
+  ST_RETURN_IF_ERROR(MonitorHandshakes(&events_->socket(), "coordinator events"));
   loop_.Add(
       requests_.get(), [this](net::Incoming in) { HandleRequest(std::move(in)); },
       /*answer_refusals=*/true);
   return OkStatus();
-}
-
-Expected<std::unique_ptr<net::Socket>> CoordinatorServer::CreatePublisher(
-    const std::string& endpoint, std::string* bound) {
-  net::SocketOptions options = socket_options_;
-  // Subscribers send only subscriptions: a few bytes each, and one each (net/
-  // subscription_filter.h). A short inbound queue bounds what libzmq reads ahead of the filter.
-  options.max_message_bytes = options_.subscriptions.max_subscription_message_bytes;
-  options.receive_high_water_mark = kPublisherReceiveHighWaterMark;
-  Expected<std::unique_ptr<net::Socket>> pub =
-      net::Socket::Create(&context_, net::SocketType::kXPub, options);
-  if (!pub.ok()) return pub.status();
-  // One monitor, on the first publisher (a rebuilt one is not monitored: its refusals are
-  // rare, and monitors must not grow with rebuilds).
-  if (events_ == nullptr) ST_RETURN_IF_ERROR(MonitorHandshakes(pub->get(), "coordinator events"));
-  Expected<std::string> bound_endpoint = (*pub)->Bind(endpoint);
-  if (!bound_endpoint.ok()) return bound_endpoint.status().WithContext("events");
-  *bound = *bound_endpoint;
-  return pub;
-}
-
-Status CoordinatorServer::ServeSubscriptions() {
-  Expected<bool> rebuild = subscription_filter_.Drain(events_->socket(), &counters_);
-  if (!rebuild.ok()) return rebuild.status();
-  if (!*rebuild) return OkStatus();
-  ST_LOG(kWarning) << "events: subscribers asked for more than "
-                   << options_.subscriptions.max_foreign_topic_bytes
-                   << " bytes of topics the site does not use; rebuilding the publisher on "
-                   << event_endpoint_ << " (subscribers reconnect)";
-  // Close first (frees every subscription), then bind the same endpoint again: libzmq closes
-  // the listener on its I/O thread, so the port may be busy for a moment.
-  events_->ReplaceSocket(nullptr);
-  constexpr auto kRebindDeadline = std::chrono::seconds(2);
-  const auto until = Clock::now() + kRebindDeadline;
-  while (true) {
-    std::string bound;
-    Expected<std::unique_ptr<net::Socket>> pub = CreatePublisher(event_endpoint_, &bound);
-    if (pub.ok()) {
-      events_->ReplaceSocket(std::move(*pub));
-      subscription_filter_.Rebuilt();
-      return OkStatus();
-    }
-    if (Clock::now() >= until) return pub.status().WithContext("rebuilding the publisher");
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
 }
 
 void CoordinatorServer::CountPublishFailure(const Status& status, const char* what) {
@@ -161,7 +115,7 @@ Status CoordinatorServer::Step(std::chrono::milliseconds max_wait) {
   // Never sleep past the next expiry check: dead nodes must be found within a period.
   const auto wait = std::min(max_wait, options_.membership.heartbeat_period / 2);
   ST_RETURN_IF_ERROR(loop_.RunOnce(wait));
-  ST_RETURN_IF_ERROR(ServeSubscriptions());
+  ST_RETURN_IF_ERROR(events_->Drain());
   if (open_notice_) open_notice_->Tick(Clock::now());
   for (CoordinatorService* service : services_) {
     // A service's failure (e.g. a publish over the codec limit) is logged, not fatal.
@@ -189,7 +143,9 @@ Status CoordinatorServer::Run(const std::atomic<bool>& stop) {
   return OkStatus();
 }
 
-Status CoordinatorServer::Publish(wire::Envelope event) { return events_->Send(std::move(event)); }
+Status CoordinatorServer::Publish(wire::Envelope event) {
+  return events_->Publish(std::move(event));
+}
 
 Status CoordinatorServer::Reply(wire::Envelope reply, const std::string& routing_id) {
   return requests_->Send(std::move(reply), routing_id);
@@ -200,7 +156,7 @@ Status CoordinatorServer::PublishMemberList() {
   *envelope.mutable_member_list() = members_.ToWire();
   published_version_ = members_.version();
   last_publish_ = Clock::now();
-  return events_->Send(std::move(envelope));
+  return events_->Publish(std::move(envelope));
 }
 
 void CoordinatorServer::HandleRequest(net::Incoming request) {

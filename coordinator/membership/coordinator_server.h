@@ -1,7 +1,7 @@
 // CoordinatorServer: the coordinator's sockets and its membership/time service.
 //
 // Binds a ROUTER for requests (Hello -> HelloAck, Heartbeat -> HeartbeatAck, Goodbye,
-// TimeRequest -> TimeReply) and a PUB for events (MemberList on every change and every
+// TimeRequest -> TimeReply) and an event publisher (MemberList on every change and every
 // republish_period for late subscribers; later tracker, cursor, annotation and timeline
 // events through Publish()). Any other request is answered with Rejected and counted as
 // wrong_type, unless a CoordinatorService added with AddService() serves it (annotations,
@@ -12,12 +12,11 @@
 // membership_table.h is answered with Rejected and counted over_limit; a full site or an id
 // bound to another live connection gets HelloAck{accepted: false} (counted over_limit /
 // forged); a Goodbye or Heartbeat for an id from another connection or incarnation changes
-// nothing (counted forged). The PUB is an XPUB whose subscriptions net::SubscriptionFilter
-// bounds. A publish that fails (a message over the codec limit, a full queue) is logged and
-// counted (publish_failures()), and the server keeps serving: Step() fails only when a socket
-// itself fails.
-// Single-threaded: call Step() in a loop (or Run()). Never throws; failures of sockets come back as
-// Status.
+// nothing (counted forged). Events leave through a net::EventPublisher (a ROUTER that
+// subscribers' DEALERs connect to), which a subscription flood cannot grow or stall. A publish that
+// fails (a message over the codec limit, a full queue) is logged and counted (publish_failures()),
+// and the server keeps serving: Step() fails only when a socket itself fails. Single-threaded: call
+// Step() in a loop (or Run()). Never throws; failures of sockets come back as Status.
 #pragma once
 
 #include <atomic>
@@ -32,9 +31,9 @@
 #include "net/channel.h"
 #include "net/curve.h"
 #include "net/endpoint.h"
+#include "net/event_publisher.h"
 #include "net/handshake_monitor.h"
 #include "net/server_loop.h"
-#include "net/subscription_filter.h"
 
 namespace sandtable::coordinator {
 
@@ -55,7 +54,7 @@ class CoordinatorService {
 
 struct CoordinatorOptions {
   std::string request_endpoint = "tcp://127.0.0.1:*";  // ROUTER
-  std::string event_endpoint = "tcp://127.0.0.1:*";    // PUB
+  std::string event_endpoint = "tcp://127.0.0.1:*";    // events (ROUTER)
   MembershipOptions membership;
   std::chrono::milliseconds republish_period{1000};
   // Longest wait for requests in Run(): services polling a tracker at 100 Hz need <= 5 ms.
@@ -65,7 +64,7 @@ struct CoordinatorOptions {
   // network may join it, read its events and write its annotations; logged every minute).
   bool insecure = false;
   proto::CodecLimits limits;
-  net::SubscriptionLimits subscriptions;  // what the PUB accepts from subscribers
+  net::EventPublisherLimits events;  // what the event socket accepts from subscribers
 
   Status Check() const;
 };
@@ -97,7 +96,8 @@ class CoordinatorServer {
   const proto::MessageCounters& counters() const { return counters_; }
   // Publishes that failed (logged; the server kept serving).
   uint64_t publish_failures() const { return publish_failures_; }
-  const net::SubscriptionStats& subscriptions() const { return subscription_filter_.stats(); }
+  const net::EventPublisherStats& event_stats() const { return events_->stats(); }
+  size_t event_subscribers() const { return events_ ? events_->subscribers() : 0; }
   // Senders whose sequence state the request socket keeps (bounded).
   size_t tracked_senders() const { return requests_ ? requests_->tracked_senders() : 0; }
 
@@ -105,10 +105,6 @@ class CoordinatorServer {
   void HandleRequest(net::Incoming request);
   Status PublishMemberList();
   void CountPublishFailure(const Status& status, const char* what);
-  Expected<std::unique_ptr<net::Socket>> CreatePublisher(const std::string& endpoint,
-                                                         std::string* bound);
-  // Drains the publisher's subscriptions; rebuilds it when they hold too much.
-  Status ServeSubscriptions();
   // True when the connection with this routing id is still up (a probe send).
   bool StillConnected(const std::string& routing_id);
   // With CURVE, logs and counts refused handshakes on `socket` (net/handshake_monitor.h).
@@ -120,13 +116,11 @@ class CoordinatorServer {
   std::vector<std::unique_ptr<net::HandshakeMonitor>> handshake_monitors_;
   proto::MessageCounters counters_;
   std::unique_ptr<net::Channel> requests_;
-  std::unique_ptr<net::Channel> events_;
+  std::unique_ptr<net::EventPublisher> events_;
   net::ServerLoop loop_;
   std::string request_endpoint_, event_endpoint_;
   MembershipTable members_;
   std::vector<CoordinatorService*> services_;
-  net::SocketOptions socket_options_;
-  net::SubscriptionFilter subscription_filter_;
   std::unique_ptr<net::InsecureNotice> open_notice_;  // an open site's repeated warning
   uint64_t publish_failures_ = 0;
   uint64_t published_version_ = ~uint64_t{0};

@@ -49,8 +49,10 @@ std::string StatusService::BuildJson(const CoordinatorServer& server) const {
   doc["messages"] = {
       {"accepted", c.accepted()}, {"rejected", rejected}, {"rejected_total", c.total_rejected()}};
   doc["limits"] = {{"publish_failures", server.publish_failures()},
-                   {"subscriptions_refused", server.subscriptions().refused},
-                   {"publisher_rebuilds", server.subscriptions().rebuilds},
+                   {"event_subscribers", server.event_subscribers()},
+                   {"event_messages_refused", server.event_stats().refused},
+                   {"event_subscribers_refused", server.event_stats().refused_full},
+                   {"events_dropped_queue_full", server.event_stats().dropped_queue_full},
                    {"tracked_senders", server.tracked_senders()},
                    {"max_members", server.members().options().max_members}};
 

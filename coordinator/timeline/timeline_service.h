@@ -1,7 +1,7 @@
 // TimelineService: the after-action review timeline on the coordinator (CoordinatorService).
 //
 // Requests on the ROUTER: play, pause, seek, rate (proto/timeline.proto) -> timeline_reply
-// {request_sequence, accepted, reason, clock}. Events on the PUB: timeline_clock at
+// {request_sequence, accepted, reason, clock}. Events: timeline_clock at
 // publish_rate_hz and at once after every change (accepted request, end reached). The clock
 // carries media time sampled at the coordinator's steady clock (sample_time_ns), rate and the
 // playing flag, so nodes extrapolate between events with their time-sync offset, plus the

@@ -1,7 +1,7 @@
 // WandService: runs a tracker source and the wand inside the coordinator (CoordinatorService).
 //
 // Every OnStep() polls the source (never blocks) and, for each sample that became due,
-// publishes on the PUB a TrackerPose (table_from_sensor = table_from_tracker *
+// publishes a TrackerPose (table_from_sensor = table_from_tracker *
 // tracker_from_sensor) and a Cursor (ComputeCursor against the scene: the wand ray from the
 // tip, hit point and normal). So events go out at the tracker rate (100 Hz for .traj replay),
 // each at most one server step late; the server must step at least every 1 / (2 rate) s

@@ -154,7 +154,8 @@ Status NodeRuntime::Start() {
   coordinator_faults.seed ^= 0x9e3779b97f4a7c15ull;  // its own draws
   ST_RETURN_IF_ERROR(coordinator_->SetFaults(coordinator_faults));
 
-  auto sub = net::Socket::Create(&context_, net::SocketType::kSub, ClientSocketOptions());
+  auto sub =
+      net::Socket::Create(&context_, net::SocketType::kEventSubscriber, ClientSocketOptions());
   if (!sub.ok()) return sub.status();
   ST_RETURN_IF_ERROR((*sub)->Connect(options_.coordinator_events));
   events_ = std::make_unique<net::Channel>(std::move(*sub), options_.id, incarnation_, &counters_,

@@ -1,10 +1,10 @@
 // NodeRuntime: a node's network side and the host of its services.
 //
 // Sockets: a DEALER to the coordinator's ROUTER (Hello, Heartbeat, TimeRequest, Goodbye, and
-// the services' requests); a SUB to the coordinator's PUB (MemberList and events); a bound
-// ROUTER for peers; one DEALER per peer it links to. Membership comes from the coordinator's
-// member list; the node links every member, or only the ones given to SetNeighbours (no
-// service narrows the links today: the blend picks its overlapping units among the linked
+// the services' requests); an event subscriber to the coordinator's events (MemberList and events);
+// a bound ROUTER for peers; one DEALER per peer it links to. Membership comes from the
+// coordinator's member list; the node links every member, or only the ones given to SetNeighbours
+// (no service narrows the links today: the blend picks its overlapping units among the linked
 // peers). Peer heartbeats: every heartbeat_period up to kPeersAtFullHeartbeatRate peers, the
 // period growing in proportion beyond, so the heartbeats a node sends and receives stay flat
 // as a site grows; each says its period and a peer counts as silent after kPeerSilencePeriods
@@ -77,7 +77,7 @@ inline constexpr int kPeerSilencePeriods = 5;
 struct NodeOptions {
   NodeId id = kInvalidNodeId;                   // below kFirstReservedSenderId
   std::string coordinator_requests;             // coordinator ROUTER endpoint
-  std::string coordinator_events;               // coordinator PUB endpoint
+  std::string coordinator_events;               // the coordinator's events endpoint
   std::string peer_bind = "tcp://127.0.0.1:*";  // own ROUTER for peers
   // The host peers are told to connect to (empty: the bound address, or when bound to every
   // interface the one facing the coordinator; net/endpoint.h, docs/deploy.md).

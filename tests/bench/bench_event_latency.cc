@@ -47,7 +47,7 @@ int main(int argc, char** argv) {
     threads.emplace_back([&, i] {
       zmq::context_t context;
       proto::MessageCounters counters;
-      auto sub = net::Socket::Create(&context, net::SocketType::kSub);
+      auto sub = net::Socket::Create(&context, net::SocketType::kEventSubscriber);
       if (!sub.ok() || !(*sub)->Connect(server.event_endpoint()).ok()) return;
       net::Channel channel(std::move(*sub), 1000 + i, 1, &counters);
       bool counted_ready = false;

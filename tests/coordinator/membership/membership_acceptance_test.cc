@@ -59,7 +59,7 @@ class Site {
     ASSERT_FALSE(requests_.empty()) << ready->dump();
     ASSERT_FALSE(events_.empty()) << ready->dump();
     if (!subscriber_) {
-      auto sub = net::Socket::Create(&context_, net::SocketType::kSub);
+      auto sub = net::Socket::Create(&context_, net::SocketType::kEventSubscriber);
       ASSERT_TRUE(sub.ok());
       ASSERT_TRUE((*sub)->Connect(events_).ok());
       subscriber_ = std::make_unique<net::Channel>(std::move(*sub), 900000, 1, &counters_);

@@ -24,7 +24,7 @@ class ServiceFixture : public ::testing::Test {
     server_->AddService(service);
     ASSERT_TRUE(server_->Start().ok());
     thread_ = std::thread([this] { (void)server_->Run(stop_); });
-    auto sub = net::Socket::Create(&context_, net::SocketType::kSub);
+    auto sub = net::Socket::Create(&context_, net::SocketType::kEventSubscriber);
     ASSERT_TRUE(sub.ok());
     ASSERT_TRUE((*sub)->Connect(server_->event_endpoint()).ok());
     sub_ = std::make_unique<net::Channel>(std::move(*sub), 901, 1, &counters_);

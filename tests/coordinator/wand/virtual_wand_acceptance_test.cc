@@ -48,7 +48,7 @@ TEST(VirtualWandAcceptanceTest, WandStrokeIsPublishedAndSurvivesSigkill) {
   ASSERT_TRUE(ready.has_value()) << error;
   zmq::context_t context;
   proto::MessageCounters counters;
-  auto sub = net::Socket::Create(&context, net::SocketType::kSub);
+  auto sub = net::Socket::Create(&context, net::SocketType::kEventSubscriber);
   ASSERT_TRUE(sub.ok());
   ASSERT_TRUE((*sub)->Connect(ReadyString(*ready, "events")).ok());
   net::Channel channel(std::move(*sub), 952, 1, &counters);

@@ -76,7 +76,7 @@ TEST(WandReplayAcceptanceTest, TrajectoryDrivesPosesAndCursorAtTrackerRate) {
 
   zmq::context_t context;
   proto::MessageCounters counters;
-  auto sub = net::Socket::Create(&context, net::SocketType::kSub);
+  auto sub = net::Socket::Create(&context, net::SocketType::kEventSubscriber);
   ASSERT_TRUE(sub.ok());
   ASSERT_TRUE((*sub)->Connect(events).ok());
   net::Channel channel(std::move(*sub), 951, 1, &counters);

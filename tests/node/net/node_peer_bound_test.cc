@@ -3,14 +3,15 @@
 // with 1 100 fake members (the report: each node pushed to ZeroMQ's 1 023-socket limit, real
 // peers never connected) costs a node max_peer_links sockets and the runner
 // kMaxRunnerPeerLinks, and the real neighbours are linked and heard both ways. The member list
-// comes from a publisher of the test (a stand-in for the coordinator's PUB, real sockets), the
-// nodes are real NodeRuntimes stepped on this thread.
+// comes from a publisher of the test (a stand-in for the coordinator's event publisher, real
+// sockets), the nodes are real NodeRuntimes stepped on this thread.
 #include <gtest/gtest.h>
 
 #include <chrono>
 #include <memory>
 
 #include "common/base/ids.h"
+#include "net/event_publisher.h"
 #include "node/net/node_runtime.h"
 #include "tests/net/test_wait.h"
 
@@ -28,11 +29,11 @@ constexpr milliseconds kRepublish{50};
 TEST(NodePeerBoundTest, FakeMembersCannotCrowdOutARealNeighbour) {
   zmq::context_t context;
   proto::MessageCounters counters;
-  auto pub = net::Socket::Create(&context, net::SocketType::kPub);
-  ASSERT_TRUE(pub.ok());
-  Expected<std::string> events = (*pub)->Bind("tcp://127.0.0.1:*");
-  ASSERT_TRUE(events.ok());
-  net::Channel publisher(std::move(*pub), kCoordinatorSenderId, 1, &counters);
+  Expected<std::unique_ptr<net::EventPublisher>> publisher =
+      net::EventPublisher::Bind(&context, net::SocketOptions{}, net::EventPublisherLimits{},
+                                "tcp://127.0.0.1:*", kCoordinatorSenderId, 1, &counters, {});
+  ASSERT_TRUE(publisher.ok()) << publisher.status().ToString();
+  const std::string events = (*publisher)->endpoint();
   auto router = net::Socket::Create(&context, net::SocketType::kRouter);
   ASSERT_TRUE(router.ok());
   Expected<std::string> requests = (*router)->Bind("tcp://127.0.0.1:*");
@@ -42,7 +43,7 @@ TEST(NodePeerBoundTest, FakeMembersCannotCrowdOutARealNeighbour) {
     NodeOptions o;
     o.id = id;
     o.coordinator_requests = *requests;
-    o.coordinator_events = *events;
+    o.coordinator_events = events;
     o.heartbeat_period = milliseconds(50);
     o.coordinator_timeout = milliseconds(5000);
     o.peer_timeout = milliseconds(5000);
@@ -73,7 +74,8 @@ TEST(NodePeerBoundTest, FakeMembersCannotCrowdOutARealNeighbour) {
   const bool heard = net::testing::WaitFor(
       [&] {
         if (SteadyClock::now() >= next_publish) {
-          (void)publisher.Send(list);  // republished: the SUBs may join late
+          (void)(*publisher)->Drain();
+          (void)(*publisher)->Publish(list);  // republished: subscribers may join late
           next_publish = SteadyClock::now() + kRepublish;
         }
         EXPECT_TRUE(a.Step(milliseconds(1)).ok());
