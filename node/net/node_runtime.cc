@@ -13,6 +13,8 @@ namespace sandtable::node {
 namespace {
 
 constexpr int kMaxPeerDrain = 100;
+// A linked peer whose advertised address no connection reached in this long is logged.
+constexpr std::chrono::seconds kPeerUnreachableAfter{5};
 // A turn of the loop (handlers, completions, services) longer than this is logged.
 constexpr std::chrono::milliseconds kBusyTurn{250};
 constexpr size_t kMaxPeerEndpointBytes = 256;
@@ -301,6 +303,7 @@ void NodeRuntime::SendTimers(Clock::time_point now) {
       hb.mutable_heartbeat()->set_calibration_state(calibration_state_);
       hb.mutable_heartbeat()->set_period_ms(static_cast<uint32_t>(period.count()));
       (void)peer.to_peer->Send(std::move(hb));  // a full queue means the peer is down
+      WarnIfUnreachable(id, peer, now);
     }
   }
   if (now >= next_time_sync_) {
@@ -555,6 +558,7 @@ void NodeRuntime::ApplyMemberList(const wire::MemberList& list) {
       }
     }
     PeerInfo& peer = peers_[id];
+    peer.linked_at = Clock::now();
     peer.endpoint = member->endpoints().peer_router();
     peer.incarnation = member->incarnation();
     peer.to_peer = std::make_unique<net::Channel>(std::move(*dealer), options_.id, incarnation_,
@@ -613,9 +617,33 @@ void NodeRuntime::DrainPeerMonitors(const std::vector<NodeId>& ids) {
         if (peer.disconnected_at == Clock::time_point{}) peer.disconnected_at = Clock::now();
       } else if (code == ZMQ_EVENT_HANDSHAKE_SUCCEEDED) {
         peer.disconnected_at = Clock::time_point{};
+        if (peer.unreachable_logged) {
+          ST_LOG(kInfo) << "peer " << id << " at " << peer.endpoint << " reached after "
+                        << std::chrono::duration_cast<std::chrono::seconds>(Clock::now() -
+                                                                            peer.linked_at)
+                               .count()
+                        << " s";
+        }
+        peer.reached = true;
+        peer.unreachable_logged = false;
       }
     }
   }
+}
+
+void NodeRuntime::WarnIfUnreachable(NodeId id, PeerInfo& peer, Clock::time_point now) {
+  // Without a monitor there are no connection events to go by.
+  if (peer.reached || peer.unreachable_logged || !peer.monitor ||
+      now - peer.linked_at < kPeerUnreachableAfter) {
+    return;
+  }
+  peer.unreachable_logged = true;
+  ST_LOG(kWarning)
+      << "peer " << id << " advertised " << peer.endpoint << ", and no connection to it "
+      << "completed in "
+      << std::chrono::duration_cast<std::chrono::seconds>(kPeerUnreachableAfter).count()
+      << " s: is that address reachable from this host (a firewall, a loopback "
+         "address, a wrong --advertise on that unit, different site keys)? Still trying";
 }
 
 void NodeRuntime::HandlePeerMessage(net::Incoming in) {

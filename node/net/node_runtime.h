@@ -114,6 +114,12 @@ struct PeerInfo {
   // has not come back (cleared by the next handshake); services that must react within a frame
   // (the blend) read it. Destroyed before to_peer (declared after it).
   Clock::time_point disconnected_at{};
+  // When it was linked and whether a connection to its advertised address ever completed: a
+  // peer not reached within kPeerUnreachableAfter is logged once (its address does not route
+  // from this host), and again once it is reached.
+  Clock::time_point linked_at{};
+  bool reached = false;
+  bool unreachable_logged = false;
   std::unique_ptr<zmq::socket_t> monitor;
   int dealer_fd = -1, monitor_fd = -1;  // ZMQ_FD of to_peer and of monitor (-1: none)
 };
@@ -183,6 +189,8 @@ class NodeRuntime {
   void SetRegistered(bool registered);
   void DrainPeerDealers(const std::vector<NodeId>& ids);
   void DrainPeerMonitors(const std::vector<NodeId>& ids);
+  // Logs, once, a peer linked kPeerUnreachableAfter ago that no connection has reached.
+  void WarnIfUnreachable(NodeId id, PeerInfo& peer, Clock::time_point now);
   NodeService* CoordinatorServiceFor(wire::Envelope::BodyCase body) const;
   wire::Envelope MakeHello() const;
   net::SocketOptions ClientSocketOptions() const;

@@ -217,6 +217,35 @@ TEST_F(NodeProgramTest, ANodeWithNoCoordinatorSaysSoAndRegistersWhenItComes) {
   EXPECT_EQ(coordinator.Wait(), 0);
 }
 
+// A unit that advertises an address its neighbours cannot reach (here TEST-NET-1, which routes
+// nowhere): the neighbour says so after 5 s, naming the unit and the address, and goes on.
+TEST_F(NodeProgramTest, ANeighbourSaysWhenAPeersAdvertisedAddressIsNotReachable) {
+  ChildProcess coordinator({SANDTABLE_COORDINATOR_BIN});
+  std::string error;
+  const std::optional<nlohmann::json> ready =
+      testing::ReadReadyLine(coordinator, "sandtable-coordinator", kStartDeadline, &error);
+  ASSERT_TRUE(ready.has_value()) << error;
+  const std::string endpoints =
+      testing::ReadyString(*ready, "requests") + "," + testing::ReadyString(*ready, "events");
+  ChildProcess neighbour({SANDTABLE_NODE_BIN, "--id", "1", "--coordinator", endpoints},
+                         testing::ChildOutput::kStdoutAndStderr);
+  std::string seen;
+  ASSERT_TRUE(ReadUntil(neighbour, "\"ready\"", kStartDeadline, &seen)) << seen;
+  ChildProcess unit(
+      {SANDTABLE_NODE_BIN, "--id", "2", "--coordinator", endpoints, "--advertise", "192.0.2.1"},
+      testing::ChildOutput::kStdoutAndStderr);
+  std::string unit_seen;
+  ASSERT_TRUE(ReadUntil(unit, "\"ready\"", kStartDeadline, &unit_seen)) << unit_seen;
+  ASSERT_TRUE(
+      ReadUntil(neighbour, "peer 2 advertised tcp://192.0.2.1:", milliseconds(20000), &seen))
+      << seen;
+  EXPECT_NE(seen.find("is that address reachable from this host"), std::string::npos) << seen;
+  for (ChildProcess* child : {&unit, &neighbour, &coordinator}) {
+    child->Signal(SIGTERM);
+    EXPECT_EQ(child->Wait(), 0);
+  }
+}
+
 // One site file for both programs and a unit file for the node (docs/config-file.md): the
 // coordinator listens where the file says, the node finds it there with no --coordinator, takes
 // its id from its unit file, and a flag on its command line wins over the file's.
