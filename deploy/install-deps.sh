@@ -31,6 +31,8 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox python3
   # sites across hosts: network namespaces, veth, sockets' backlogs (ip, ss)
   iproute2
+  # the rollout's test (tests/deploy): a systemd, an sshd and a system bus on each namespace host
+  openssh-server dbus systemd
 )
 
 missing=()
