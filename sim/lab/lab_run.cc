@@ -30,7 +30,14 @@ int LabRun::Prepare() {
     return inputs.status().code() == StatusCode::kInvalidArgument ? kExitUsage : kExitFailure;
   }
   inputs_ = std::move(*inputs);
-  if (options_.curve) {
+  if (options_.hosts == "netns") {
+    if (Status made = MakeHosts(); !made.ok()) {
+      progress_.End("failed");
+      err_ << "sandtable-lab run: " << made.ToString() << "\n";
+      return kExitFailure;
+    }
+  }
+  if (options_.curve || hosts_ != nullptr) {
     // One site key for the whole run: world, coordinator and nodes require CURVE with it.
     const std::string key_path = fs::absolute(fs::path(options_.out_dir) / "site.key");
     Expected<net::CurveKeyPair> keys = net::GenerateCurveKeyPair();
@@ -92,12 +99,28 @@ int64_t LabRun::SystemMs() {
       .count();
 }
 
+Status LabRun::MakeHosts() {
+  Expected<std::unique_ptr<NetnsHosts>> hosts = NetnsHosts::Create();
+  if (!hosts.ok()) return hosts.status();
+  hosts_ = std::move(*hosts);
+  std::vector<std::string> names = {"world", "coordinator"};
+  for (const UnitSpec& unit : inputs_.site.units)
+    names.push_back("node-" + std::to_string(unit.id));
+  for (const std::string& name : names) {
+    Expected<std::string> address = hosts_->AddHost(name);
+    if (!address.ok()) return address.status();
+  }
+  return OkStatus();
+}
+
 bool LabRun::StartWorld() {
   Phase("start world", 1);
+  const std::string bind =
+      hosts_ ? "tcp://" + hosts_->Address("world") + ":*" : std::string("tcp://127.0.0.1:*");
   ChildProcess* world =
       StartChild("world", "world",
                  {world_bin_, "serve", "--site", inputs_.site_path, "--scene", inputs_.scene_path,
-                  "--bind", "tcp://127.0.0.1:*", "--frame-log", FrameLogPath()});
+                  "--bind", bind, "--frame-log", FrameLogPath()});
   if (!world) return false;
   return Wait(
       "start world", [&] { return !lines_.world_endpoint.empty(); }, ToMs(options_.start_timeout_s),
@@ -121,8 +144,16 @@ std::vector<std::string> LabRun::CoordinatorArgs(const std::string& requests,
 
 bool LabRun::StartCoordinator() {
   Phase("start coordinator", 1);
-  ChildProcess* coordinator = StartChild("coordinator", "coordinator",
-                                         CoordinatorArgs("tcp://127.0.0.1:*", "tcp://127.0.0.1:*"));
+  // Across hosts the coordinator listens on every interface of its host and beacons the site;
+  // no node is given its address.
+  std::vector<std::string> argv = hosts_
+                                      ? CoordinatorArgs("tcp://*:*", "tcp://*:*")
+                                      : CoordinatorArgs("tcp://127.0.0.1:*", "tcp://127.0.0.1:*");
+  if (hosts_) {
+    argv.insert(argv.end(),
+                {"--beacon", std::to_string(kLabDiscoveryPort), "--site-name", kLabSiteName});
+  }
+  ChildProcess* coordinator = StartChild("coordinator", "coordinator", argv);
   if (!coordinator) return false;
   return Wait(
       "start coordinator", [&] { return !lines_.coordinator_events.empty(); },
@@ -167,19 +198,26 @@ bool LabRun::StartNode(const UnitSpec& unit) {
   const std::string export_dir = fs::absolute(fs::path(options_.out_dir) / "calibration");
   {
     const std::string id = std::to_string(unit.id);
-    std::vector<std::string> argv = {node_bin_,
-                                     "--id",
-                                     id,
-                                     "--coordinator",
-                                     lines_.coordinator_requests + "," + lines_.coordinator_events,
-                                     "--world",
-                                     lines_.world_endpoint,
-                                     "--factory",
-                                     inputs_.factory_paths.at(unit.id),
-                                     "--export-dir",
-                                     export_dir,
-                                     "--heartbeat-ms",
-                                     std::to_string(HeartbeatMs())};
+    std::vector<std::string> argv = {
+        node_bin_,
+        "--id",
+        id,
+        "--coordinator",
+        hosts_ ? std::string("discover")
+               : lines_.coordinator_requests + "," + lines_.coordinator_events,
+        "--world",
+        lines_.world_endpoint,
+        "--factory",
+        inputs_.factory_paths.at(unit.id),
+        "--export-dir",
+        export_dir,
+        "--heartbeat-ms",
+        std::to_string(HeartbeatMs())};
+    if (hosts_) {
+      // Its address is the one of its host that faces the coordinator (found by the node).
+      argv.insert(argv.end(), {"--discovery-port", std::to_string(kLabDiscoveryPort), "--site-name",
+                               kLabSiteName, "--bind", "tcp://*:*"});
+    }
     // The model: self-calibration finds where it stands; the renderer draws it there.
     argv.insert(argv.end(), {"--model", inputs_.model_path});
     if (options_.render == "off") {
@@ -364,6 +402,7 @@ ChildProcess* LabRun::StartChild(const std::string& name, const std::string& rol
   if (!curve_keys_path_.empty() && (role == "world" || role == "coordinator" || role == "node")) {
     argv.insert(argv.end(), {"--curve-keys", curve_keys_path_});
   }
+  if (hosts_) argv = hosts_->Wrap(name, std::move(argv));
   ChildSpec spec{name, role, std::move(argv),
                  (fs::path(options_.out_dir) / "logs" / (name + ".log")).string(), std::move(env)};
   Expected<ChildProcess*> child = supervisor_.Start(spec);
@@ -380,6 +419,12 @@ ChildProcess* LabRun::StartChild(const std::string& name, const std::string& rol
 Supervisor::LineHandler LabRun::Handler() {
   return [this](ChildProcess& child, const report::ReportLine& line) {
     lines_.Take(child.spec().role, line, std::chrono::steady_clock::now());
+    if (hosts_) {
+      // Programs bound to every interface of their host print 0.0.0.0: the lab needs the
+      // host's address to reach them.
+      lines_.coordinator_requests = hosts_->Reachable("coordinator", lines_.coordinator_requests);
+      lines_.coordinator_events = hosts_->Reachable("coordinator", lines_.coordinator_events);
+    }
     if (std::holds_alternative<report::NodeReady>(line)) {
       progress_.Update(static_cast<int>(lines_.nodes_ready.size()));
     }
@@ -483,6 +528,9 @@ Status LabTimings::Check() const {
 Status LabRunOptions::Check() const {
   ST_RETURN_IF_ERROR(timings.Check());
   if (out_dir.empty()) return InvalidArgumentError("--out: an output directory is required");
+  if (hosts != "local" && hosts != "netns") {
+    return InvalidArgumentError("--hosts must be local or netns, not " + hosts);
+  }
   if (!(hold_s >= 0)) return InvalidArgumentError("--hold-s must be >= 0");
   if (!(start_timeout_s > 0) || !(calibration_timeout_s > 0) || !(teardown_grace_s >= 0)) {
     return InvalidArgumentError("timeouts must be > 0");

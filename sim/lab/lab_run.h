@@ -95,6 +95,10 @@ struct LabRunOptions {
   int heartbeat_ms = 0;
   bool progress_tty = false;
   bool curve = false;  // generate OUT/site.key (0600); world, coordinator, nodes require CURVE
+  // Where the children run: "local" (this host's loopback) or "netns" (each on a host of its
+  // own, a network namespace on a bridge, sim/lab/lab_hosts.h; the nodes find the coordinator
+  // by its beacon, and CURVE is on as with --curve).
+  std::string hosts = "local";
   // "structured-light" (the nodes calibrate themselves and find the model) or "true-pose"
   // (LAB TEST MODE: factory intrinsics + the true pose, the baseline).
   std::string calibration = "structured-light";

@@ -28,6 +28,7 @@
 #include "common/scene/ray_caster.h"
 #include "net/channel.h"
 #include "net/curve.h"
+#include "sim/lab/lab_hosts.h"
 #include "sim/lab/lab_images.h"
 #include "sim/lab/lab_inputs.h"
 #include "sim/lab/lab_lines.h"
@@ -67,6 +68,9 @@ inline double AlphaMean(const MpcdiRegion& region) {
 inline constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2, kExitVerdict = kLabExitVerdict,
                      kExitInterrupted = 130;
 inline constexpr int kLogTailLines = 20;
+// --hosts netns: the beacon's UDP port and the site's name (each run has a network of its own).
+inline constexpr int kLabDiscoveryPort = 5670;
+inline constexpr const char* kLabSiteName = "lab";
 
 inline milliseconds ToMs(double seconds) {
   return milliseconds(static_cast<int64_t>(seconds * 1e3));
@@ -128,6 +132,8 @@ class LabRun {
   std::string FrameLogPath() const;
   static int64_t SystemMs();
 
+  // --hosts netns: the run's hosts (world, coordinator, one per unit).
+  Status MakeHosts();
   bool StartWorld();
 
   std::vector<std::string> CoordinatorArgs(const std::string& requests,
@@ -307,6 +313,8 @@ class LabRun {
   std::ostream& out_;
   std::ostream& err_;
   Progress progress_;
+  // --hosts netns: destroyed after the supervisor (whose children run on these hosts).
+  std::unique_ptr<NetnsHosts> hosts_;
   Supervisor supervisor_;
   std::chrono::steady_clock::time_point start_;
   LabInputs inputs_;

@@ -176,6 +176,10 @@ void AddRunShowFlags(CLI::App* run, sim::LabRunOptions& options, std::string& pr
   run->add_flag("--curve", options.curve,
                 "Authenticate the whole run: a site key in OUT/site.key, CURVE on world, "
                 "coordinator and nodes");
+  run->add_option("--hosts", options.hosts,
+                  "Where the children run: local (loopback), or netns (each on a host of its own: "
+                  "a network namespace on a bridge; discovery, CURVE; needs root)")
+      ->check(CLI::IsMember({"local", "netns"}));
   run->add_option("--progress", progress,
                   "Terminal progress: bars, plain lines, or auto (bars "
                   "on a TTY)")
