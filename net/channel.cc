@@ -1,5 +1,6 @@
 #include "net/channel.h"
 
+#include <algorithm>
 #include <utility>
 
 namespace sandtable::net {
@@ -42,19 +43,56 @@ Expected<std::optional<std::string>> Channel::StampAndEncode(wire::Envelope enve
   return std::optional<std::string>(std::move(*bytes));
 }
 
-Status Channel::Send(wire::Envelope envelope, const std::string& routing_id) {
-  Expected<std::optional<std::string>> bytes = StampAndEncode(std::move(envelope));
-  if (!bytes.ok()) return bytes.status();
-  if (!bytes->has_value()) return OkStatus();
-  const size_t size = (*bytes)->size();
-  Status sent = socket_->type() == SocketType::kRouter
-                    ? socket_->Send({routing_id, std::move(**bytes)})
-                    : socket_->Send({std::move(**bytes)});
+Status Channel::SendOrHold(std::vector<std::string> frames, size_t size) {
+  if (faults_.delay.count() > 0) {
+    const auto now = std::chrono::steady_clock::now();
+    const double jitter_us = static_cast<double>(faults_.jitter.count());
+    const auto wobble = std::chrono::microseconds(static_cast<int64_t>(
+        std::uniform_real_distribution<double>(-jitter_us, jitter_us)(fault_random_)));
+    auto due = now + faults_.delay + wobble;
+    if (!held_.empty()) due = std::max(due, held_.back().due);  // the order sent
+    if (held_.size() >= kMaxDelayedMessages) {
+      ++fault_counts_.delayed_dropped;
+      return OkStatus();
+    }
+    held_.push_back(Held{due, std::move(frames), size});
+    ++fault_counts_.delayed;
+    return OkStatus();
+  }
+  Status sent = socket_->Send(frames);
   if (sent.ok()) {
     ++stats_.messages_sent;
     stats_.bytes_sent += size;
   }
   return sent;
+}
+
+void Channel::FlushDelayed(std::chrono::steady_clock::time_point now) {
+  while (!held_.empty() && held_.front().due <= now) {
+    if (socket_->Send(held_.front().frames).ok()) {
+      ++stats_.messages_sent;
+      stats_.bytes_sent += held_.front().size;
+    } else {
+      ++fault_counts_.delayed_dropped;  // as the link would have lost it
+    }
+    held_.pop_front();
+  }
+}
+
+std::optional<std::chrono::steady_clock::time_point> Channel::next_delayed_due() const {
+  if (held_.empty()) return std::nullopt;
+  return held_.front().due;
+}
+
+Status Channel::Send(wire::Envelope envelope, const std::string& routing_id) {
+  Expected<std::optional<std::string>> bytes = StampAndEncode(std::move(envelope));
+  if (!bytes.ok()) return bytes.status();
+  if (!bytes->has_value()) return OkStatus();
+  const size_t size = (*bytes)->size();
+  if (socket_->type() == SocketType::kRouter) {
+    return SendOrHold({routing_id, std::move(**bytes)}, size);
+  }
+  return SendOrHold({std::move(**bytes)}, size);
 }
 
 Status Channel::SendToEach(wire::Envelope envelope, const std::vector<std::string>& routing_ids,
@@ -65,11 +103,7 @@ Status Channel::SendToEach(wire::Envelope envelope, const std::vector<std::strin
   if (!bytes.ok()) return bytes.status();
   if (!bytes->has_value()) return OkStatus();
   for (size_t i = 0; i < routing_ids.size(); ++i) {
-    (*results)[i] = socket_->Send({routing_ids[i], **bytes});
-    if ((*results)[i].ok()) {
-      ++stats_.messages_sent;
-      stats_.bytes_sent += (*bytes)->size();
-    }
+    (*results)[i] = SendOrHold({routing_ids[i], **bytes}, (*bytes)->size());
   }
   return OkStatus();
 }
@@ -80,6 +114,12 @@ Status ChannelFaults::Check() const {
     return InvalidArgumentError("channel faults: drop share " + std::to_string(drop_share) +
                                 " and corrupt share " + std::to_string(corrupt_share) +
                                 " must be in [0, 1] with a sum of at most 1");
+  }
+  constexpr std::chrono::microseconds kMaxDelay = std::chrono::seconds(10);
+  if (delay.count() < 0 || jitter.count() < 0 || jitter > delay || delay > kMaxDelay) {
+    return InvalidArgumentError("channel faults: delay " + std::to_string(delay.count()) +
+                                " us and jitter " + std::to_string(jitter.count()) +
+                                " us must satisfy 0 <= jitter <= delay <= 10 s");
   }
   return OkStatus();
 }

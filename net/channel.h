@@ -7,7 +7,9 @@
 // (counted malformed). Not thread-safe.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <optional>
 #include <random>
@@ -56,20 +58,30 @@ struct ChannelStats {
 // messages this channel sends, a share is dropped (Send() reports success, nothing leaves: a
 // lossy link) and a share corrupted (1 to 4 bytes of the encoded message flipped after
 // encoding, so the receiver's codec and checks meet it), drawn per message from a generator
-// seeded with `seed`. Off (both 0) by default; a product node turns it on only through its
-// --fault-* flags.
+// seeded with `seed`; and every message leaves `delay` +- `jitter` (uniform) after Send(), in
+// the order sent (a link's latency: TCP keeps the order), held in the channel until
+// FlushDelayed() finds it due. Off (all 0) by default; a product node turns it on only through
+// its --fault-* flags. This machine's kernel has no netem: this is where the lab's latency
+// comes from (docs/lab.md).
 struct ChannelFaults {
   double drop_share = 0.0;
   double corrupt_share = 0.0;
   uint64_t seed = 1;
-  bool active() const { return drop_share > 0.0 || corrupt_share > 0.0; }
-  Status Check() const;  // shares in [0, 1], their sum at most 1
+  std::chrono::microseconds delay{0};
+  std::chrono::microseconds jitter{0};
+  bool active() const { return drop_share > 0.0 || corrupt_share > 0.0 || delay.count() > 0; }
+  Status Check() const;  // shares in [0, 1], their sum at most 1; 0 <= jitter <= delay <= 10 s
 };
 
 struct ChannelFaultCounts {
   uint64_t dropped = 0;
   uint64_t corrupted = 0;
+  uint64_t delayed = 0;          // messages held for the injected latency
+  uint64_t delayed_dropped = 0;  // held messages that could not be sent when due, or overflowed
 };
+
+// Most messages a channel holds for the injected latency; more are dropped (counted).
+inline constexpr size_t kMaxDelayedMessages = 10000;
 
 class Channel {
  public:
@@ -99,6 +111,11 @@ class Channel {
   // Senders whose sequence state is kept (bounded, proto/sequence_tracker.h).
   size_t tracked_senders() const { return tracker_.size(); }
 
+  // Sends the held messages (injected latency) whose time has come, in order. Call it on every
+  // turn of the owner's loop, and wake by next_delayed_due().
+  void FlushDelayed(std::chrono::steady_clock::time_point now);
+  std::optional<std::chrono::steady_clock::time_point> next_delayed_due() const;
+
   // Turns fault injection on (or off with both shares 0). INVALID_ARGUMENT from Check().
   Status SetFaults(const ChannelFaults& faults);
   const ChannelFaultCounts& fault_counts() const { return fault_counts_; }
@@ -110,6 +127,13 @@ class Channel {
  private:
   // Stamps the header and encodes; nullopt when fault injection drops the message (counted).
   Expected<std::optional<std::string>> StampAndEncode(wire::Envelope envelope);
+  // Sends now, or holds for the injected latency.
+  Status SendOrHold(std::vector<std::string> frames, size_t size);
+  struct Held {
+    std::chrono::steady_clock::time_point due;
+    std::vector<std::string> frames;
+    size_t size = 0;
+  };
 
   std::unique_ptr<Socket> socket_;
   proto::EnvelopeStamper stamper_;
@@ -120,6 +144,7 @@ class Channel {
   ChannelFaults faults_;
   std::mt19937_64 fault_random_;
   ChannelFaultCounts fault_counts_;
+  std::deque<Held> held_;
 };
 
 }  // namespace sandtable::net

@@ -24,6 +24,8 @@ constexpr Limit<int> kHeartbeatMs{"--heartbeat-ms", 1, 60000};
 constexpr Limit<int> kWorkers{"--workers", 1, 64};
 constexpr Limit<double> kDropShare{"--fault-drop-share", 0.0, 1.0};
 constexpr Limit<double> kCorruptShare{"--fault-corrupt-share", 0.0, 1.0};
+constexpr Limit<double> kDelayMs{"--fault-delay-ms", 0.0, 10000.0};
+constexpr Limit<double> kJitterMs{"--fault-jitter-ms", 0.0, 10000.0};
 constexpr Limit<int> kExpectUnits{"--expect-units", 0, 4096};
 constexpr Limit<int> kGridStepPx{"--grid-step-px", 4, 256};
 constexpr Limit<int> kPhaseSteps{"--phase-steps", 3, 64};
@@ -104,6 +106,10 @@ void AddSiteFlags(CLI::App& app, NodeConfig& c) {
              "LAB CHAOS ONLY: drop this share of the messages the node sends");
   AddLimited(app, kCorruptShare, c.faults.corrupt_share,
              "LAB CHAOS ONLY: corrupt this share of the messages the node sends");
+  AddLimited(app, kDelayMs, c.fault_delay_ms,
+             "LAB CHAOS ONLY: every message the node sends leaves this many ms later (in order)");
+  AddLimited(app, kJitterMs, c.fault_jitter_ms,
+             "LAB CHAOS ONLY: the delay varies by up to this many ms either way (<= the delay)");
   app.add_option("--fault-seed", c.faults.seed, "seed of the injected faults");
 }
 
@@ -214,6 +220,7 @@ Status NodeConfig::Check() const {
   for (const Status& s :
        {InRange(kHeartbeatMs, heartbeat_ms), InRange(kWorkers, worker_threads),
         InRange(kDropShare, faults.drop_share), InRange(kCorruptShare, faults.corrupt_share),
+        InRange(kDelayMs, fault_delay_ms), InRange(kJitterMs, fault_jitter_ms),
         InRange(kExpectUnits, expected_units), InRange(kGridStepPx, grid_step_px),
         InRange(kPhaseSteps, phase_steps), InRange(kGrayCellPx, gray_cell_px),
         InRange(kBundleIterations, bundle_iterations), InRange(kRenderMaxFps, render_max_fps),
@@ -262,6 +269,8 @@ NodeOptions NodeConfig::RuntimeOptions() const {
   o.peer_timeout = std::max(o.peer_timeout, 5 * o.heartbeat_period);
   o.worker_threads = worker_threads;
   o.faults = faults;
+  o.faults.delay = std::chrono::microseconds(static_cast<int64_t>(fault_delay_ms * 1000.0));
+  o.faults.jitter = std::chrono::microseconds(static_cast<int64_t>(fault_jitter_ms * 1000.0));
   return o;
 }
 

@@ -46,7 +46,8 @@ struct NodeConfig {
   bool insecure = false;        // --bind beyond loopback without CURVE allowed (an open site)
   int heartbeat_ms = 100;
   int worker_threads = NodeOptions{}.worker_threads;
-  net::ChannelFaults faults;  // lab chaos only
+  net::ChannelFaults faults;                           // lab chaos only
+  double fault_delay_ms = 0.0, fault_jitter_ms = 0.0;  // into faults.delay / jitter
 
   // The unit: its devices (node/devices/device_factory.h; empty: none) and what it knows.
   std::string world;  // short for projector and camera world:ENDPOINT

@@ -318,6 +318,7 @@ Status NodeRuntime::Step(std::chrono::milliseconds max_wait) {
   ST_CHECK(coordinator_ != nullptr) << "NodeRuntime::Step before a successful Start()";
   const Clock::time_point now = Clock::now();
   SendTimers(now);
+  const std::optional<Clock::time_point> next_delayed = FlushDelayed(now);
   // Sleep until a socket, a peer's connection monitor or a finished job wakes us, or until
   // the next timer; services whose checks are time-based (resends, silences) get a turn at
   // least every kServiceTick. An idle node wakes ~30 times a second instead of polling: with
@@ -325,6 +326,7 @@ Status NodeRuntime::Step(std::chrono::milliseconds max_wait) {
   Clock::time_point next =
       std::min({next_heartbeat_, next_time_sync_, next_peer_drain_, next_peer_heartbeat_});
   if (!registered_) next = std::min(next, next_hello_);
+  if (next_delayed) next = std::min(next, *next_delayed);
   if (drain_all_peers_) next = now;
   auto wait = std::min({max_wait, kServiceTick,
                         std::chrono::duration_cast<std::chrono::milliseconds>(next - now) +
@@ -530,6 +532,8 @@ void NodeRuntime::ApplyMemberList(const wire::MemberList& list) {
     if (gone && it->second.to_peer) {
       closed_link_faults_.dropped += it->second.to_peer->fault_counts().dropped;
       closed_link_faults_.corrupted += it->second.to_peer->fault_counts().corrupted;
+      closed_link_faults_.delayed += it->second.to_peer->fault_counts().delayed;
+      closed_link_faults_.delayed_dropped += it->second.to_peer->fault_counts().delayed_dropped;
     }
     if (gone) StopPeerMonitor(it->second);
     it = gone ? peers_.erase(it) : std::next(it);
@@ -583,6 +587,8 @@ net::ChannelFaultCounts NodeRuntime::fault_counts() const {
     if (!c) return;
     total.dropped += c->fault_counts().dropped;
     total.corrupted += c->fault_counts().corrupted;
+    total.delayed += c->fault_counts().delayed;
+    total.delayed_dropped += c->fault_counts().delayed_dropped;
   };
   add(peer_router_.get());
   add(coordinator_.get());
@@ -629,6 +635,19 @@ void NodeRuntime::DrainPeerMonitors(const std::vector<NodeId>& ids) {
       }
     }
   }
+}
+
+std::optional<Clock::time_point> NodeRuntime::FlushDelayed(Clock::time_point now) {
+  if (options_.faults.delay.count() == 0) return std::nullopt;
+  std::optional<Clock::time_point> next;
+  auto flush = [&](net::Channel* channel) {
+    channel->FlushDelayed(now);
+    if (auto due = channel->next_delayed_due(); due && (!next || *due < *next)) next = due;
+  };
+  flush(coordinator_.get());
+  flush(peer_router_.get());
+  for (auto& [id, peer] : peers_) flush(peer.to_peer.get());
+  return next;
 }
 
 void NodeRuntime::WarnIfUnreachable(NodeId id, PeerInfo& peer, Clock::time_point now) {

@@ -189,6 +189,8 @@ class NodeRuntime {
   void SetRegistered(bool registered);
   void DrainPeerDealers(const std::vector<NodeId>& ids);
   void DrainPeerMonitors(const std::vector<NodeId>& ids);
+  // Sends what the injected latency held (lab faults); the earliest still held.
+  std::optional<Clock::time_point> FlushDelayed(Clock::time_point now);
   // Logs, once, a peer linked kPeerUnreachableAfter ago that no connection has reached.
   void WarnIfUnreachable(NodeId id, PeerInfo& peer, Clock::time_point now);
   NodeService* CoordinatorServiceFor(wire::Envelope::BodyCase body) const;

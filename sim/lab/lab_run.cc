@@ -246,6 +246,12 @@ bool LabRun::StartNode(const UnitSpec& unit) {
       }
     }
     argv.insert(argv.end(), options_.node_args.begin(), options_.node_args.end());
+    if (options_.link_latency_ms > 0 || options_.link_loss > 0) {
+      argv.insert(argv.end(), {"--fault-delay-ms", std::to_string(options_.link_latency_ms),
+                               "--fault-jitter-ms", std::to_string(options_.link_jitter_ms),
+                               "--fault-drop-share", std::to_string(options_.link_loss),
+                               "--fault-seed", std::to_string(options_.seed)});
+    }
     if (options_.fault_unit >= 0 && unit.id == static_cast<NodeId>(options_.fault_unit)) {
       argv.insert(argv.end(),
                   {"--fault-drop-share", std::to_string(options_.fault_drop_share),
@@ -530,6 +536,20 @@ Status LabRunOptions::Check() const {
   if (out_dir.empty()) return InvalidArgumentError("--out: an output directory is required");
   if (hosts != "local" && hosts != "netns") {
     return InvalidArgumentError("--hosts must be local or netns, not " + hosts);
+  }
+  if (!(link_latency_ms >= 0) || !(link_jitter_ms >= 0) || link_jitter_ms > link_latency_ms ||
+      !(link_loss >= 0 && link_loss < 1)) {
+    return InvalidArgumentError(
+        "--link-latency-ms, --link-jitter-ms, --link-loss: 0 <= jitter <= latency, loss in [0, 1)");
+  }
+  if ((link_latency_ms > 0 || link_loss > 0) && fault_unit >= 0) {
+    return InvalidArgumentError("--link-* and --fault-unit both set the nodes' --fault-* flags");
+  }
+  if (stall_by != "signal" && stall_by != "link") {
+    return InvalidArgumentError("--stall-by must be signal or link");
+  }
+  if (stall_by == "link" && hosts != "netns") {
+    return InvalidArgumentError("--stall-by link needs --hosts netns (a host's link to cut)");
   }
   if (!(hold_s >= 0)) return InvalidArgumentError("--hold-s must be >= 0");
   if (!(start_timeout_s > 0) || !(calibration_timeout_s > 0) || !(teardown_grace_s >= 0)) {

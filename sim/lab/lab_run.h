@@ -146,6 +146,15 @@ struct LabRunOptions {
   int fault_unit = -1;
   double fault_drop_share = 0.0;
   double fault_corrupt_share = 0.0;
+  // Every node's links (what it sends to the coordinator and its peers): this latency, +- this
+  // jitter (uniform, in order), and this share lost, seeded by --seed (the nodes' --fault-*
+  // flags; there is no netem here, docs/lab.md). Not with fault_unit.
+  double link_latency_ms = 0.0;
+  double link_jitter_ms = 0.0;
+  double link_loss = 0.0;
+  // How --stall-unit stalls its unit: "signal" (SIGSTOP, SIGCONT) or "link" (--hosts netns:
+  // its host's link down, then up: cut off from the site while it keeps running).
+  std::string stall_by = "signal";
   // The show (docs/render.md): once calibrated, every node shows the table grid (the lab
   // measures how the projectors' lines coincide from above), then the show with the lab's
   // personnel tracks playing for show_s (frame times, timeline skew). render "off": none.

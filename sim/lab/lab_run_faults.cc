@@ -149,10 +149,17 @@ void LabRun::MaybeStall() {
 
 void LabRun::Stall(bool stop) {
   const NodeId unit = static_cast<NodeId>(options_.stall_unit);
-  for (const auto& child : supervisor_.children()) {
-    if (child->name() != "node-" + std::to_string(unit)) continue;
-    child->Signal(stop ? SIGSTOP : SIGCONT);
+  const std::string name = "node-" + std::to_string(unit);
+  if (options_.stall_by == "link") {
+    if (Status cut = hosts_->SetLink(name, !stop); !cut.ok()) {
+      ST_LOG(kWarning) << "lab: --stall-by link: " << cut.ToString();
+    }
+  } else {
+    for (const auto& child : supervisor_.children()) {
+      if (child->name() == name) child->Signal(stop ? SIGSTOP : SIGCONT);
+    }
   }
+  const char* how = options_.stall_by == "link" ? "cut node-" : "stopped node-";
   const auto now = std::chrono::steady_clock::now();
   const auto from = options_.stall_after_calibration ? hold_started_ : calibration_started_;
   const double at_s = std::chrono::duration<double>(now - from).count();
@@ -162,11 +169,12 @@ void LabRun::Stall(bool stop) {
     result_.stall = {{"unit", unit},
                      {"stopped_at_s", at_s},
                      {"during_calibration", !lines_.calibrated.count(unit)}};
-    ST_LOG(kWarning) << "lab: stopped node-" << unit << " (--stall-unit)";
+    ST_LOG(kWarning) << "lab: " << how << unit << " (--stall-unit)";
   } else {
     stall_state_ = StallState::kResumed;
     result_.stall["resumed_at_s"] = at_s;
-    ST_LOG(kWarning) << "lab: resumed node-" << unit << " (--stall-unit)";
+    ST_LOG(kWarning) << "lab: resumed node-" << unit << " (--stall-unit, by " << options_.stall_by
+                     << ")";
   }
 }
 
@@ -265,7 +273,8 @@ int LabRun::FramesLost(int64_t from_ms, int64_t window_ms, const std::set<NodeId
 }
 
 void LabRun::RecordChaos() {
-  const bool any = Chaos() || options_.fault_unit >= 0 ||
+  const bool any = Chaos() || options_.fault_unit >= 0 || options_.link_latency_ms > 0 ||
+                   options_.link_loss > 0 ||
                    (options_.kill_unit >= 0 && options_.kill_after_calibration) ||
                    options_.stall_unit >= 0;
   if (!any) return;
@@ -292,8 +301,10 @@ void LabRun::RecordChaos() {
   }
   if (!result_.stall.is_null()) {
     const NodeId unit = static_cast<NodeId>(options_.stall_unit);
-    json f = {{"fault", "SIGSTOP node-" + std::to_string(unit) + " for " +
-                            FixedDigits(options_.stall_for_s, 1) + " s"},
+    const std::string what =
+        options_.stall_by == "link" ? "link down, host of node-" : "SIGSTOP node-";
+    json f = {{"fault",
+               what + std::to_string(unit) + " for " + FixedDigits(options_.stall_for_s, 1) + " s"},
               {"at_s", result_.stall.value("stopped_at_s", 0.0)},
               {"note", options_.stall_after_calibration
                            ? "stopped while the site showed"
@@ -324,6 +335,14 @@ void LabRun::RecordChaos() {
       f["frames_lost_max"] = lost;
     }
     chaos["faults"].push_back(f);
+  }
+  if (options_.link_latency_ms > 0 || options_.link_loss > 0) {
+    chaos["faults"].push_back(
+        {{"fault", "every node's links: " + FixedDigits(options_.link_latency_ms, 1) + " +- " +
+                       FixedDigits(options_.link_jitter_ms, 1) + " ms latency, " +
+                       FixedDigits(options_.link_loss * 100, 1) + " % lost (whole run)"},
+         {"at_s", 0.0},
+         {"note", "counts: chaos.links"}});
   }
   if (options_.fault_unit >= 0) {
     chaos["faults"].push_back(

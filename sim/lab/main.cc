@@ -134,6 +134,19 @@ void AddRunFaultFlags(CLI::App* run, sim::LabRunOptions& options) {
   run->add_option("--fault-corrupt-share", options.fault_corrupt_share,
                   "share of --fault-unit's messages corrupted (bytes flipped)")
       ->check(CLI::Range(0.0, 1.0));
+  run->add_option("--link-latency-ms", options.link_latency_ms,
+                  "every node's messages leave this much later (in order; the nodes' own fault "
+                  "injection: no netem here)")
+      ->check(CLI::Range(0.0, 10000.0));
+  run->add_option("--link-jitter-ms", options.link_jitter_ms,
+                  "the latency varies by up to this much either way (uniform)")
+      ->check(CLI::Range(0.0, 10000.0));
+  run->add_option("--link-loss", options.link_loss, "share of every node's messages lost")
+      ->check(CLI::Range(0.0, 0.99));
+  run->add_option("--stall-by", options.stall_by,
+                  "how --stall-unit stalls: signal (SIGSTOP/SIGCONT) or link (--hosts netns: its "
+                  "host's link down, then up)")
+      ->check(CLI::IsMember({"signal", "link"}));
   run->add_option("--join-late", options.join_late,
                   "start this unit only once the others hold their calibration: it joins the "
                   "calibrated site (a live join; the report says whether any other unit was "

@@ -165,5 +165,45 @@ TEST(ChannelTest, InjectedFaultsDropAndCorruptASeededShare) {
   EXPECT_FALSE(ReceiveWithin(p->server.get(), milliseconds(300)).has_value());
 }
 
+// Injected latency: every message arrives no sooner than the delay minus the jitter after it was
+// sent, held until FlushDelayed finds it due, and in the order sent.
+TEST(ChannelTest, InjectedLatencyHoldsEachMessageAndKeepsTheOrder) {
+  auto p = MakePair();
+  ChannelFaults faults;
+  faults.delay = std::chrono::milliseconds(50);
+  faults.jitter = std::chrono::milliseconds(10);
+  faults.seed = 3;
+  ASSERT_TRUE(p->client->SetFaults(faults).ok());
+  constexpr int kMessages = 20;
+  const auto sent_at = std::chrono::steady_clock::now();
+  for (int i = 0; i < kMessages; ++i) {
+    wire::Envelope e;
+    e.mutable_time_request()->set_t0_client_send_ns(i);
+    ASSERT_TRUE(p->client->Send(std::move(e)).ok());
+  }
+  EXPECT_EQ(p->client->fault_counts().delayed, static_cast<uint64_t>(kMessages));
+  ASSERT_TRUE(p->client->next_delayed_due().has_value());
+  EXPECT_GE(*p->client->next_delayed_due(), sent_at + faults.delay - faults.jitter);
+  // Nothing leaves before it is due.
+  p->client->FlushDelayed(sent_at);
+  EXPECT_FALSE(ReceiveWithin(p->server.get(), milliseconds(20)).has_value());
+  int received = 0;
+  const auto until = std::chrono::steady_clock::now() + kDeadline;
+  while (received < kMessages && std::chrono::steady_clock::now() < until) {
+    p->client->FlushDelayed(std::chrono::steady_clock::now());
+    std::optional<Incoming> in = ReceiveWithin(p->server.get(), milliseconds(5));
+    if (!in) continue;
+    EXPECT_GE(std::chrono::steady_clock::now(), sent_at + faults.delay - faults.jitter);
+    EXPECT_EQ(in->envelope.time_request().t0_client_send_ns(), received) << "out of order";
+    ++received;
+  }
+  EXPECT_EQ(received, kMessages);
+  EXPECT_FALSE(p->client->next_delayed_due().has_value());
+  ChannelFaults bad;
+  bad.delay = std::chrono::milliseconds(5);
+  bad.jitter = std::chrono::milliseconds(6);
+  EXPECT_FALSE(bad.Check().ok()) << "jitter larger than the delay";
+}
+
 }  // namespace
 }  // namespace sandtable::net
