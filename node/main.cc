@@ -44,6 +44,7 @@
 #include <string>
 
 #include "cluster/report_lines.h"
+#include "common/base/host_clock.h"
 #include "common/base/log.h"
 #include "common/base/main_guard.h"
 #include "common/cli/command_line.h"
@@ -117,6 +118,11 @@ static int Run(int argc, char** argv) {
   if (calibrate->parsed()) return node::RunCalibrateUnit(calibrate->remaining());
   if (render_frame->parsed()) return node::RunRenderFrame(render_frame->remaining());
   if (config.id != kInvalidNodeId) SetLogTag("node-" + std::to_string(config.id));
+  if (config.test_clock_offset_s != 0.0) {
+    SetHostClockOffsetForTest(static_cast<int64_t>(config.test_clock_offset_s * 1e9));
+    ST_LOG(kWarning) << "LAB TEST: this node's clock reads " << config.test_clock_offset_s
+                     << " s from the machine's (--test-clock-offset-s)";
+  }
 
   struct sigaction action {};
   action.sa_handler = OnSignal;

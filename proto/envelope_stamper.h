@@ -5,17 +5,15 @@
 #include <chrono>
 #include <cstdint>
 
+#include "common/base/host_clock.h"
 #include "proto/codec.h"
 #include "proto/envelope.pb.h"
 
 namespace sandtable::proto {
 
-// Steady clock now, in ns since its epoch: the time base of send_time_ns and time sync.
-inline int64_t SteadyNowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+// This host's clock now, in ns (common/base/host_clock.h): the time base of send_time_ns and
+// time sync.
+inline int64_t SteadyNowNs() { return HostNowNs(); }
 
 class EnvelopeStamper {
  public:

@@ -26,6 +26,7 @@ constexpr Limit<double> kDropShare{"--fault-drop-share", 0.0, 1.0};
 constexpr Limit<double> kCorruptShare{"--fault-corrupt-share", 0.0, 1.0};
 constexpr Limit<double> kDelayMs{"--fault-delay-ms", 0.0, 10000.0};
 constexpr Limit<double> kJitterMs{"--fault-jitter-ms", 0.0, 10000.0};
+constexpr Limit<double> kClockOffsetS{"--test-clock-offset-s", -86400.0, 86400.0};
 constexpr Limit<int> kExpectUnits{"--expect-units", 0, 4096};
 constexpr Limit<int> kGridStepPx{"--grid-step-px", 4, 256};
 constexpr Limit<int> kPhaseSteps{"--phase-steps", 3, 64};
@@ -111,6 +112,9 @@ void AddSiteFlags(CLI::App& app, NodeConfig& c) {
   AddLimited(app, kJitterMs, c.fault_jitter_ms,
              "LAB CHAOS ONLY: the delay varies by up to this many ms either way (<= the delay)");
   app.add_option("--fault-seed", c.faults.seed, "seed of the injected faults");
+  AddLimited(app, kClockOffsetS, c.test_clock_offset_s,
+             "LAB TEST ONLY: this node's clock reads this many seconds from the machine's (as "
+             "another host's clock would)");
 }
 
 void AddUnitFlags(CLI::App& app, NodeConfig& c) {
@@ -221,12 +225,12 @@ Status NodeConfig::Check() const {
        {InRange(kHeartbeatMs, heartbeat_ms), InRange(kWorkers, worker_threads),
         InRange(kDropShare, faults.drop_share), InRange(kCorruptShare, faults.corrupt_share),
         InRange(kDelayMs, fault_delay_ms), InRange(kJitterMs, fault_jitter_ms),
-        InRange(kExpectUnits, expected_units), InRange(kGridStepPx, grid_step_px),
-        InRange(kPhaseSteps, phase_steps), InRange(kGrayCellPx, gray_cell_px),
-        InRange(kBundleIterations, bundle_iterations), InRange(kRenderMaxFps, render_max_fps),
-        InRange(kSunStartH, sun.start_hour), InRange(kSunHoursPerS, sun.hours_per_media_s),
-        InRange(kBlendStepPx, blend_step_px), InRange(kBlendFillLimit, blend_fill_limit),
-        InRange(kBlendEdgeSoftMm, blend_edge_soft_mm),
+        InRange(kClockOffsetS, test_clock_offset_s), InRange(kExpectUnits, expected_units),
+        InRange(kGridStepPx, grid_step_px), InRange(kPhaseSteps, phase_steps),
+        InRange(kGrayCellPx, gray_cell_px), InRange(kBundleIterations, bundle_iterations),
+        InRange(kRenderMaxFps, render_max_fps), InRange(kSunStartH, sun.start_hour),
+        InRange(kSunHoursPerS, sun.hours_per_media_s), InRange(kBlendStepPx, blend_step_px),
+        InRange(kBlendFillLimit, blend_fill_limit), InRange(kBlendEdgeSoftMm, blend_edge_soft_mm),
         InRange(kBlendSoftFaceM2, blend_soft_face_m2)}) {
     if (!s.ok()) return s;
   }

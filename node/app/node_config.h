@@ -48,6 +48,9 @@ struct NodeConfig {
   int worker_threads = NodeOptions{}.worker_threads;
   net::ChannelFaults faults;                           // lab chaos only
   double fault_delay_ms = 0.0, fault_jitter_ms = 0.0;  // into faults.delay / jitter
+  // LAB TEST ONLY: this process's clock reads this far from the machine's (common/base/
+  // host_clock.h), as another host's would.
+  double test_clock_offset_s = 0.0;
 
   // The unit: its devices (node/devices/device_factory.h; empty: none) and what it knows.
   std::string world;  // short for projector and camera world:ENDPOINT

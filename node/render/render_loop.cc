@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "common/base/bytes_hash.h"
+#include "common/base/host_clock.h"
 #include "common/base/log.h"
 #include "common/scene/procedural_scene.h"
 #include "node/render/gl_context.h"
@@ -20,10 +21,8 @@ double MsBetween(Clock::time_point from, Clock::time_point to) {
 }
 constexpr size_t kKeptFrames = 2000;  // frame times kept for the percentiles
 
-int64_t NowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch())
-      .count();
-}
+// This host's clock (the timeline's time base; the render log's node_steady_ns).
+int64_t NowNs() { return HostNowNs(); }
 
 double Percentile(const std::deque<double>& values, double p) {
   if (values.empty()) return 0.0;
@@ -686,7 +685,9 @@ void RenderLoop::RecordFrame(FrameWork& work, const Expected<FrameStats>& stats)
   }
   summary_.pattern = TestPatternName(work.inputs.pattern);
   shown_generation_ = std::max(shown_generation_, work.generation);
-  last_shown_ns_ = NowNs();
+  // The steady clock itself: the blend reports it to the lab, which compares it with its own.
+  last_shown_ns_ =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
   if (work.mask) {
     work.mask_frame.generation = work.generation;
     work.mask_frame.render_ms = work.late_stats ? work.late_stats->frame_ms : stats->frame_ms;

@@ -157,6 +157,9 @@ Status LabChaosOptions::Check() const {
   if (out_dir.empty()) return InvalidArgumentError("--out: an output directory is required");
   if (runs < 1 || runs > 1000) return InvalidArgumentError("--runs must be in 1..1000");
   if (metric_samples < 1) return InvalidArgumentError("--samples must be >= 1");
+  if (hosts != "local" && hosts != "netns") {
+    return InvalidArgumentError("--hosts must be local or netns");
+  }
   return OkStatus();
 }
 
@@ -206,6 +209,7 @@ int RunChaos(const LabChaosOptions& options, const std::atomic<bool>& stop, std:
     const std::vector<std::string> faults = o.plan.RunArgs();
     args.insert(args.end(), faults.begin(), faults.end());
     if (!options.bin_dir.empty()) args.insert(args.end(), {"--bin-dir", options.bin_dir});
+    if (options.hosts != "local") args.insert(args.end(), {"--hosts", options.hosts});
     err << "chaos: " << (i + 1) << "/" << options.runs << " " << name << " ..." << std::endl;
     const std::string exit_error =
         RunChildLab(args, (dir / "runs" / (name + ".log")).string(), stop);

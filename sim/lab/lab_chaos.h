@@ -59,6 +59,8 @@ struct LabChaosOptions {
   int runs = 5;
   int metric_samples = 4000;
   std::string bin_dir;
+  // Where each run's children run: "local" or "netns" (sandtable-lab run --hosts).
+  std::string hosts = "local";
   std::string command_line;
   // INVALID_ARGUMENT naming the flag: no --out, --runs outside 1..1000, --samples < 1.
   Status Check() const;

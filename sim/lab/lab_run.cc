@@ -139,6 +139,10 @@ std::vector<std::string> LabRun::CoordinatorArgs(const std::string& requests,
     argv.insert(argv.end(),
                 {"--annotations", fs::absolute(fs::path(options_.out_dir) / "annotations.db")});
   }
+  if (hosts_) {
+    argv.insert(argv.end(),
+                {"--beacon", std::to_string(kLabDiscoveryPort), "--site-name", kLabSiteName});
+  }
   return argv;
 }
 
@@ -146,13 +150,9 @@ bool LabRun::StartCoordinator() {
   Phase("start coordinator", 1);
   // Across hosts the coordinator listens on every interface of its host and beacons the site;
   // no node is given its address.
-  std::vector<std::string> argv = hosts_
-                                      ? CoordinatorArgs("tcp://*:*", "tcp://*:*")
-                                      : CoordinatorArgs("tcp://127.0.0.1:*", "tcp://127.0.0.1:*");
-  if (hosts_) {
-    argv.insert(argv.end(),
-                {"--beacon", std::to_string(kLabDiscoveryPort), "--site-name", kLabSiteName});
-  }
+  const std::vector<std::string> argv =
+      hosts_ ? CoordinatorArgs("tcp://*:*", "tcp://*:*")
+             : CoordinatorArgs("tcp://127.0.0.1:*", "tcp://127.0.0.1:*");
   ChildProcess* coordinator = StartChild("coordinator", "coordinator", argv);
   if (!coordinator) return false;
   return Wait(
@@ -246,6 +246,9 @@ bool LabRun::StartNode(const UnitSpec& unit) {
       }
     }
     argv.insert(argv.end(), options_.node_args.begin(), options_.node_args.end());
+    if (options_.clock_offset_s != 0.0) {
+      argv.insert(argv.end(), {"--test-clock-offset-s", std::to_string(ClockOffsetS(unit.id))});
+    }
     if (options_.link_latency_ms > 0 || options_.link_loss > 0) {
       argv.insert(argv.end(), {"--fault-delay-ms", std::to_string(options_.link_latency_ms),
                                "--fault-jitter-ms", std::to_string(options_.link_jitter_ms),
@@ -264,6 +267,16 @@ bool LabRun::StartNode(const UnitSpec& unit) {
     if (!node) return false;
   }
   return true;
+}
+
+double LabRun::ClockOffsetS(NodeId id) const {
+  int index = 0;
+  for (const UnitSpec& unit : inputs_.site.units) {
+    if (unit.id == id) break;
+    ++index;
+  }
+  const double magnitude = options_.clock_offset_s * (1 + index / 2);
+  return index % 2 == 0 ? magnitude : -magnitude;
 }
 
 bool LabRun::Calibrate() {
@@ -408,7 +421,8 @@ ChildProcess* LabRun::StartChild(const std::string& name, const std::string& rol
   if (!curve_keys_path_.empty() && (role == "world" || role == "coordinator" || role == "node")) {
     argv.insert(argv.end(), {"--curve-keys", curve_keys_path_});
   }
-  if (hosts_) argv = hosts_->Wrap(name, std::move(argv));
+  // A restarted coordinator ("coordinator-2") runs on the coordinator's host.
+  if (hosts_) argv = hosts_->Wrap(role == "coordinator" ? "coordinator" : name, std::move(argv));
   ChildSpec spec{name, role, std::move(argv),
                  (fs::path(options_.out_dir) / "logs" / (name + ".log")).string(), std::move(env)};
   Expected<ChildProcess*> child = supervisor_.Start(spec);

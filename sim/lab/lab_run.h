@@ -155,6 +155,10 @@ struct LabRunOptions {
   // How --stall-unit stalls its unit: "signal" (SIGSTOP, SIGCONT) or "link" (--hosts netns:
   // its host's link down, then up: cut off from the site while it keeps running).
   std::string stall_by = "signal";
+  // LAB TEST: the nodes' clocks disagree as separate hosts' do: the units, in the site's order,
+  // read +1, -1, +2, -2, ... times this many seconds off the machine's clock
+  // (--test-clock-offset-s); the lab takes the offsets off again where it compares their times.
+  double clock_offset_s = 0.0;
   // The show (docs/render.md): once calibrated, every node shows the table grid (the lab
   // measures how the projectors' lines coincide from above), then the show with the lab's
   // personnel tracks playing for show_s (frame times, timeline skew). render "off": none.

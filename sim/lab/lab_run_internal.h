@@ -155,6 +155,8 @@ class LabRun {
   bool Join();
 
   bool StartNode(const UnitSpec& unit);
+  // The clock offset (s) the lab gives this unit's node (--clock-offset-s), 0 without.
+  double ClockOffsetS(NodeId id) const;
 
   bool TruePoseMode() const { return options_.calibration == "true-pose"; }
 

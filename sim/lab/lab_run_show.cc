@@ -139,7 +139,11 @@ bool LabRun::Show() {
   }
   // The logs are flushed once a second: wait for the last frames of the show.
   (void)supervisor_.Watch(options_.timings.render_log_flush, stop_, Handler());
-  Expected<TimelineSkew> skew = MeasureTimelineSkew(logs);
+  std::map<NodeId, int64_t> offsets_ns;
+  for (NodeId id : units) {
+    offsets_ns[id] = static_cast<int64_t>(ClockOffsetS(id) * 1e9);
+  }
+  Expected<TimelineSkew> skew = MeasureTimelineSkew(logs, offsets_ns);
   result_.render["timeline_skew"] =
       skew.ok() ? skew->ToJson() : nlohmann::json{{"error", skew.status().message()}};
   if (skew.ok()) result_.render["timeline_skew_ms_p99"] = skew->p99_ms;

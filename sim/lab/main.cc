@@ -143,6 +143,10 @@ void AddRunFaultFlags(CLI::App* run, sim::LabRunOptions& options) {
       ->check(CLI::Range(0.0, 10000.0));
   run->add_option("--link-loss", options.link_loss, "share of every node's messages lost")
       ->check(CLI::Range(0.0, 0.99));
+  run->add_option("--clock-offset-s", options.clock_offset_s,
+                  "LAB TEST: the nodes' clocks read +1, -1, +2, -2, ... times this many seconds "
+                  "off the machine's, as separate hosts' clocks disagree")
+      ->check(CLI::Range(0.0, 3600.0));
   run->add_option("--stall-by", options.stall_by,
                   "how --stall-unit stalls: signal (SIGSTOP/SIGCONT) or link (--hosts netns: its "
                   "host's link down, then up)")
@@ -254,6 +258,10 @@ void AddChaosFlags(CLI::App* chaos, sim::LabChaosOptions& chaos_options) {
       ->check(cli::Integer<int>(1, 1000));
   chaos->add_option("--bin-dir", chaos_options.bin_dir,
                     "Directory of sandtable-world/-coordinator/-node (as for run)");
+  chaos
+      ->add_option("--hosts", chaos_options.hosts,
+                   "Where each run's children run: local, or netns (as for run; needs root)")
+      ->check(CLI::IsMember({"local", "netns"}));
   chaos
       ->add_option("--samples", chaos_options.metric_samples,
                    "Surface points sampled by each run's registration metric")

@@ -136,7 +136,8 @@ nlohmann::json TimelineSkew::ToJson() const {
           {"max_ms", max_ms}};
 }
 
-Expected<TimelineSkew> MeasureTimelineSkew(const std::map<NodeId, std::string>& logs) {
+Expected<TimelineSkew> MeasureTimelineSkew(const std::map<NodeId, std::string>& logs,
+                                           const std::map<NodeId, int64_t>& clock_offsets_ns) {
   struct Frame {
     int64_t ns;
     double media_s;
@@ -145,6 +146,8 @@ Expected<TimelineSkew> MeasureTimelineSkew(const std::map<NodeId, std::string>& 
   };
   std::map<NodeId, std::vector<Frame>> frames;
   for (const auto& [id, path] : logs) {
+    const auto offset = clock_offsets_ns.find(id);
+    const int64_t offset_ns = offset == clock_offsets_ns.end() ? 0 : offset->second;
     std::ifstream in(path);
     std::string line;
     std::getline(in, line);  // header
@@ -153,7 +156,7 @@ Expected<TimelineSkew> MeasureTimelineSkew(const std::map<NodeId, std::string>& 
       std::string f[5];
       for (auto& field : f) std::getline(s, field, ',');
       try {
-        Frame fr{std::stoll(f[0]), std::stod(f[1]), f[2] == "1",
+        Frame fr{std::stoll(f[0]) - offset_ns, std::stod(f[1]), f[2] == "1",
                  f[4].empty() ? 1.0 : std::stod(f[4])};
         if (fr.playing) frames[id].push_back(fr);
       } catch (const std::exception&) {

@@ -64,8 +64,11 @@ struct TimelineSkew {
 };
 
 // `logs`: node -> path of its render log (node_steady_ns,media_time_s,playing,frame_ms,rate).
-// NOT_FOUND when fewer than two nodes logged frames while playing at the same time.
-Expected<TimelineSkew> MeasureTimelineSkew(const std::map<NodeId, std::string>& logs);
+// `clock_offsets_ns`: what the lab made a node's clock read off the machine's (its
+// --test-clock-offset-s), taken off its times so that instants compare. NOT_FOUND when fewer
+// than two nodes logged frames while playing at the same time.
+Expected<TimelineSkew> MeasureTimelineSkew(const std::map<NodeId, std::string>& logs,
+                                           const std::map<NodeId, int64_t>& clock_offsets_ns = {});
 
 // Writes the tracks CSV; `area_radius_m` bounds where they walk.
 Status WriteLabTracks(const std::string& path, int count, double duration_s, double area_radius_m);
