@@ -120,8 +120,14 @@ Expected<std::unique_ptr<NetnsHosts>> NetnsHosts::Create() {
   DeleteLeftovers();
   const pid_t pid = ::getpid();
   const std::string bridge = "stb" + std::to_string(pid);
-  // One /24 per lab process, from its pid: concurrent labs on one machine stay apart.
-  const std::string subnet = "10.250." + std::to_string(pid % 250) + ".";
+  // One /24 per lab process: from its pid, the next one no interface of this host uses, so
+  // concurrent labs on one machine stay apart.
+  const std::string in_use = Output({"ip", "-o", "-4", "addr", "show"});
+  int third = pid % 250;
+  for (int tries = 0; tries < 250; ++tries, third = (third + 1) % 250) {
+    if (in_use.find(" 10.250." + std::to_string(third) + ".") == std::string::npos) break;
+  }
+  const std::string subnet = "10.250." + std::to_string(third) + ".";
   std::unique_ptr<NetnsHosts> hosts(
       new NetnsHosts(bridge, "stl" + std::to_string(pid) + "-", subnet));
   hosts->ip_ = ip;

@@ -110,6 +110,10 @@ Status LabRun::MakeHosts() {
     Expected<std::string> address = hosts_->AddHost(name);
     if (!address.ok()) return address.status();
   }
+  if (options_.cap_unit >= 0) {
+    ST_RETURN_IF_ERROR(
+        hosts_->CapBandwidth("node-" + std::to_string(options_.cap_unit), options_.cap_kbit));
+  }
   return OkStatus();
 }
 
@@ -561,6 +565,9 @@ Status LabRunOptions::Check() const {
   }
   if (stall_by != "signal" && stall_by != "link") {
     return InvalidArgumentError("--stall-by must be signal or link");
+  }
+  if (cap_unit >= 0 && (hosts != "netns" || cap_kbit <= 0)) {
+    return InvalidArgumentError("--cap-unit needs --hosts netns and a --cap-kbit > 0");
   }
   if (stall_by == "link" && hosts != "netns") {
     return InvalidArgumentError("--stall-by link needs --hosts netns (a host's link to cut)");

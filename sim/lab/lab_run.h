@@ -155,6 +155,10 @@ struct LabRunOptions {
   // How --stall-unit stalls its unit: "signal" (SIGSTOP, SIGCONT) or "link" (--hosts netns:
   // its host's link down, then up: cut off from the site while it keeps running).
   std::string stall_by = "signal";
+  // --hosts netns: what reaches this unit's host is capped at cap_kbit (tc tbf on its link), the
+  // whole run. -1: none.
+  int cap_unit = -1;
+  int cap_kbit = 0;
   // LAB TEST: the nodes' clocks disagree as separate hosts' do: the units, in the site's order,
   // read +1, -1, +2, -2, ... times this many seconds off the machine's clock
   // (--test-clock-offset-s); the lab takes the offsets off again where it compares their times.

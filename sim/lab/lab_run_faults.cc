@@ -273,8 +273,8 @@ int LabRun::FramesLost(int64_t from_ms, int64_t window_ms, const std::set<NodeId
 }
 
 void LabRun::RecordChaos() {
-  const bool any = Chaos() || options_.fault_unit >= 0 || options_.link_latency_ms > 0 ||
-                   options_.link_loss > 0 ||
+  const bool any = Chaos() || options_.fault_unit >= 0 || options_.cap_unit >= 0 ||
+                   options_.link_latency_ms > 0 || options_.link_loss > 0 ||
                    (options_.kill_unit >= 0 && options_.kill_after_calibration) ||
                    options_.stall_unit >= 0;
   if (!any) return;
@@ -335,6 +335,12 @@ void LabRun::RecordChaos() {
       f["frames_lost_max"] = lost;
     }
     chaos["faults"].push_back(f);
+  }
+  if (options_.cap_unit >= 0) {
+    chaos["faults"].push_back(
+        {{"fault", "what reaches node-" + std::to_string(options_.cap_unit) + "'s host capped at " +
+                       std::to_string(options_.cap_kbit) + " kbit/s (tc tbf, whole run)"},
+         {"at_s", 0.0}});
   }
   if (options_.link_latency_ms > 0 || options_.link_loss > 0) {
     chaos["faults"].push_back(

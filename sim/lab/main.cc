@@ -147,6 +147,12 @@ void AddRunFaultFlags(CLI::App* run, sim::LabRunOptions& options) {
                   "LAB TEST: the nodes' clocks read +1, -1, +2, -2, ... times this many seconds "
                   "off the machine's, as separate hosts' clocks disagree")
       ->check(CLI::Range(0.0, 3600.0));
+  run->add_option("--cap-unit", options.cap_unit,
+                  "--hosts netns: cap what reaches this unit's host at --cap-kbit (tc tbf), the "
+                  "whole run")
+      ->check(CLI::Range(0, 1 << 20));
+  run->add_option("--cap-kbit", options.cap_kbit, "the cap of --cap-unit, kbit/s")
+      ->check(CLI::Range(1, 10000000));
   run->add_option("--stall-by", options.stall_by,
                   "how --stall-unit stalls: signal (SIGSTOP/SIGCONT) or link (--hosts netns: its "
                   "host's link down, then up)")
