@@ -139,10 +139,21 @@ Status ReadCoordinator(Reader& r, ConfigProgram program) {
   if (!c.is_object()) return r.Error("coordinator", "must be an object");
   ST_RETURN_IF_ERROR(
       r.OnlyKnown(c, "coordinator.", {"host", "requests_port", "events_port", "listen"}));
-  for (const char* key : {"host", "requests_port", "events_port"}) {
+  for (const char* key : {"requests_port", "events_port"}) {
     if (!c.contains(key)) return r.Error(std::string("coordinator.") + key, "missing");
   }
-  ST_ASSIGN(host, r.String(c, "host", "coordinator."));
+  // Without a host the nodes find the coordinator by its beacon; the ports are where it listens.
+  const bool discovered = r.doc().contains("discovery");
+  if (!c.contains("host") && !discovered) {
+    return r.Error("coordinator.host",
+                   "missing (or add a discovery section: the nodes then find the coordinator by "
+                   "its beacon)");
+  }
+  std::string host;
+  if (c.contains("host")) {
+    ST_ASSIGN(given_host, r.String(c, "host", "coordinator."));
+    host = given_host;
+  }
   ST_ASSIGN(requests, r.Integer(c, "requests_port", "coordinator."));
   ST_ASSIGN(events, r.Integer(c, "events_port", "coordinator."));
   for (long long port : {requests, events}) {
@@ -150,8 +161,10 @@ Status ReadCoordinator(Reader& r, ConfigProgram program) {
   }
   if (requests == events) return r.Error("coordinator", "the two ports must differ");
   if (program == ConfigProgram::kNode) {
-    r.Add("coordinator", "tcp://" + host + ":" + std::to_string(requests) + ",tcp://" + host + ":" +
-                             std::to_string(events));
+    if (!host.empty()) {
+      r.Add("coordinator", "tcp://" + host + ":" + std::to_string(requests) + ",tcp://" + host +
+                               ":" + std::to_string(events));
+    }
     return OkStatus();
   }
   std::string listen = "*";
@@ -189,7 +202,9 @@ Status ReadSite(Reader& r, ConfigProgram program) {
     }
     if (node) {
       // An explicit coordinator address stays the way in; discovery is for a site without one.
-      if (!d.contains("coordinator")) r.Add("coordinator", "discover");
+      const bool has_host = d.contains("coordinator") && d["coordinator"].is_object() &&
+                            d["coordinator"].contains("host");
+      if (!has_host) r.Add("coordinator", "discover");
       r.Add("discovery-port", port);
     } else {
       r.Add("beacon", port);

@@ -65,6 +65,24 @@ TEST_F(ConfigFileTest, SiteFileSetsEachProgramsFlags) {
                    "--annotations", "/var/lib/sandtable/annotations.db"}));
 }
 
+// A site whose nodes find the coordinator by its beacon (docs/deploy.md): the coordinator section
+// gives only where it listens; the nodes discover it.
+TEST_F(ConfigFileTest, ADiscoverySiteGivesTheCoordinatorItsPortsAndTheNodesNoAddress) {
+  const fs::path site = Write("site.json", R"({
+    "format": "sandtable.site_config", "version": 1,
+    "discovery": {"port": 5670, "site": "hall-b"},
+    "coordinator": {"listen": "*", "requests_port": 7000, "events_port": 7001}
+  })");
+  Expected<Words> node = SiteConfigFlags(site, ConfigProgram::kNode);
+  ASSERT_TRUE(node.ok()) << node.status().ToString();
+  EXPECT_EQ(*node, (Words{"--coordinator", "discover", "--discovery-port", "5670", "--site-name",
+                          "hall-b"}));
+  Expected<Words> coordinator = SiteConfigFlags(site, ConfigProgram::kCoordinator);
+  ASSERT_TRUE(coordinator.ok()) << coordinator.status().ToString();
+  EXPECT_EQ(*coordinator, (Words{"--requests", "tcp://*:7000", "--events", "tcp://*:7001",
+                                 "--beacon", "5670", "--site-name", "hall-b"}));
+}
+
 TEST_F(ConfigFileTest, CommandLineWinsOverTheUnitFileOverTheSiteFile) {
   const fs::path site = Write("site.json", kSite);
   const fs::path unit = Write("unit.json", R"({
@@ -119,6 +137,9 @@ TEST_F(ConfigFileTest, MalformedFilesAreRefusedNamingFileAndKey) {
        "\"heartbeat_ms\""},
       {R"({"format": "sandtable.site_config", "version": 1, "coordinator": {"host": "a"}})",
        "\"coordinator.requests_port\""},
+      {R"({"format": "sandtable.site_config", "version": 1,
+           "coordinator": {"requests_port": 7000, "events_port": 7001}})",
+       "\"coordinator.host\""},
       {R"({"format": "sandtable.site_config", "version": 1,
            "coordinator": {"host": "a", "requests_port": 7000, "events_port": 70000}})",
        "1..65535"},
