@@ -1,5 +1,7 @@
 #include "node/app/node_app.h"
 
+#include <filesystem>
+#include <system_error>
 #include <utility>
 
 #include "common/base/log.h"
@@ -101,7 +103,13 @@ Status NodeApp::LoadInputs() {
     caps.camera_width_px = calibration_->camera.width_px;
     caps.camera_height_px = calibration_->camera.height_px;
   }
-  if (!c.saved_calibration_path.empty()) {
+  std::error_code no_file;
+  if (!c.saved_calibration_path.empty() &&
+      !std::filesystem::exists(c.saved_calibration_path, no_file)) {
+    // A unit's first start: the file its calibration will be exported to is not there yet.
+    ST_LOG(kInfo) << "--saved-calibration: no " << c.saved_calibration_path
+                  << " yet; the unit calibrates with the site";
+  } else if (!c.saved_calibration_path.empty()) {
     Expected<UnitCalibration> loaded = LoadUnitCalibration(c.saved_calibration_path);
     if (!loaded.ok()) return FlagError("--saved-calibration", loaded.status());
     ST_RETURN_IF_ERROR(

@@ -139,8 +139,8 @@ void AddUnitFlags(CLI::App& app, NodeConfig& c) {
       ->check(CLI::ExistingFile);
   app.add_option("--saved-calibration", c.saved_calibration_path,
                  "a calibration this unit saved in an earlier run (unit-<id>.json, source "
-                 "structured_light): checked with two frames and kept when it holds")
-      ->check(CLI::ExistingFile);
+                 "structured_light): checked with two frames and kept when it holds; when the "
+                 "file does not exist yet (a unit's first start) the unit calibrates");
 }
 
 // The knobs `sandtable-lab sweep` turns (docs/lab.md, "Sweep"): run time against error.
