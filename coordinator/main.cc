@@ -11,6 +11,10 @@
 //                         [--beacon 5670 [--site-name NAME]]  (LAN discovery, net/discovery.h)
 //   sandtable-coordinator --site-config site.json [flags that win over it] (docs/config-file.md)
 //   sandtable-coordinator --generate-curve-keys site.key
+//   sandtable-coordinator enrollment --requests ENDPOINT --curve-keys site.key
+//                         [--accept FINGERPRINT | --refuse FINGERPRINT]
+//     (the units that ask to join, and the operator's decision: docs/deploy.md, "Accepting a
+//      new unit"; --enroll ENDPOINT on the serving coordinator takes their requests)
 //
 // Flags are parsed by CLI11 (common/cli/command_line.h): --help lists them all; a bad value
 // (--heartbeat-ms abc, --misses 0, --status 99999) or flags that exclude each other exit 2
@@ -71,6 +75,7 @@
 #include "coordinator/annotations/session_file.h"
 #include "coordinator/display/test_pattern_service.h"
 #include "coordinator/membership/coordinator_server.h"
+#include "coordinator/membership/enrollment_command.h"
 #include "coordinator/status/http_status_server.h"
 #include "coordinator/status/status_service.h"
 #include "coordinator/timeline/timeline_service.h"
@@ -116,6 +121,11 @@ CLI::Option* AddFlags(CLI::App& app, CoordinatorFlags& f) {
                  "--events beyond loopback")
       ->check(cli::Integer(1, 65535));
   app.add_option("--site-name", f.site_name, "the site's name in its beacon");
+  app.add_option("--enroll", f.options.enroll_endpoint,
+                 "where units without the site's key ask to be accepted (an operator decides with "
+                 "`sandtable-coordinator enrollment`); its port goes into the beacon; needs "
+                 "--curve-keys")
+      ->check(cli::Endpoint());
   app.add_flag("--insecure", f.options.insecure,
                "allow --requests/--events beyond loopback without --curve-keys (an open site: "
                "anyone on the network may join it; logged every minute)");
@@ -294,6 +304,10 @@ std::optional<int> ReadKeysAndCheck(const CLI::App& app, CoordinatorFlags& f,
                                       "for an open site anyone on the network may join)");
     }
   }
+  if (!f.options.enroll_endpoint.empty() && !f.options.curve) {
+    return cli::UsageError(
+        app, "--enroll needs --curve-keys: an accepted unit is handed the site's key");
+  }
   if (f.beacon_port > 0 && !(net::BeyondLoopback(f.options.request_endpoint) &&
                              net::BeyondLoopback(f.options.event_endpoint))) {
     return cli::UsageError(app,
@@ -314,6 +328,10 @@ sandtable::Expected<std::unique_ptr<sandtable::net::BeaconPublisher>> StartBeaco
   const std::optional<net::TcpEndpoint> events = net::ParseTcpEndpoint(server.event_endpoint());
   site.requests_port = requests ? std::atoi(requests->port.c_str()) : 0;
   site.events_port = events ? std::atoi(events->port.c_str()) : 0;
+  if (!server.enroll_endpoint().empty()) {
+    const std::optional<net::TcpEndpoint> enroll = net::ParseTcpEndpoint(server.enroll_endpoint());
+    site.enroll_port = enroll ? std::atoi(enroll->port.c_str()) : 0;
+  }
   Expected<std::unique_ptr<net::BeaconPublisher>> beacon =
       net::BeaconPublisher::Start(f.beacon_port, site);
   if (beacon.ok()) {
@@ -338,11 +356,18 @@ static int Run(int argc, char** argv) {
       "sandtable-coordinator");
   CLI::Option* generate = AddFlags(app, f);
   cli::AddConfigFileFlags(app, cli::ConfigProgram::kCoordinator);
+  app.require_subcommand(0, 1);
+  CLI::App* enrollment = app.add_subcommand(
+      "enrollment",
+      "the units that ask to join, accept or refuse one (sandtable-coordinator enrollment --help)");
+  enrollment->prefix_command();  // its own parser (coordinator/membership/enrollment_command.h)
+  enrollment->set_help_flag();
   // The site's configuration file, read into flags the command line overrides.
   Expected<std::vector<std::string>> args = cli::ExpandConfigFiles(
       std::vector<std::string>(argv + 1, argv + argc), cli::ConfigProgram::kCoordinator);
   if (!args.ok()) return cli::UsageError(app, args.status().message());
   if (std::optional<int> exit = cli::Parse(app, *args)) return *exit;
+  if (enrollment->parsed()) return coordinator::RunEnrollmentCommand(enrollment->remaining());
   if (generate->count() > 0) {
     Expected<net::CurveKeyPair> keys = net::GenerateCurveKeyPair();
     Status written =

@@ -139,7 +139,10 @@ Expected<std::optional<Incoming>> Channel::TryReceive() {
 }
 
 Expected<Received> Channel::Receive() {
-  Expected<std::optional<std::vector<std::string>>> frames = socket_->TryReceive();
+  Socket::PeerInfo peer;
+  const bool router_socket = socket_->type() == SocketType::kRouter;
+  Expected<std::optional<std::vector<std::string>>> frames =
+      socket_->TryReceive(router_socket ? &peer : nullptr);
   if (!frames.ok()) return frames.status();
   Received out;
   if (!frames->has_value()) return out;
@@ -165,6 +168,8 @@ Expected<Received> Channel::Receive() {
   }
   Incoming incoming;
   if (router) incoming.routing_id = parts[0];
+  incoming.peer_key = std::move(peer.user_id);
+  incoming.peer_address = std::move(peer.address);
   const std::string& payload = parts.back();
   incoming.wire_bytes = payload.size();
   Expected<wire::Envelope> envelope = proto::DecodeEnvelope(payload, limits_, counters_);

@@ -28,6 +28,9 @@ namespace sandtable::net {
 
 struct Incoming {
   std::string routing_id;  // ROUTER only: who sent it (reply with the same id)
+  // ROUTER with CURVE only: the sender's CURVE public key (Z85) as ZAP let it through, and its
+  // address; empty otherwise.
+  std::string peer_key, peer_address;
   wire::Envelope envelope;
   size_t wire_bytes = 0;
 };

@@ -108,6 +108,20 @@ Expected<CurveKeyPair> ReadCurveKeyFile(const std::string& path) {
   return keys;
 }
 
+std::string KeyFingerprint(const std::string& public_key_z85) {
+  if (public_key_z85.size() != 40) return "";
+  std::array<uint8_t, 32> decoded{};
+  if (zmq_z85_decode(decoded.data(), public_key_z85.c_str()) == nullptr) return "";
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string out;
+  for (int i = 0; i < 8; ++i) {
+    if (i > 0 && i % 2 == 0) out += '-';
+    out += kHex[decoded[i] >> 4];
+    out += kHex[decoded[i] & 15];
+  }
+  return out;
+}
+
 CurveSettings ServerCurve(const CurveKeyPair& site) {
   CurveSettings s;
   s.enabled = true;
@@ -169,6 +183,7 @@ void ZapHandler::Run() {
       } while (request.back().more());
       if (request.size() < 6) continue;  // not a ZAP request; REP needs no reply to garbage
       const std::string request_id = request[1].to_string();
+      const std::string domain = request[2].to_string();
       const std::string address = request[3].to_string();
       const std::string mechanism = request[5].to_string();
       bool allowed = false;
@@ -177,7 +192,7 @@ void ZapHandler::Run() {
         std::array<char, 41> z85{};
         zmq_z85_encode(z85.data(), static_cast<const uint8_t*>(request[6].data()), 32);
         client_key.assign(z85.data(), 40);
-        allowed = authorized_.count(client_key) > 0;
+        allowed = authorized_.count(client_key) > 0 || open_domains_.count(domain) > 0;
       }
       if (allowed) {
         ++accepted_;
@@ -186,9 +201,12 @@ void ZapHandler::Run() {
         ST_LOG(kWarning) << "CURVE: refused client " << client_key << " from " << address
                          << " (mechanism " << mechanism << "): key not authorized for this site";
       }
-      const std::vector<std::string> reply = {
-          "1.0", request_id, allowed ? "200" : "400", allowed ? "OK" : "key not authorized",
-          "",    ""};
+      const std::vector<std::string> reply = {"1.0",
+                                              request_id,
+                                              allowed ? "200" : "400",
+                                              allowed ? "OK" : "key not authorized",
+                                              allowed ? client_key : "",
+                                              ""};
       for (size_t i = 0; i < reply.size(); ++i) {
         socket_->send(zmq::buffer(reply[i]),
                       i + 1 < reply.size() ? zmq::send_flags::sndmore : zmq::send_flags::none);

@@ -55,17 +55,31 @@ Expected<CurveKeyPair> ReadCurveKeyFile(const std::string& path);
 Status CheckCurveKeyFilePermissions(const std::string& path);
 Status CheckCurveKeyPair(const std::string& path, const CurveKeyPair& keys);
 
+// How an operator reads a CURVE public key (docs/deploy.md, "Accepting a new unit"): the first
+// 8 of its 32 bytes in hex, in four groups ("3f9a-01c2-77de-b450"). Empty for a key that is not
+// 40 characters of Z85.
+std::string KeyFingerprint(const std::string& public_key_z85);
+
+// The ZAP domain of the coordinator's enrollment socket, where any CURVE key is let through
+// (ZapHandler::AdmitAnyKeyIn) so a unit without the site's key can ask to be accepted.
+inline constexpr char kEnrollZapDomain[] = "sandtable-enroll";
+
 // Socket settings for a bound (server) or connecting (client) socket of a site.
 CurveSettings ServerCurve(const CurveKeyPair& site);
 CurveSettings ClientCurve(const CurveKeyPair& site);
 
 // Answers ZAP requests (RFC 27) for one context on inproc://zeromq.zap.01 in its own thread.
 // Start it before binding any CURVE server socket of that context; Stop() (or the destructor)
-// before the context is closed.
+// before the context is closed. Every client let through gets its public key (Z85) as its
+// ZAP User-Id, which each message it sends carries (Incoming::peer_key).
 class ZapHandler {
  public:
   ZapHandler(zmq::context_t* context, std::set<std::string> authorized_public_keys_z85);
   ~ZapHandler();
+  // In `domain` (a socket's CurveSettings::zap_domain) any CURVE client is let through, and
+  // only there: the enrollment socket's handler decides what a stranger may ask. Call before
+  // Start().
+  void AdmitAnyKeyIn(const std::string& domain) { open_domains_.insert(domain); }
   Status Start();
   void Stop();
 
@@ -76,6 +90,7 @@ class ZapHandler {
   void Run();
   zmq::context_t* context_;
   std::set<std::string> authorized_;
+  std::set<std::string> open_domains_;
   std::unique_ptr<zmq::socket_t> socket_;
   std::thread thread_;
   std::atomic<bool> stop_{false};

@@ -84,11 +84,16 @@ std::string SiteBeacon::EventsEndpoint() const {
   return "tcp://" + host + ":" + std::to_string(events_port);
 }
 
+std::string SiteBeacon::EnrollEndpoint() const {
+  return enroll_port > 0 ? "tcp://" + host + ":" + std::to_string(enroll_port) : "";
+}
+
 std::string EncodeBeacon(const SiteBeacon& b) {
   std::string out(kMagic);
   out += " site=" + b.site + " key=" + (b.curve_key.empty() ? "-" : b.curve_key) +
          " requests=" + std::to_string(b.requests_port) +
          " events=" + std::to_string(b.events_port);
+  if (b.enroll_port > 0) out += " enroll=" + std::to_string(b.enroll_port);
   return out;
 }
 
@@ -115,8 +120,11 @@ Expected<SiteBeacon> DecodeBeacon(std::string_view data, const std::string& host
     } else if (key == "key") {
       if (value != "-" && !ValidKey(value)) return bad("key is not a Z85 CURVE public key");
       b.curve_key = value == "-" ? "" : value;
-    } else if (key == "requests" || key == "events") {
-      if (!ParsePort(value, key == "requests" ? &b.requests_port : &b.events_port)) {
+    } else if (key == "requests" || key == "events" || key == "enroll") {
+      int* port = key == "requests" ? &b.requests_port
+                  : key == "events" ? &b.events_port
+                                    : &b.enroll_port;
+      if (!ParsePort(value, port)) {
         return bad(key + " port '" + value + "'");
       }
     } else {
@@ -183,8 +191,9 @@ Expected<SiteBeacon> DiscoverSite(
   std::string last_refusal;
   const std::string wanted =
       (options.site.empty() ? std::string("any site") : "site " + options.site) +
-      (options.trusted_key.empty() ? " that is open (no CURVE)"
-                                   : " whose key is " + options.trusted_key.substr(0, 8) + "...");
+      (options.enrolling             ? " that accepts new units (enrollment)"
+       : options.trusted_key.empty() ? " that is open (no CURVE)"
+                                     : " whose key is " + options.trusted_key.substr(0, 8) + "...");
   Expected<SiteBeacon> found = UnavailableError("");
   while (true) {
     if (stop != nullptr && stop->load()) {
@@ -223,6 +232,13 @@ Expected<SiteBeacon> DiscoverSite(
       why = beacon.status().message();
     } else if (!options.site.empty() && beacon->site != options.site) {
       why = "site " + beacon->site + ", not " + options.site;
+    } else if (options.enrolling && (beacon->curve_key.empty() || beacon->enroll_port == 0)) {
+      why = beacon->curve_key.empty()
+                ? "an open site (no CURVE), which hands out no key to enroll with"
+                : "a CURVE site that does not accept new units (its coordinator has no --enroll)";
+    } else if (options.enrolling) {
+      found = std::move(*beacon);
+      break;
     } else if (beacon->curve_key.empty() && !options.accept_open_site) {
       why = "an open site (no CURVE); this unit joins one only with --insecure";
     } else if (!beacon->curve_key.empty() && beacon->curve_key != options.trusted_key) {

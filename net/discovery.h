@@ -4,7 +4,8 @@
 // namespaces), and a unit with no coordinator address listens for it. The beacon names the
 // site, its two ports and the coordinator's CURVE public key; a unit joins only a site whose
 // key it trusts (the key in its site key file), or an open site (no CURVE) when it runs open
-// itself (--insecure).
+// itself (--insecure), or, when it has no site key yet, a site that offers enrollment (the
+// operator then accepts it: net/site_enrollment.h).
 #pragma once
 
 #include <atomic>
@@ -26,10 +27,12 @@ struct SiteBeacon {
   std::string curve_key;  // the coordinator's CURVE public key (Z85, 40 chars); empty: open site
   int requests_port = 0;  // the coordinator's ROUTER
   int events_port = 0;    // the coordinator's events socket
+  int enroll_port = 0;    // its enrollment socket (0: none; "enroll=" is optional in the beacon)
   std::string host;       // where the beacon came from (set by the listener)
 
   std::string RequestsEndpoint() const;  // tcp://HOST:REQUESTS
   std::string EventsEndpoint() const;
+  std::string EnrollEndpoint() const;  // empty without an enrollment port
 };
 
 // The beacon's bytes (at most 255, zbeacon's limit) and back; INVALID_ARGUMENT for anything
@@ -60,7 +63,10 @@ struct DiscoveryOptions {
   std::string site;               // only this site (empty: any)
   std::string trusted_key;        // the CURVE public key a site must show (empty: open sites only)
   bool accept_open_site = false;  // an open site is joined only when the unit runs open too
-  std::string interface_name;     // empty: CZMQ's choice
+  // A unit that has no site key yet (net/site_enrollment.h): any CURVE site with an enrollment
+  // port is taken (the operator's acceptance is what makes it trusted).
+  bool enrolling = false;
+  std::string interface_name;            // empty: CZMQ's choice
   std::chrono::milliseconds timeout{0};  // 0: until found or stopped
   Status Check() const;
 };

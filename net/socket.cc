@@ -135,7 +135,7 @@ Status Socket::Send(const std::vector<std::string>& frames) {
   }
 }
 
-Expected<std::optional<std::vector<std::string>>> Socket::TryReceive() {
+Expected<std::optional<std::vector<std::string>>> Socket::TryReceive(PeerInfo* peer) {
   try {
     std::vector<std::string> frames;
     zmq::message_t message;
@@ -147,6 +147,13 @@ Expected<std::optional<std::vector<std::string>>> Socket::TryReceive() {
       // The rest of a multipart message is already here (ZeroMQ delivers it atomically).
       if (!socket_.recv(message, zmq::recv_flags::none)) break;
       frames.push_back(message.to_string());
+    }
+    if (peer != nullptr) {
+      // zmq_msg_gets, not message_t::gets: a property the connection lacks is NULL, not a throw.
+      const char* user_id = zmq_msg_gets(message.handle(), "User-Id");
+      const char* address = zmq_msg_gets(message.handle(), "Peer-Address");
+      peer->user_id = user_id ? user_id : "";
+      peer->address = address ? address : "";
     }
     return std::optional<std::vector<std::string>>(std::move(frames));
   } catch (const zmq::error_t& e) {

@@ -69,7 +69,13 @@ class Socket {
   // water mark); NOT_FOUND, for ROUTER, when the routing id is not connected.
   Status Send(const std::vector<std::string>& frames);
   // Receives one multipart message if one is waiting (nullopt otherwise); never blocks.
-  Expected<std::optional<std::vector<std::string>>> TryReceive();
+  // `peer`, when given, gets what libzmq knows of the sender from its last frame: the ZAP
+  // User-Id (the client's CURVE public key, net/curve.h) and its address (empty when unknown).
+  struct PeerInfo {
+    std::string user_id;
+    std::string address;
+  };
+  Expected<std::optional<std::vector<std::string>>> TryReceive(PeerInfo* peer = nullptr);
 
   // Waits up to `timeout` for any of `sockets` to be readable; sets (*readable)[i]. Returns
   // OK also on timeout (all false) and on EINTR (a signal arrived: the caller checks it).

@@ -17,6 +17,7 @@ constexpr uint32_t kCoordinatorSenderId = 0xFFFFFFF0u;
 constexpr uint32_t kWorldSenderId = 0xFFFFFFF1u;
 constexpr uint32_t kLabSenderId = 0xFFFFFFF2u;
 constexpr uint32_t kLabPainterSenderId = 0xFFFFFFF3u;  // the lab's annotation client (chaos)
+constexpr uint32_t kOperatorSenderId = 0xFFFFFFF4u;    // an operator's command (enrollment)
 constexpr bool IsValidNodeId(NodeId id) { return id < kFirstReservedSenderId; }
 
 // A projector within a site; today equal to its unit's NodeId.

@@ -186,14 +186,34 @@ Status ReadSite(Reader& r, ConfigProgram program) {
        "heartbeat_ms", "misses", "model", "expect_units", "node_flags", "coordinator_flags"}));
   const bool node = program == ConfigProgram::kNode;
   if (d.contains("coordinator")) ST_RETURN_IF_ERROR(ReadCoordinator(r, program));
+  // A site that accepts new units: a node's key file may not exist yet (it asks for it).
+  const bool enrolling = d.contains("discovery") && d["discovery"].is_object() &&
+                         d["discovery"].contains("enroll_port");
   if (d.contains("curve_keys")) {
     ST_ASSIGN(keys, r.Path(d, "curve_keys", ""));
-    r.Add("curve-keys", keys);
+    r.Add(node && enrolling ? "enroll" : "curve-keys", keys);
   }
   if (d.contains("discovery")) {
     const json& disc = d["discovery"];
     if (!disc.is_object()) return r.Error("discovery", "must be an object");
-    ST_RETURN_IF_ERROR(r.OnlyKnown(disc, "discovery.", {"port", "site"}));
+    ST_RETURN_IF_ERROR(r.OnlyKnown(disc, "discovery.", {"port", "site", "enroll_port"}));
+    if (enrolling) {
+      ST_ASSIGN(enroll, r.Integer(disc, "enroll_port", "discovery."));
+      if (enroll < 1 || enroll > 65535)
+        return r.Error("discovery.enroll_port", "must be in 1..65535");
+      if (!d.contains("curve_keys")) {
+        return r.Error("discovery.enroll_port", "needs curve_keys (the key a unit is handed)");
+      }
+      if (!node) {
+        std::string listen = "*";
+        if (d.contains("coordinator") && d["coordinator"].is_object() &&
+            d["coordinator"].contains("listen")) {
+          ST_ASSIGN(given, r.String(d["coordinator"], "listen", "coordinator."));
+          listen = given;
+        }
+        r.Add("enroll", "tcp://" + listen + ":" + std::to_string(enroll));
+      }
+    }
     std::string port = "5670";
     if (disc.contains("port")) {
       ST_ASSIGN(p, r.Integer(disc, "port", "discovery."));

@@ -6,16 +6,17 @@
 #include "net/endpoint.h"
 
 namespace sandtable::coordinator {
-namespace {
-
-// Subscription messages queued per subscriber connection before libzmq stops reading it.
-
-}  // namespace
 
 Status CoordinatorOptions::Check() const {
   ST_RETURN_IF_ERROR(membership.Check());
   ST_RETURN_IF_ERROR(limits.Check());
   ST_RETURN_IF_ERROR(events.Check());
+  ST_RETURN_IF_ERROR(enrollment.Check());
+  if (!enroll_endpoint.empty() && !curve) {
+    return InvalidArgumentError(
+        "coordinator: enrollment needs CURVE (an accepted unit is handed the site's key): give "
+        "--curve-keys");
+  }
   if (step_period.count() <= 0)
     return InvalidArgumentError("coordinator: step_period must be > 0 ms");
   if (republish_period.count() <= 0) {
@@ -34,12 +35,13 @@ Status CoordinatorOptions::Check() const {
 }
 
 CoordinatorServer::CoordinatorServer(CoordinatorOptions options)
-    : options_(std::move(options)), members_(options_.membership) {}
+    : options_(std::move(options)), desk_(options_.enrollment), members_(options_.membership) {}
 
 CoordinatorServer::~CoordinatorServer() {
   for (auto& monitor : handshake_monitors_) monitor->Stop();
   requests_.reset();
   events_.reset();
+  enroll_.reset();
   if (zap_) zap_->Stop();
 }
 
@@ -66,6 +68,7 @@ Status CoordinatorServer::Start() {
   if (options_.curve) {
     zap_ = std::make_unique<net::ZapHandler>(&context_,
                                              std::set<std::string>{options_.curve->public_key_z85});
+    if (!options_.enroll_endpoint.empty()) zap_->AdmitAnyKeyIn(net::kEnrollZapDomain);
     ST_RETURN_IF_ERROR(zap_->Start());
     socket_options.curve = net::ServerCurve(*options_.curve);
   }
@@ -90,7 +93,80 @@ Status CoordinatorServer::Start() {
   loop_.Add(
       requests_.get(), [this](net::Incoming in) { HandleRequest(std::move(in)); },
       /*answer_refusals=*/true);
+  if (!options_.enroll_endpoint.empty()) {
+    ST_RETURN_IF_ERROR(BindEnrollment(socket_options, incarnation));
+  }
   return OkStatus();
+}
+
+Status CoordinatorServer::BindEnrollment(const net::SocketOptions& site_socket_options,
+                                         uint64_t incarnation) {
+  net::SocketOptions options = site_socket_options;
+  options.curve.zap_domain = net::kEnrollZapDomain;  // any CURVE key gets through, here only
+  options.max_message_bytes = 4096;                  // an EnrollRequest is a few dozen bytes
+  options.receive_high_water_mark = 100;
+  Expected<std::unique_ptr<net::Socket>> router =
+      net::Socket::Create(&context_, net::SocketType::kRouter, options);
+  if (!router.ok()) return router.status();
+  ST_RETURN_IF_ERROR(MonitorHandshakes(router->get(), "coordinator enrollment"));
+  Expected<std::string> endpoint = (*router)->Bind(options_.enroll_endpoint);
+  if (!endpoint.ok()) return endpoint.status().WithContext("enrollment");
+  enroll_endpoint_ = *endpoint;
+  proto::CodecLimits limits = options_.limits;
+  limits.max_message_bytes = limits.max_body_bytes = 4096;
+  enroll_ = std::make_unique<net::Channel>(std::move(*router), kCoordinatorSenderId, incarnation,
+                                           &counters_, limits);
+  loop_.Add(
+      enroll_.get(), [this](net::Incoming in) { HandleEnroll(std::move(in)); },
+      /*answer_refusals=*/true);
+  ST_LOG(kInfo) << "enrollment: units without the site's key may ask to join at "
+                << enroll_endpoint_ << " (an operator accepts them)";
+  return OkStatus();
+}
+
+void CoordinatorServer::HandleEnroll(net::Incoming request) {
+  const wire::Envelope& in = request.envelope;
+  wire::Envelope reply;
+  if (in.body_case() != wire::Envelope::kEnrollRequest) {
+    counters_.CountRejected(proto::RejectReason::kWrongType);
+    reply.mutable_rejected()->set_rejected_sequence(in.sequence());
+    reply.mutable_rejected()->set_reason("the enrollment socket serves only enroll_request, not " +
+                                         proto::BodyName(in));
+  } else {
+    const bool known = desk_.Knows(request.peer_key);
+    Expected<EnrollState> state =
+        desk_.OnRequest(request.peer_key, in.enroll_request().host_name(), request.peer_address,
+                        in.sender_id(), Clock::now());
+    auto* out = reply.mutable_enroll_reply();
+    out->set_fingerprint(net::KeyFingerprint(request.peer_key));
+    if (!state.ok()) {
+      out->set_state(wire::EnrollReply::STATE_REFUSED);
+      out->set_message(state.status().message());
+    } else if (*state == EnrollState::kAccepted) {
+      out->set_state(wire::EnrollReply::STATE_ACCEPTED);
+      out->set_site_public_key(options_.curve->public_key_z85);
+      out->set_site_secret_key(options_.curve->secret_key_z85);
+      out->set_message("accepted by the site's operator");
+      ST_LOG(kInfo) << "enrollment: unit " << out->fingerprint() << " (node " << in.sender_id()
+                    << ") was handed the site's key";
+    } else if (*state == EnrollState::kRefused) {
+      out->set_state(wire::EnrollReply::STATE_REFUSED);
+      out->set_message("refused by the site's operator");
+    } else {
+      out->set_state(wire::EnrollReply::STATE_PENDING);
+      out->set_message("waiting for the site's operator to accept unit " + out->fingerprint());
+      if (!known) {
+        ST_LOG(kInfo) << "enrollment: unit " << out->fingerprint() << " ("
+                      << in.enroll_request().host_name().substr(0, 64) << " at "
+                      << request.peer_address << ", node " << in.sender_id()
+                      << ") asks to join; accept it with `sandtable-coordinator enrollment "
+                         "--accept "
+                      << out->fingerprint() << "`";
+      }
+    }
+  }
+  Status sent = enroll_->Send(std::move(reply), request.routing_id);
+  if (!sent.ok()) ST_LOG(kDebug) << "enrollment reply dropped: " << sent.ToString();
 }
 
 void CoordinatorServer::CountPublishFailure(const Status& status, const char* what) {
@@ -230,6 +306,19 @@ void CoordinatorServer::HandleRequest(net::Incoming request) {
           break;
       }
       return;  // no reply: the node is closing
+    case wire::Envelope::kEnrollmentRequest: {
+      if (!enroll_) {
+        auto* out = reply.mutable_enrollment_reply();
+        out->set_ok(false);
+        out->set_message("enrollment is off on this coordinator (--enroll ENDPOINT turns it on)");
+        break;
+      }
+      *reply.mutable_enrollment_reply() = desk_.Serve(in.enrollment_request(), now);
+      if (!in.enrollment_request().accept().empty() || !in.enrollment_request().refuse().empty()) {
+        ST_LOG(kInfo) << "enrollment: " << reply.enrollment_reply().message();
+      }
+      break;
+    }
     case wire::Envelope::kTimeRequest: {
       auto* time = reply.mutable_time_reply();
       time->set_t0_client_send_ns(in.time_request().t0_client_send_ns());

@@ -8,6 +8,12 @@
 // tracker calibration, timeline); invalid messages are counted and answered with Rejected
 // (net/server_loop.h).
 //
+// With an enrollment endpoint (and CURVE) it binds a third ROUTER where any CURVE key gets
+// through and only EnrollRequest is served: a unit without the site's key asks there, an
+// operator decides with EnrollmentRequest on the requests socket (only the site's key reaches
+// it), and an accepted unit is handed the site's key pair
+// (coordinator/membership/enrollment_desk.h).
+//
 // Hostile peers (docs/reliability.md): a Hello whose fields exceed the limits of
 // membership_table.h is answered with Rejected and counted over_limit; a full site or an id
 // bound to another live connection gets HelloAck{accepted: false} (counted over_limit /
@@ -27,6 +33,7 @@
 #include <vector>
 
 #include "common/base/ids.h"
+#include "coordinator/membership/enrollment_desk.h"
 #include "coordinator/membership/membership_table.h"
 #include "net/channel.h"
 #include "net/curve.h"
@@ -60,6 +67,9 @@ struct CoordinatorOptions {
   // Longest wait for requests in Run(): services polling a tracker at 100 Hz need <= 5 ms.
   std::chrono::milliseconds step_period{50};
   std::optional<net::CurveKeyPair> curve;  // site keys: require CURVE on both sockets
+  // Units without the site's key ask to be accepted here (empty: no enrollment; needs curve).
+  std::string enroll_endpoint;
+  EnrollmentDeskOptions enrollment;
   // Without CURVE the sockets stay on loopback unless this is set (an open site: anyone on the
   // network may join it, read its events and write its annotations; logged every minute).
   bool insecure = false;
@@ -78,6 +88,7 @@ class CoordinatorServer {
   Status Start();
   const std::string& request_endpoint() const { return request_endpoint_; }
   const std::string& event_endpoint() const { return event_endpoint_; }
+  const std::string& enroll_endpoint() const { return enroll_endpoint_; }  // empty: none
 
   // Serves what is waiting (at most `max_wait` of waiting), expires silent nodes, publishes.
   Status Step(std::chrono::milliseconds max_wait);
@@ -93,6 +104,7 @@ class CoordinatorServer {
   void AddService(CoordinatorService* service) { services_.push_back(service); }
 
   const MembershipTable& members() const { return members_; }
+  EnrollmentDesk& enrollment() { return desk_; }
   const proto::MessageCounters& counters() const { return counters_; }
   // Publishes that failed (logged; the server kept serving).
   uint64_t publish_failures() const { return publish_failures_; }
@@ -103,6 +115,8 @@ class CoordinatorServer {
 
  private:
   void HandleRequest(net::Incoming request);
+  void HandleEnroll(net::Incoming request);
+  Status BindEnrollment(const net::SocketOptions& site_socket_options, uint64_t incarnation);
   Status PublishMemberList();
   void CountPublishFailure(const Status& status, const char* what);
   // True when the connection with this routing id is still up (a probe send).
@@ -117,8 +131,10 @@ class CoordinatorServer {
   proto::MessageCounters counters_;
   std::unique_ptr<net::Channel> requests_;
   std::unique_ptr<net::EventPublisher> events_;
+  std::unique_ptr<net::Channel> enroll_;
   net::ServerLoop loop_;
-  std::string request_endpoint_, event_endpoint_;
+  std::string request_endpoint_, event_endpoint_, enroll_endpoint_;
+  EnrollmentDesk desk_;
   MembershipTable members_;
   std::vector<CoordinatorService*> services_;
   std::unique_ptr<net::InsecureNotice> open_notice_;  // an open site's repeated warning

@@ -98,6 +98,11 @@ void AddSiteFlags(CLI::App& app, NodeConfig& c) {
                  "site CURVE key file (sandtable-coordinator "
                  "--generate-curve-keys)")
       ->check(CLI::ExistingFile);
+  app.add_option("--enroll", c.enroll_keys_path,
+                 "with --coordinator discover: the site's key file; while it does not exist, ask "
+                 "the site's operator to accept this unit and write the key handed over there "
+                 "(docs/deploy.md, \"Accepting a new unit\")")
+      ->excludes("--curve-keys");
   app.add_flag("--insecure", c.insecure,
                "allow --bind beyond loopback without --curve-keys (an open site: anyone on the "
                "network may talk to the node; logged every minute)");
@@ -216,7 +221,11 @@ Status NodeConfig::Check() const {
   if (!saved_calibration_path.empty() && factory_path.empty()) {
     return Bad("--saved-calibration needs --factory");
   }
-  if (curve_keys_path.empty() && !insecure && net::BeyondLoopback(peer_bind)) {
+  if (!enroll_keys_path.empty() && coordinator_requests != kDiscover) {
+    return Bad("--enroll needs --coordinator discover (the beacon names the site to ask)");
+  }
+  if (curve_keys_path.empty() && enroll_keys_path.empty() && !insecure &&
+      net::BeyondLoopback(peer_bind)) {
     return Bad("--bind " + peer_bind +
                " is beyond loopback: it needs --curve-keys (or --insecure for an open site anyone "
                "on the network may talk to)");

@@ -43,7 +43,10 @@ struct NodeConfig {
   std::string peer_bind = NodeOptions{}.peer_bind;
   std::string peer_advertise;   // the host peers connect to (empty: chosen; docs/deploy.md)
   std::string curve_keys_path;  // the site's CURVE key file (empty: no CURVE)
-  bool insecure = false;        // --bind beyond loopback without CURVE allowed (an open site)
+  // --enroll: where the site's key file is (used as curve_keys_path) or, while it does not
+  // exist, is written once the site's operator accepts this unit (net/site_enrollment.h).
+  std::string enroll_keys_path;
+  bool insecure = false;  // --bind beyond loopback without CURVE allowed (an open site)
   int heartbeat_ms = 100;
   int worker_threads = NodeOptions{}.worker_threads;
   net::ChannelFaults faults;                           // lab chaos only

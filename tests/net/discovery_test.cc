@@ -37,6 +37,14 @@ TEST(DiscoveryTest, BeaconsRoundTripAndMalformedOnesAreRefused) {
   Expected<SiteBeacon> open = DecodeBeacon(EncodeBeacon(Lab("")), "10.0.0.1");
   ASSERT_TRUE(open.ok());
   EXPECT_TRUE(open->curve_key.empty());
+  EXPECT_EQ(back->enroll_port, 0);
+  EXPECT_EQ(back->EnrollEndpoint(), "");
+  SiteBeacon enrolling = Lab(keys->public_key_z85);
+  enrolling.enroll_port = 7002;
+  Expected<SiteBeacon> with_enroll = DecodeBeacon(EncodeBeacon(enrolling), "10.0.0.1");
+  ASSERT_TRUE(with_enroll.ok()) << with_enroll.status().ToString();
+  EXPECT_EQ(with_enroll->EnrollEndpoint(), "tcp://10.0.0.1:7002");
+  EXPECT_LE(EncodeBeacon(enrolling).size(), 255u);
   for (const char* bad :
        {"", "HELLO site=a key=- requests=1 events=2", "SANDTABLE1 site=a key=- requests=1",
         "SANDTABLE1 site=a key=- requests=0 events=2",
@@ -44,6 +52,8 @@ TEST(DiscoveryTest, BeaconsRoundTripAndMalformedOnesAreRefused) {
         "SANDTABLE1 site=a/b key=- requests=1 events=2",
         "SANDTABLE1 site=a key=short requests=1 events=2",
         "SANDTABLE1 site=a key=- requests=1 events=2 extra=3",
+        "SANDTABLE1 site=a key=- requests=1 events=2 enroll=0",
+        "SANDTABLE1 site=a key=- requests=1 events=2 enroll=1 enroll=2",
         "SANDTABLE1 site=a site=b key=- requests=1 events=2",
         "SANDTABLE1 site=a key=- requests=1 events=2 junk"}) {
     EXPECT_FALSE(DecodeBeacon(bad, "h").ok()) << bad;
@@ -69,6 +79,7 @@ TEST(DiscoveryTest, AUnitJoinsTheSiteItTrustsAndSaysWhyNotTheOther) {
         SiteBeacon lab = Lab(ours->public_key_z85);
         lab.requests_port = 7100;
         lab.events_port = 7101;
+        lab.enroll_port = 7102;  // this site accepts new units; the other does not
         Expected<std::unique_ptr<BeaconPublisher>> a =
             BeaconPublisher::Start(kPort, other, "site0", std::chrono::milliseconds(100));
         Expected<std::unique_ptr<BeaconPublisher>> b =
@@ -108,6 +119,29 @@ TEST(DiscoveryTest, AUnitJoinsTheSiteItTrustsAndSaysWhyNotTheOther) {
           return 1;
         }
         *text += " | " + none.status().message();
+        // A unit with no key yet takes only a site that accepts new units.
+        DiscoveryOptions enrolling;
+        enrolling.port = kPort;
+        enrolling.interface_name = "site0";
+        enrolling.enrolling = true;
+        enrolling.timeout = std::chrono::milliseconds(10000);
+        std::vector<std::string> passed_over;
+        Expected<SiteBeacon> asked =
+            DiscoverSite(enrolling, nullptr, [&](const SiteBeacon& s, const std::string& why) {
+              passed_over.push_back(s.site + ": " + why);
+            });
+        if (!asked.ok() || asked->EnrollEndpoint() != "tcp://10.63.0.1:7102") {
+          *text =
+              "enrolling: " + (asked.ok() ? asked->EnrollEndpoint() : asked.status().ToString());
+          return 1;
+        }
+        for (const std::string& r : passed_over) {
+          if (r.find("other-site") == std::string::npos ||
+              r.find("does not accept new units") == std::string::npos) {
+            *text = "enrolling: passed over for the wrong reason: " + r;
+            return 1;
+          }
+        }
         return 0;
       });
   if (run.code == test_support::NamespaceRun::kSkipped) GTEST_SKIP() << run.text;

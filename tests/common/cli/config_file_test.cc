@@ -83,6 +83,36 @@ TEST_F(ConfigFileTest, ADiscoverySiteGivesTheCoordinatorItsPortsAndTheNodesNoAdd
                                  "--beacon", "5670", "--site-name", "hall-b"}));
 }
 
+// A site that accepts new units (docs/deploy.md, "Accepting a new unit"): the coordinator listens
+// for their requests; a node's key file becomes --enroll, so a unit without it yet asks for it.
+TEST_F(ConfigFileTest, AnEnrollPortOpensTheCoordinatorsDeskAndLetsANodeAskForTheKey) {
+  const fs::path site = Write("site.json", R"({
+    "format": "sandtable.site_config", "version": 1,
+    "discovery": {"port": 5670, "enroll_port": 7002},
+    "coordinator": {"listen": "10.0.0.1", "requests_port": 7000, "events_port": 7001},
+    "curve_keys": "site.keys"
+  })");
+  const std::string keys = (dir_ / "etc" / "site.keys").string();
+  Expected<Words> node = SiteConfigFlags(site, ConfigProgram::kNode);
+  ASSERT_TRUE(node.ok()) << node.status().ToString();
+  EXPECT_EQ(*node,
+            (Words{"--enroll", keys, "--coordinator", "discover", "--discovery-port", "5670"}));
+  Expected<Words> coordinator = SiteConfigFlags(site, ConfigProgram::kCoordinator);
+  ASSERT_TRUE(coordinator.ok()) << coordinator.status().ToString();
+  EXPECT_EQ(*coordinator,
+            (Words{"--requests", "tcp://10.0.0.1:7000", "--events", "tcp://10.0.0.1:7001",
+                   "--curve-keys", keys, "--enroll", "tcp://10.0.0.1:7002", "--beacon", "5670"}));
+  const fs::path no_keys = Write("no_keys.json", R"({
+    "format": "sandtable.site_config", "version": 1,
+    "discovery": {"enroll_port": 7002},
+    "coordinator": {"requests_port": 7000, "events_port": 7001}
+  })");
+  Expected<Words> refused = SiteConfigFlags(no_keys, ConfigProgram::kCoordinator);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("discovery.enroll_port"), std::string::npos)
+      << refused.status().message();
+}
+
 TEST_F(ConfigFileTest, CommandLineWinsOverTheUnitFileOverTheSiteFile) {
   const fs::path site = Write("site.json", kSite);
   const fs::path unit = Write("unit.json", R"({

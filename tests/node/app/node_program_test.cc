@@ -16,6 +16,7 @@
 #include <opencv2/core.hpp>
 
 #include "common/io/unit_calibration_file.h"
+#include "net/curve.h"
 #include "node/app/calibration_service.h"
 #include "tests/coordinator/membership/child_process.h"
 #include "tests/testing/network_namespace.h"
@@ -350,13 +351,117 @@ TEST_F(NodeProgramTest, ANodeWithNoAddressFindsItsSiteByTheBeacon) {
   EXPECT_NE(run.text.find("CURVE key trusted"), std::string::npos) << run.text;
 }
 
+// First time on a site (docs/deploy.md, "Accepting a new unit"): a unit with no site key at all
+// (--enroll names where it will keep it) hears the beacon, asks, and waits; the operator lists
+// it with `sandtable-coordinator enrollment`, accepts it by the fingerprint the unit logged, and
+// the unit writes the site's key and registers over CURVE. Started again it trusts that key.
+TEST_F(NodeProgramTest, AUnitWithNoKeyJoinsOnceTheOperatorAcceptsIt) {
+  const std::string keys = (dir_ / "site.keys").string();
+  const std::string unit_keys = (dir_ / "unit" / "site.keys").string();
+  std::filesystem::create_directories(dir_ / "unit");
+  ChildProcess generate({SANDTABLE_COORDINATOR_BIN, "--generate-curve-keys", keys});
+  ASSERT_EQ(testing::RunToEnd(generate, milliseconds(10000)), 0);
+  const test_support::NamespaceRun run = test_support::InOwnNetworkNamespace(
+      "ip link add site0 type veth peer name site0p && "
+      "ip addr add 10.64.0.1/24 dev site0 && ip addr add 10.64.0.2/24 dev site0p && "
+      "ip link set site0p up && ip link set site0 up",
+      [&](std::string* text) {
+        ChildProcess coordinator({SANDTABLE_COORDINATOR_BIN, "--requests", "tcp://*:7000",
+                                  "--events", "tcp://*:7001", "--enroll", "tcp://*:7002",
+                                  "--curve-keys", keys, "--beacon", "5674", "--site-name", "lab-2"},
+                                 testing::ChildOutput::kStdoutAndStderr);
+        std::string seen;
+        if (!ReadUntil(coordinator, "\"ready\"", kStartDeadline, &seen)) {
+          *text = "coordinator: " + seen;
+          return 1;
+        }
+        const std::vector<std::string> node_args = {
+            SANDTABLE_NODE_BIN, "--id", "4",        "--coordinator", "discover",
+            "--discovery-port", "5674", "--enroll", unit_keys,       "--bind",
+            "tcp://*:*"};
+        ChildProcess node(node_args, testing::ChildOutput::kStdoutAndStderr);
+        const std::string ask = "sandtable-coordinator enrollment --accept ";
+        if (!ReadUntil(node, ask, kStartDeadline, &seen)) {
+          *text = "node never said how to accept it: " + seen;
+          return 1;
+        }
+        const size_t at = seen.rfind(ask) + ask.size();
+        const std::string fingerprint = seen.substr(at, 19);
+        // The operator's list shows it pending, from the unit's address.
+        std::string list;
+        ChildProcess lister({SANDTABLE_COORDINATOR_BIN, "enrollment", "--requests",
+                             "tcp://10.64.0.1:7000", "--curve-keys", keys},
+                            testing::ChildOutput::kStdoutAndStderr);
+        const int list_exit = testing::RunToEnd(lister, milliseconds(10000), &list);
+        std::string decision;
+        ChildProcess accept({SANDTABLE_COORDINATOR_BIN, "enrollment", "--requests",
+                             "tcp://10.64.0.1:7000", "--curve-keys", keys, "--accept", fingerprint},
+                            testing::ChildOutput::kStdoutAndStderr);
+        const int accept_exit = testing::RunToEnd(accept, milliseconds(10000), &decision);
+        const bool registered =
+            ReadUntil(node, "registered with the coordinator", kStartDeadline, &seen);
+        node.Signal(SIGTERM);
+        const int node_exit = node.Wait();
+        // Started again, the unit trusts the key it was handed and asks no one.
+        ChildProcess again(node_args, testing::ChildOutput::kStdoutAndStderr);
+        const bool trusted =
+            ReadUntil(again, "CURVE key trusted", kStartDeadline, &seen) &&
+            ReadUntil(again, "registered with the coordinator", kStartDeadline, &seen);
+        again.Signal(SIGTERM);
+        const int again_exit = again.Wait();
+        coordinator.Signal(SIGTERM);
+        const int coordinator_exit = coordinator.Wait();
+        *text = seen + "\n--- list (exit " + std::to_string(list_exit) + "):\n" + list +
+                "\n--- accept (exit " + std::to_string(accept_exit) + "):\n" + decision;
+        const bool listed = list_exit == 0 && list.find(fingerprint) != std::string::npos &&
+                            list.find("pending") != std::string::npos &&
+                            list.find("10.64.0.") != std::string::npos;
+        return listed && accept_exit == 0 && registered && trusted && node_exit == 0 &&
+                       again_exit == 0 && coordinator_exit == 0
+                   ? 0
+                   : 1;
+      });
+  if (run.code == test_support::NamespaceRun::kSkipped) GTEST_SKIP() << run.text;
+  ASSERT_EQ(run.code, 0) << run.text;
+  EXPECT_NE(run.text.find("accepted unit"), std::string::npos) << run.text;
+  Expected<net::CurveKeyPair> written = net::ReadCurveKeyFile(unit_keys);  // mode 0600 checked
+  ASSERT_TRUE(written.ok()) << written.status().ToString();
+  Expected<net::CurveKeyPair> site = net::ReadCurveKeyFile(keys);
+  ASSERT_TRUE(site.ok());
+  EXPECT_EQ(written->public_key_z85, site->public_key_z85);
+}
+
+// The operator's command says what is wrong instead of waiting forever or guessing.
+TEST_F(NodeProgramTest, TheEnrollmentCommandSaysWhenNobodyAnswers) {
+  const std::string keys = (dir_ / "site.keys").string();
+  ChildProcess generate({SANDTABLE_COORDINATOR_BIN, "--generate-curve-keys", keys});
+  ASSERT_EQ(testing::RunToEnd(generate, milliseconds(10000)), 0);
+  std::string output;
+  ChildProcess nobody({SANDTABLE_COORDINATOR_BIN, "enrollment", "--requests", "tcp://127.0.0.1:9",
+                       "--curve-keys", keys, "--timeout-ms", "500"},
+                      testing::ChildOutput::kStdoutAndStderr);
+  EXPECT_EQ(testing::RunToEnd(nobody, milliseconds(10000), &output), 1) << output;
+  EXPECT_NE(output.find("no answer from tcp://127.0.0.1:9"), std::string::npos) << output;
+  ChildProcess missing({SANDTABLE_COORDINATOR_BIN, "enrollment", "--curve-keys", keys},
+                       testing::ChildOutput::kStdoutAndStderr);
+  output.clear();
+  EXPECT_EQ(testing::RunToEnd(missing, milliseconds(10000), &output), 2) << output;
+  EXPECT_NE(output.find("--requests"), std::string::npos) << output;
+  ChildProcess no_keys({SANDTABLE_COORDINATOR_BIN, "--requests", "tcp://127.0.0.1:*", "--enroll",
+                        "tcp://127.0.0.1:*"},
+                       testing::ChildOutput::kStdoutAndStderr);
+  output.clear();
+  EXPECT_EQ(testing::RunToEnd(no_keys, milliseconds(10000), &output), 2) << output;
+  EXPECT_NE(output.find("--enroll needs --curve-keys"), std::string::npos) << output;
+}
+
 TEST_F(NodeProgramTest, HelpListsEveryFlag) {
   ChildProcess node({SANDTABLE_NODE_BIN, "--help"});
   std::string output;
   ASSERT_EQ(testing::RunToEnd(node, milliseconds(10000), &output), 0);
   for (const char* flag :
        {"--id", "--coordinator", "--bind", "--curve-keys", "--heartbeat-ms", "--workers",
-        "--advertise", "--world", "--projector", "--camera", "--factory", "--true-pose",
+        "--advertise", "--world", "--projector", "--camera", "--factory", "--true-pose", "--enroll",
         "--export-dir", "--expect-units", "calibrate-unit"}) {
     EXPECT_NE(output.find(flag), std::string::npos) << flag << " missing from:\n" << output;
   }
