@@ -27,7 +27,7 @@ struct EnrollmentClientOptions {
   std::string key_file;         // where the site's key pair is written once accepted
   uint32_t node_id = 0;         // the id the unit will use (shown to the operator)
   std::string host_name;        // shown to the operator (empty: this host's name)
-  std::chrono::milliseconds ask_period{1000};
+  std::chrono::milliseconds ask_period{250};
   std::chrono::milliseconds timeout{0};  // 0: until decided or stopped
   Status Check() const;
 };

@@ -128,6 +128,7 @@ json LabReportJson(const LabResult& r) {
   if (!r.join.is_null()) calibration["join"] = r.join;
   if (!r.kill.is_null()) calibration["kill"] = r.kill;
   if (!r.stall.is_null()) calibration["stall"] = r.stall;
+  if (!r.enrollment.is_null()) calibration["enrollment"] = r.enrollment;
   if (sc.contains("verification")) calibration["verification"] = sc["verification"];
   if (sc.contains("round_ran")) calibration["round_ran"] = sc["round_ran"];
   if (sc.contains("compute_time_s")) {

@@ -93,6 +93,8 @@ struct LabResult {
   nlohmann::json join;   // --join-late: the late unit's join (null when none)
   nlohmann::json kill;   // --kill-unit: what the others did (null when none)
   nlohmann::json stall;  // --stall-unit: when the unit was stopped and resumed (null when none)
+  // --enroll-unit: when the unit with no key asked, was accepted, and was ready (null when none)
+  nlohmann::json enrollment;
   // Faults during the hold (docs/lab.md, "Chaos"): the annotations painted and found, the
   // coordinator's restart, faults on a node's links, frames lost, crashes (null when none).
   nlohmann::json chaos;

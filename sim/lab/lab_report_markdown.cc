@@ -262,6 +262,17 @@ void RestartAndJoinMarkdown(const LabResult& r, std::ostringstream& md) {
     }
     md << "\n";
   }
+  if (!r.enrollment.is_null()) {
+    const json& e = r.enrollment;
+    md << "## A unit with no key\n\n"
+       << "Unit " << e.value("unit", 0) << " started with no site key (`--enroll`): it asked "
+       << Fixed(e.value("asked_after_s", 0.0), 2) << " s after it started, the lab accepted it "
+       << "as the operator at " << Fixed(e.value("accepted_after_s", 0.0), 2)
+       << " s, and it was ready at "
+       << (e.contains("ready_after_s") ? Fixed(e.value("ready_after_s", 0.0), 2) + " s"
+                                       : std::string("**never**"))
+       << " (fingerprint " << e.value("fingerprint", std::string()) << ").\n\n";
+  }
   if (!r.join.is_null()) {
     const json& j = r.join;
     md << "## Live join\n\n"

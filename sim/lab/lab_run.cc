@@ -146,6 +146,7 @@ std::vector<std::string> LabRun::CoordinatorArgs(const std::string& requests,
   if (hosts_) {
     argv.insert(argv.end(),
                 {"--beacon", std::to_string(kLabDiscoveryPort), "--site-name", kLabSiteName});
+    if (options_.enroll_unit >= 0) argv.insert(argv.end(), {"--enroll", "tcp://*:*"});
   }
   return argv;
 }
@@ -190,7 +191,11 @@ bool LabRun::StartNodes() {
     if (!Late(unit.id) && !StartNode(unit)) return false;
   }
   return Wait(
-      "start nodes", [&] { return static_cast<int>(lines_.nodes_ready.size()) == n; },
+      "start nodes",
+      [&] {
+        MaybeAcceptEnrollment();
+        return static_cast<int>(lines_.nodes_ready.size()) == n;
+      },
       ToMs(options_.start_timeout_s),
       "not every sandtable-node printed its readiness line "
       "{\"ready\":\"sandtable-node\",\"id\":N,..}",
@@ -423,7 +428,17 @@ std::vector<std::string> LabRun::NodeHugePagesEnv() {
 ChildProcess* LabRun::StartChild(const std::string& name, const std::string& role,
                                  std::vector<std::string> argv, std::vector<std::string> env) {
   if (!curve_keys_path_.empty() && (role == "world" || role == "coordinator" || role == "node")) {
-    argv.insert(argv.end(), {"--curve-keys", curve_keys_path_});
+    if (role == "node" && options_.enroll_unit >= 0 &&
+        name == "node-" + std::to_string(options_.enroll_unit)) {
+      // No site key: it asks the operator (MaybeAcceptEnrollment) and keeps the key it is handed.
+      const fs::path keys = fs::absolute(fs::path(options_.out_dir) / "enroll" / (name + ".keys"));
+      std::error_code ec;
+      fs::create_directories(keys.parent_path(), ec);
+      argv.insert(argv.end(), {"--enroll", keys.string()});
+      enroll_started_ = std::chrono::steady_clock::now();
+    } else {
+      argv.insert(argv.end(), {"--curve-keys", curve_keys_path_});
+    }
   }
   // A restarted coordinator ("coordinator-2") runs on the coordinator's host.
   if (hosts_) argv = hosts_->Wrap(role == "coordinator" ? "coordinator" : name, std::move(argv));
@@ -568,6 +583,11 @@ Status LabRunOptions::Check() const {
   }
   if (cap_unit >= 0 && (hosts != "netns" || cap_kbit <= 0)) {
     return InvalidArgumentError("--cap-unit needs --hosts netns and a --cap-kbit > 0");
+  }
+  if (enroll_unit >= 0 && hosts != "netns") {
+    return InvalidArgumentError(
+        "--enroll-unit needs --hosts netns (the unit finds the site by its "
+        "beacon and asks its operator)");
   }
   if (stall_by == "link" && hosts != "netns") {
     return InvalidArgumentError("--stall-by link needs --hosts netns (a host's link to cut)");

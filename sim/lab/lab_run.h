@@ -121,6 +121,10 @@ struct LabRunOptions {
   // it is calibrated against them; the report says whether any of them was recalibrated.
   // -1: none.
   int join_late = -1;
+  // --hosts netns: this unit starts with no site key (--enroll, docs/deploy.md "Accepting a new
+  // unit"); the coordinator takes enrollment requests and the lab, as the operator, accepts the
+  // unit once it asks. The report says how long it waited. -1: none.
+  int enroll_unit = -1;
   // A unit the lab kills (SIGKILL) kill_at_s seconds after the calibration phase began: during
   // the round (a node lost mid-calibration) or, with a --hold-s past it, after (a node that
   // leaves). The run goes on; the report says what the others did. -1: none.

@@ -135,6 +135,49 @@ void LabRun::MaybeKill() {
   }
 }
 
+void LabRun::MaybeAcceptEnrollment() {
+  if (options_.enroll_unit < 0 || enroll_started_ == std::chrono::steady_clock::time_point{}) {
+    return;
+  }
+  const NodeId unit = static_cast<NodeId>(options_.enroll_unit);
+  const auto now = std::chrono::steady_clock::now();
+  const double since_start = std::chrono::duration<double>(now - enroll_started_).count();
+  if (enroll_accepted_) {
+    if (lines_.nodes_ready.count(unit) && !result_.enrollment.contains("ready_after_s")) {
+      result_.enrollment["ready_after_s"] = since_start;
+    }
+    return;
+  }
+  if (now < next_enroll_poll_) return;
+  next_enroll_poll_ = now + options_.timings.reply_poll * 2;
+  if (lines_.coordinator_requests.empty()) return;
+  wire::Envelope list;
+  list.mutable_enrollment_request();
+  Expected<wire::Envelope> reply =
+      Call(lines_.coordinator_requests, std::move(list), wire::Envelope::kEnrollmentReply,
+           options_.timings.request_timeout);
+  if (!reply.ok()) return;
+  for (const wire::EnrollingUnit& asking : reply->enrollment_reply().units()) {
+    if (asking.node_id() != unit || asking.state() != "pending") continue;
+    if (result_.enrollment.is_null()) {
+      result_.enrollment = {{"unit", unit},
+                            {"fingerprint", asking.fingerprint()},
+                            {"asked_after_s", since_start - asking.waiting_s()}};
+    }
+    wire::Envelope accept;
+    accept.mutable_enrollment_request()->set_accept(asking.fingerprint());
+    Expected<wire::Envelope> decided =
+        Call(lines_.coordinator_requests, std::move(accept), wire::Envelope::kEnrollmentReply,
+             options_.timings.request_timeout);
+    if (decided.ok() && decided->enrollment_reply().ok()) {
+      enroll_accepted_ = true;
+      result_.enrollment["accepted_after_s"] =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - enroll_started_).count();
+    }
+    return;
+  }
+}
+
 void LabRun::MaybeStall() {
   if (options_.stall_unit < 0 || stall_state_ == StallState::kResumed) return;
   const auto now = std::chrono::steady_clock::now();

@@ -166,6 +166,8 @@ class LabRun {
   // --stall-unit: SIGSTOP the unit stall_at_s after the calibration phase began, SIGCONT it
   // stall_for_s later (and at the latest before the teardown).
   void MaybeStall();
+  // --enroll-unit: as the site's operator, accepts that unit once it asks (result_.enrollment).
+  void MaybeAcceptEnrollment();
   void Stall(bool stop);
 
   // What the other units did after the kill (their calibrated lines' rounds).
@@ -343,6 +345,9 @@ class LabRun {
   enum class StallState { kNone, kStopped, kResumed };
   StallState stall_state_ = StallState::kNone;
   std::chrono::steady_clock::time_point stalled_at_{};
+  // --enroll-unit: when its node started, when the lab next looks at the coordinator's list.
+  std::chrono::steady_clock::time_point enroll_started_{}, next_enroll_poll_{};
+  bool enroll_accepted_ = false;
   std::map<NodeId, report::Calibrated> calibrated_at_kill_;
   std::set<NodeId> given_saved_;  // nodes started with --saved-calibration
   bool units_have_model_ = false;

@@ -157,6 +157,10 @@ void AddRunFaultFlags(CLI::App* run, sim::LabRunOptions& options) {
                   "how --stall-unit stalls: signal (SIGSTOP/SIGCONT) or link (--hosts netns: its "
                   "host's link down, then up)")
       ->check(CLI::IsMember({"signal", "link"}));
+  run->add_option("--enroll-unit", options.enroll_unit,
+                  "--hosts netns: start this unit with no site key (--enroll); the lab accepts "
+                  "it as the operator would, once it asks (the report says how long it took)")
+      ->check(CLI::Range(0, 1 << 20));
   run->add_option("--join-late", options.join_late,
                   "start this unit only once the others hold their calibration: it joins the "
                   "calibrated site (a live join; the report says whether any other unit was "

@@ -23,6 +23,7 @@
 
 #include "common/scene/gltf_writer.h"
 #include "common/scene/procedural_scene.h"
+#include "net/curve.h"
 #include "sim/site/site_json.h"
 #include "sim/site/site_presets.h"
 #include "tests/coordinator/membership/child_process.h"
@@ -192,10 +193,24 @@ TEST_F(LabRunTest, Sandtable3AcrossFiveHostsByDiscoveryOnly) {
   }
   ASSERT_EQ(std::system(("ip netns del " + probe).c_str()), 0);
   json report;
-  ASSERT_TRUE(RunToEnd(LabArgs({"--hosts", "netns"}), "", &report));
+  // Unit 2 starts with no site key at all: it asks, and the lab accepts it as the operator.
+  ASSERT_TRUE(RunToEnd(LabArgs({"--hosts", "netns", "--enroll-unit", "2"}), "", &report));
   EXPECT_EQ(report["status"], "ok");
   const json& calibration = report["calibration"];
   EXPECT_EQ(calibration["source"], "structured_light");
+  ASSERT_TRUE(calibration.contains("enrollment")) << calibration.dump();
+  const json& enrollment = calibration["enrollment"];
+  EXPECT_EQ(enrollment["unit"], 2);
+  EXPECT_LE(enrollment["asked_after_s"].get<double>(),
+            enrollment["accepted_after_s"].get<double>());
+  EXPECT_LE(enrollment["accepted_after_s"].get<double>(),
+            enrollment["ready_after_s"].get<double>());
+  Expected<net::CurveKeyPair> handed =
+      net::ReadCurveKeyFile((dir_ / "enroll" / "node-2.keys").string());
+  ASSERT_TRUE(handed.ok()) << handed.status().ToString();
+  Expected<net::CurveKeyPair> site = net::ReadCurveKeyFile((dir_ / "site.key").string());
+  ASSERT_TRUE(site.ok()) << site.status().ToString();
+  EXPECT_EQ(handed->public_key_z85, site->public_key_z85);
   for (const char* scope : {"table", "buildings"}) {
     EXPECT_LT(calibration[scope]["rms_mm"].get<double>(), kAcceptanceRms_mm) << scope;
   }
@@ -206,6 +221,9 @@ TEST_F(LabRunTest, Sandtable3AcrossFiveHostsByDiscoveryOnly) {
     std::ifstream log(dir_ / "logs" / (std::string("node-") + id + ".log"));
     const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
     EXPECT_NE(text.find("discovery: site lab at 10.250."), std::string::npos) << "node " << id;
+    if (std::string(id) == "2") {
+      EXPECT_NE(text.find("enrollment: accepted by the site's operator"), std::string::npos);
+    }
     const size_t at = text.find("advertised as tcp://10.250.");
     ASSERT_NE(at, std::string::npos) << "node " << id;
     advertised.insert(text.substr(at, text.find(':', at + 24) - at));
