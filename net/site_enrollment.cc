@@ -55,7 +55,8 @@ Status EnrollmentClientOptions::Check() const {
 }
 
 Expected<CurveKeyPair> EnrollWithSite(const EnrollmentClientOptions& options,
-                                      const std::atomic<bool>* stop, const EnrollmentLog& given_log) {
+                                      const std::atomic<bool>* stop,
+                                      const EnrollmentLog& given_log) {
   ST_RETURN_IF_ERROR(options.Check());
   const EnrollmentLog log = given_log ? given_log : [](const std::string&) {};
   Expected<CurveKeyPair> own = RequestKeys(options.key_file, log);
