@@ -277,6 +277,18 @@ Expected<SimCalibrationResult> RunSimCalibration(const sim::Site& site, const Sc
       const Eigen::Vector3d up_true = truth.rotation.inverse() * Eigen::Vector3d::UnitZ();
       fprintf(stderr, "unit %u: table plane tilt against the true table %.3f deg\n", id,
               std::acos(std::clamp(up_est.dot(up_true), -1.0, 1.0)) * 180 / M_PI);
+      // Where the model truly stands in the nodes' table frame, through this unit's pose.
+      const Rigid3d model_from_estimated =
+          options.model_from_table * truth * c.table_from_projector->Inverse();
+      const Eigen::Vector3d z_model = model_from_estimated.rotation * Eigen::Vector3d::UnitZ();
+      const Eigen::Vector3d x_model = model_from_estimated.rotation * Eigen::Vector3d::UnitX();
+      fprintf(stderr,
+              "unit %u: model_from_table truly t (%+.3f, %+.3f, %+.3f) m, yaw %.2f deg, tilt "
+              "%.3f deg\n",
+              id, model_from_estimated.translation.x(), model_from_estimated.translation.y(),
+              model_from_estimated.translation.z(),
+              std::atan2(x_model.y(), x_model.x()) * 180 / M_PI,
+              std::acos(std::clamp(z_model.z(), -1.0, 1.0)) * 180 / M_PI);
     }
     fprintf(stderr, "frame relation: %d pixel pairs, fit rms %.2f mm\n", placement->pairs,
             placement->frame_fit_rms_mm);

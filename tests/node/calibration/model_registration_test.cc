@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "common/scene/procedural_scene.h"
+#include "common/scene/random_scene.h"
 
 namespace sandtable::node {
 namespace {
@@ -21,6 +22,10 @@ constexpr double kOutlineAngle_deg = 0.1;
 constexpr double kPlanScaleTolerance = 5e-4;
 constexpr double kReliefScaleTolerance = 2e-3;
 constexpr double kPi = 3.14159265358979323846;
+// On terrain found through a tilted plane: the ICP's result from a coarse start on relief maps
+// (2 cm cells), noise 0.3 mm.
+constexpr double kTerrainPlacement_mm = 1.0;
+constexpr double kTerrainAngle_deg = 0.1;
 
 Scene SandtableScene(uint64_t seed) {
   ProceduralSceneOptions o;
@@ -66,6 +71,34 @@ TEST(ModelRegistration, FindsAnUnknownPlacementWithoutAGuess) {
   EXPECT_LT(error.translation.norm() * 1e3, kPlacementTolerance_mm);
   EXPECT_LT(Eigen::AngleAxisd(error.rotation).angle() * 180.0 / kPi, kAngleTolerance_deg);
   EXPECT_GT(found->inliers, static_cast<int>(0.9 * found->points));
+}
+
+// A table covered by terrain (random:15, the lab's seed whose model was not found): the cluster's
+// plane fit took a large slope of the terrain for the table, so its frame is tilted 1.9 degrees
+// and lifted against the model's table, and heights over it are not the model's anywhere. The
+// model is still found, tilt and all (before: "the model does not match", 42 % of the points).
+TEST(ModelRegistration, FindsTheModelOnTerrainWhenTheScansPlaneIsNotTheTable) {
+  RandomSceneOptions random;
+  random.seed = 15;
+  Expected<RandomScene> made = MakeRandomScene(random);
+  ASSERT_TRUE(made.ok()) << made.status().ToString();
+  ASSERT_GT(made->terrain_max_height_m, 0.0);
+  const Scene& scene = made->scene.scene;
+  const Eigen::Matrix3d turn =
+      (Eigen::AngleAxisd(1.9 * kPi / 180.0, Eigen::Vector3d(0.6, 0.8, 0.0).normalized()) *
+       Eigen::AngleAxisd(-12.4 * kPi / 180.0, Eigen::Vector3d::UnitZ()))
+          .toRotationMatrix();
+  const Rigid3d table_from_model(turn, Eigen::Vector3d(0.68, 0.50, -0.03));
+  const Eigen::Vector3d centre = scene.Bounds().center();
+  const std::vector<Eigen::Vector3d> scan =
+      Scan(scene, table_from_model, centre.head<2>(), 1.0, 0.0003, 3, /*wall_stride=*/4);
+  ModelRegistrationOptions options;
+  options.estimate_scale = false;
+  Expected<ModelRegistration> found = RegisterModel(scene, scan, options);
+  ASSERT_TRUE(found.ok()) << found.status().ToString();
+  const Rigid3d error = table_from_model.Inverse() * found->table_from_model;
+  EXPECT_LT(error.translation.norm() * 1e3, kTerrainPlacement_mm);
+  EXPECT_LT(Eigen::AngleAxisd(error.rotation).angle() * 180.0 / kPi, kTerrainAngle_deg);
 }
 
 TEST(ModelRegistration, RecoversTheScanScale) {
