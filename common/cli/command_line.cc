@@ -1,5 +1,6 @@
 #include "common/cli/command_line.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -29,12 +30,86 @@ const CLI::App& Selected(const CLI::App& app) {
   }
 }
 
-int Exit(const CLI::App& app, const CLI::ParseError& e, std::ostream& out, std::ostream& err) {
+// Edit distance (insertions, deletions, substitutions) between two names.
+size_t Distance(const std::string& a, const std::string& b) {
+  std::vector<size_t> row(b.size() + 1);
+  for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (size_t i = 1; i <= a.size(); ++i) {
+    size_t diagonal = row[0];
+    row[0] = i;
+    for (size_t j = 1; j <= b.size(); ++j) {
+      const size_t above = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] != b[j - 1] ? 1 : 0)});
+      diagonal = above;
+    }
+  }
+  return row[b.size()];
+}
+
+// The name of `names` closest to `given`, when it is close enough to be a typo (at most a third
+// of its length, and at least 2, edits away: two swapped letters are two edits); empty otherwise.
+std::string Closest(const std::string& given, const std::vector<std::string>& names) {
+  std::string best;
+  size_t best_distance = std::max<size_t>(2, given.size() / 3) + 1;
+  for (const std::string& name : names) {
+    const size_t d = Distance(given, name);
+    if (d < best_distance) {
+      best_distance = d;
+      best = name;
+    }
+  }
+  return best;
+}
+
+std::vector<std::string> SubcommandNames(const CLI::App& app) {
+  std::vector<std::string> names;
+  for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; })) {
+    names.push_back(sub->get_name());
+  }
+  return names;
+}
+
+// What to add to an error about the command line `args`: the flag or subcommand the user
+// probably meant, and the subcommands there are when one is missing.
+std::string Hint(const CLI::App& app, const CLI::ParseError& e,
+                 const std::vector<std::string>& args) {
+  const CLI::App& selected = Selected(app);
+  std::vector<std::string> flags;
+  for (const CLI::App* a = &selected; a != nullptr; a = a->get_parent()) {
+    for (const std::string& name : FlagNames(*a)) flags.push_back(name);
+  }
+  std::string hint;
+  for (const std::string& arg : args) {
+    if (arg.rfind("--", 0) != 0 || arg.size() < 3) continue;
+    const std::string name = arg.substr(0, arg.find('='));
+    if (std::find(flags.begin(), flags.end(), name) != flags.end()) continue;
+    const std::string closest = Closest(name, flags);
+    if (!closest.empty()) hint += "; did you mean " + closest + " (not " + name + ")?";
+  }
+  const std::vector<std::string> subcommands = SubcommandNames(selected);
+  const std::string what = e.what();
+  if (!subcommands.empty() && what.find("ubcommand") != std::string::npos) {
+    std::string list;
+    for (const std::string& name : subcommands) list += (list.empty() ? "" : ", ") + name;
+    for (const std::string& arg : args) {
+      if (arg.empty() || arg[0] == '-') continue;
+      const std::string closest = Closest(arg, subcommands);
+      hint += "; '" + arg + "' is not a subcommand" +
+              (closest.empty() ? std::string() : " (did you mean " + closest + "?)");
+      break;
+    }
+    hint += "; the subcommands are " + list;
+  }
+  return hint;
+}
+
+int Exit(const CLI::App& app, const CLI::ParseError& e, const std::vector<std::string>& args,
+         std::ostream& out, std::ostream& err) {
   if (e.get_exit_code() == static_cast<int>(CLI::ExitCodes::Success)) {
     app.exit(e, out, err);  // --help: the selected (sub)command's help on `out`
     return kExitOk;
   }
-  return UsageError(Selected(app), e.what(), err);
+  return UsageError(Selected(app), e.what() + Hint(app, e, args), err);
 }
 
 }  // namespace
@@ -49,7 +124,7 @@ std::optional<int> Parse(CLI::App& app, int argc, const char* const* argv, std::
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return Exit(app, e, out, err);
+    return Exit(app, e, std::vector<std::string>(argv + std::min(argc, 1), argv + argc), out, err);
   }
   return std::nullopt;
 }
@@ -60,7 +135,7 @@ std::optional<int> Parse(CLI::App& app, const std::vector<std::string>& args, st
   try {
     app.parse(reversed);
   } catch (const CLI::ParseError& e) {
-    return Exit(app, e, out, err);
+    return Exit(app, e, args, out, err);
   }
   return std::nullopt;
 }

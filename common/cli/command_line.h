@@ -42,8 +42,14 @@ std::optional<int> Parse(CLI::App& app, int argc, const char* const* argv,
 std::optional<int> Parse(CLI::App& app, const std::vector<std::string>& args,
                          std::ostream& out = std::cout, std::ostream& err = std::cerr);
 
+// Unknown flags and subcommands get the closest known name ("did you mean --site?"), and a
+// missing subcommand the list of them.
 // Prints "NAME: why" and the hint to --help on `err`; returns kExitUsage.
 int UsageError(const CLI::App& app, const std::string& why, std::ostream& err = std::cerr);
+
+// For an option whose default is a sentinel ("none", "required") outside its own range: --help
+// shows no default for it (say what its absence means in its description).
+inline CLI::Option* NoDefaultShown(CLI::Option* option) { return option->default_str(""); }
 
 // The long names ("--name") and short names ("-n") of every option `app` registered, help
 // included, in registration order: what --help must list.

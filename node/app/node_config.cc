@@ -41,7 +41,7 @@ constexpr Limit<double> kBlendEdgeSoftMm{"--blend-edge-soft-mm", 0.0, 100.0};
 constexpr Limit<double> kBlendSoftFaceM2{"--blend-soft-face-m2", 0.0, 1e6};
 
 CLI::Validator Validator(const Limit<int>& l) { return cli::Integer(l.lo, l.hi); }
-CLI::Validator Validator(const Limit<double>& l) { return CLI::Range(l.lo, l.hi); }
+CLI::Validator Validator(const Limit<double>& l) { return cli::Real(l.lo, l.hi); }
 
 template <typename T>
 Status InRange(const Limit<T>& l, T v) {
@@ -64,8 +64,9 @@ CLI::Option* AddEnum(CLI::App& app, const std::string& name, E& value,
 }
 
 void AddSiteFlags(CLI::App& app, NodeConfig& c) {
-  app.add_option("--id", c.id, "this unit's node id (below 4294967280)")
-      ->check(cli::Integer<uint32_t>(0, kFirstReservedSenderId - 1));
+  cli::NoDefaultShown(
+      app.add_option("--id", c.id, "this unit's node id (required; below 4294967280)")
+          ->check(cli::Integer<uint32_t>(0, kFirstReservedSenderId - 1)));
   app.add_option_function<std::string>(
          "--coordinator",
          [&c](const std::string& v) {

@@ -36,13 +36,13 @@ int RunRenderFrame(const std::vector<std::string>& args) {
       ->check(CLI::IsMember({"none", "id", "grid", "white", "raw-white", "bars", "black"}));
   app.add_option("--timeline", timeline_path, "personnel tracks (CSV) drawn as traces")
       ->check(CLI::ExistingFile);
-  app.add_option("--media-s", media_s, "the media time drawn, s")->check(CLI::Range(0.0, 1e9));
+  app.add_option("--media-s", media_s, "the media time drawn, s")->check(cli::Real(0.0, 1e9));
   app.add_option("--sun", sun, "the virtual sun")->check(CLI::IsMember({"on", "off"}));
   app.add_option("--sun-start-h", sun_options.start_hour, "time of day at media time 0, h")
-      ->check(CLI::Range(0.0, 24.0));
+      ->check(cli::Real(0.0, 24.0));
   app.add_option("--sun-hours-per-s", sun_options.hours_per_media_s,
                  "hours of the day per media second")
-      ->check(CLI::Range(0.0, 3600.0));
+      ->check(cli::Real(0.0, 3600.0));
   app.add_option("--id", id, "the unit id the id pattern shows");
   if (std::optional<int> exit = cli::Parse(app, args)) return *exit;
   auto usage = [&](const std::string& why) { return cli::UsageError(app, why); };

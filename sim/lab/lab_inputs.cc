@@ -40,15 +40,10 @@ Expected<LabInputs> PrepareLabInputs(const std::string& site_arg, const std::str
                                      uint64_t seed, const std::string& out_dir,
                                      const std::string& model_arg, double resolution_scale) {
   const std::filesystem::path dir(out_dir);
-  std::error_code error;
-  for (const char* sub : {"", "factory", "truth", "calibration", "logs"}) {
-    std::filesystem::create_directories(dir / sub, error);
-    if (error) return IoError("cannot create " + (dir / sub).string() + ": " + error.message());
-  }
   LabInputs inputs;
   inputs.site_label = site_arg;
   inputs.scene_label = scene_arg;
-
+  // Everything is read and checked before anything is written: a refused run leaves no folders.
   Expected<Site> site = IsFile(site_arg) ? LoadSiteFile(site_arg) : MakeSitePreset(site_arg);
   if (!site.ok())
     return InvalidArgumentError("--site " + site_arg + ": " + site.status().message());
@@ -56,22 +51,19 @@ Expected<LabInputs> PrepareLabInputs(const std::string& site_arg, const std::str
   if (Status scaled = ScaleSiteResolution(resolution_scale, &inputs.site); !scaled.ok()) {
     return InvalidArgumentError("--resolution-scale: " + scaled.message());
   }
-  inputs.site_path = (dir / "site.json").string();
-  ST_RETURN_IF_ERROR(WriteSiteFile(inputs.site, inputs.site_path));
-
+  std::optional<Scene> scene;  // the scene shown, when the lab makes it
   if (IsFile(scene_arg)) {
-    Expected<Scene> scene = LoadGltfScene(scene_arg);
-    if (!scene.ok()) {
-      return InvalidArgumentError("--scene " + scene_arg + ": " + scene.status().message());
+    Expected<Scene> loaded = LoadGltfScene(scene_arg);
+    if (!loaded.ok()) {
+      return InvalidArgumentError("--scene " + scene_arg + ": " + loaded.status().message());
     }
     inputs.scene_path = std::filesystem::absolute(scene_arg).string();
   } else if (std::optional<uint64_t> scene_seed = ParseRandomSeedName(scene_arg)) {
     RandomSceneOptions options;
     options.seed = *scene_seed;
-    Expected<RandomScene> scene = MakeRandomScene(options);
-    if (!scene.ok()) return scene.status();
-    inputs.scene_path = (dir / "scene.gltf").string();
-    ST_RETURN_IF_ERROR(WriteGltfScene(scene->scene.scene, inputs.scene_path));
+    Expected<RandomScene> made = MakeRandomScene(options);
+    if (!made.ok()) return made.status();
+    scene = std::move(made->scene.scene);
   } else {
     Expected<ScenePreset> preset = ParseScenePreset(scene_arg);
     if (!preset.ok()) {
@@ -81,23 +73,37 @@ Expected<LabInputs> PrepareLabInputs(const std::string& site_arg, const std::str
     ProceduralSceneOptions options;
     options.preset = *preset;
     options.seed = seed;
-    Expected<ProceduralScene> scene = MakeProceduralScene(options);
-    if (!scene.ok()) return scene.status();
-    inputs.scene_path = (dir / "scene.gltf").string();
-    ST_RETURN_IF_ERROR(WriteGltfScene(scene->scene, inputs.scene_path));
+    Expected<ProceduralScene> made = MakeProceduralScene(options);
+    if (!made.ok()) return made.status();
+    scene = std::move(made->scene);
   }
-
-  // The model the nodes must find.
   if (!model_arg.empty()) {
     Expected<Scene> model = LoadGltfScene(model_arg);
     if (!model.ok()) {
       return InvalidArgumentError("--model " + model_arg + ": " + model.status().message());
     }
+  }
+
+  std::error_code error;
+  for (const char* sub : {"", "factory", "truth", "calibration", "logs"}) {
+    std::filesystem::create_directories(dir / sub, error);
+    if (error) return IoError("cannot create " + (dir / sub).string() + ": " + error.message());
+  }
+  inputs.site_path = (dir / "site.json").string();
+  ST_RETURN_IF_ERROR(WriteSiteFile(inputs.site, inputs.site_path));
+  if (scene) {
+    inputs.scene_path = (dir / "scene.gltf").string();
+    ST_RETURN_IF_ERROR(WriteGltfScene(*scene, inputs.scene_path));
+  }
+
+  // The model the nodes must find.
+  if (!model_arg.empty()) {
     inputs.model_path = std::filesystem::absolute(model_arg).string();
     inputs.model_from_table = Rigid3d::Identity();
   } else {
-    Expected<Scene> scene = LoadGltfScene(inputs.scene_path);
-    if (!scene.ok()) return scene.status();
+    // The scene as the world reads it (its file), which the model moves.
+    Expected<Scene> shown = LoadGltfScene(inputs.scene_path);
+    if (!shown.ok()) return shown.status();
     // A placement the nodes do not know: uniform in [-max, max] per axis, from the seed.
     std::mt19937_64 rng(seed ^ 0x6d6f64656cULL);
     std::uniform_real_distribution<double> u(-1.0, 1.0);
@@ -109,7 +115,7 @@ Expected<LabInputs> PrepareLabInputs(const std::string& site_arg, const std::str
                 Eigen::Vector3d(x, y, 0.0));
     inputs.model_path = (dir / "model.gltf").string();
     ST_RETURN_IF_ERROR(
-        WriteGltfScene(MovedScene(*scene, inputs.model_from_table), inputs.model_path));
+        WriteGltfScene(MovedScene(*shown, inputs.model_from_table), inputs.model_path));
   }
 
   for (const UnitSpec& unit : inputs.site.units) {

@@ -95,12 +95,13 @@ void AddRunFlags(CLI::App* run, sim::LabRunOptions& options) {
 
 // `run`'s faults: kills, stalls, the coordinator's restart, faulty links, a late join.
 void AddRunFaultFlags(CLI::App* run, sim::LabRunOptions& options) {
-  run->add_option("--kill-unit", options.kill_unit,
-                  "SIGKILL this unit --kill-at-s seconds after calibration began (during the "
-                  "round, or after it with a longer --hold-s); the run goes on")
-      ->check(CLI::Range(0, 1 << 20));
+  cli::NoDefaultShown(
+      run->add_option("--kill-unit", options.kill_unit,
+                      "SIGKILL this unit --kill-at-s seconds after calibration began (during the "
+                      "round, or after it with a longer --hold-s); the run goes on")
+          ->check(cli::Integer<int>(0, 1 << 20)));
   run->add_option("--kill-at-s", options.kill_at_s, "when --kill-unit strikes (s)")
-      ->check(CLI::Range(0.0, 3600.0));
+      ->check(cli::Real(0.0, 3600.0));
   run->add_flag("--kill-after-calibration", options.kill_after_calibration,
                 "count --kill-at-s from the hold phase (every unit calibrated): a node that "
                 "leaves a calibrated site");
@@ -108,64 +109,72 @@ void AddRunFaultFlags(CLI::App* run, sim::LabRunOptions& options) {
                   "an argument for every sandtable-node, verbatim, written with '=': "
                   "--node-arg=--phase-steps=4 (repeat it; the sweep's knobs, sandtable-node "
                   "--help)");
-  run->add_option("--stall-unit", options.stall_unit,
-                  "SIGSTOP this unit --stall-at-s seconds after calibration began and SIGCONT it "
-                  "--stall-for-s later: a node frozen by load (dropped, then back)")
-      ->check(CLI::Range(0, 1 << 20));
+  cli::NoDefaultShown(
+      run->add_option(
+             "--stall-unit", options.stall_unit,
+             "SIGSTOP this unit --stall-at-s seconds after calibration began and SIGCONT it "
+             "--stall-for-s later: a node frozen by load (dropped, then back)")
+          ->check(cli::Integer<int>(0, 1 << 20)));
   run->add_option("--stall-at-s", options.stall_at_s, "when --stall-unit stops (s)")
-      ->check(CLI::Range(0.0, 3600.0));
+      ->check(cli::Real(0.0, 3600.0));
   run->add_option("--stall-for-s", options.stall_for_s, "how long --stall-unit stays stopped (s)")
-      ->check(CLI::Range(0.01, 3600.0));
+      ->check(cli::Real(0.01, 3600.0));
   run->add_flag("--stall-after-calibration", options.stall_after_calibration,
                 "count --stall-at-s from the hold's start (after calibration) instead");
   run->add_flag("--annotate", options.annotate,
                 "paint strokes through the coordinator during the hold (its database in "
                 "OUT/annotations.db) and check every acknowledged point afterwards");
-  run->add_option("--kill-coordinator-at-s", options.kill_coordinator_at_s,
-                  "SIGKILL the coordinator this long into the hold and restart it on the same "
-                  "database and endpoints")
-      ->check(CLI::Range(0.0, 3600.0));
-  run->add_option("--fault-unit", options.fault_unit,
-                  "this node drops / corrupts a share of the messages it sends (whole run)")
-      ->check(CLI::Range(0, 1 << 20));
+  cli::NoDefaultShown(
+      run->add_option("--kill-coordinator-at-s", options.kill_coordinator_at_s,
+                      "SIGKILL the coordinator this long into the hold and restart it on the same "
+                      "database and endpoints")
+          ->check(cli::Real(0.0, 3600.0)));
+  cli::NoDefaultShown(
+      run->add_option("--fault-unit", options.fault_unit,
+                      "this node drops / corrupts a share of the messages it sends (whole run)")
+          ->check(cli::Integer<int>(0, 1 << 20)));
   run->add_option("--fault-drop-share", options.fault_drop_share,
                   "share of --fault-unit's messages dropped")
-      ->check(CLI::Range(0.0, 1.0));
+      ->check(cli::Real(0.0, 1.0));
   run->add_option("--fault-corrupt-share", options.fault_corrupt_share,
                   "share of --fault-unit's messages corrupted (bytes flipped)")
-      ->check(CLI::Range(0.0, 1.0));
+      ->check(cli::Real(0.0, 1.0));
   run->add_option("--link-latency-ms", options.link_latency_ms,
                   "every node's messages leave this much later (in order; the nodes' own fault "
                   "injection: no netem here)")
-      ->check(CLI::Range(0.0, 10000.0));
+      ->check(cli::Real(0.0, 10000.0));
   run->add_option("--link-jitter-ms", options.link_jitter_ms,
                   "the latency varies by up to this much either way (uniform)")
-      ->check(CLI::Range(0.0, 10000.0));
+      ->check(cli::Real(0.0, 10000.0));
   run->add_option("--link-loss", options.link_loss, "share of every node's messages lost")
-      ->check(CLI::Range(0.0, 0.99));
+      ->check(cli::Real(0.0, 0.99));
   run->add_option("--clock-offset-s", options.clock_offset_s,
                   "LAB TEST: the nodes' clocks read +1, -1, +2, -2, ... times this many seconds "
                   "off the machine's, as separate hosts' clocks disagree")
-      ->check(CLI::Range(0.0, 3600.0));
-  run->add_option("--cap-unit", options.cap_unit,
-                  "--hosts netns: cap what reaches this unit's host at --cap-kbit (tc tbf), the "
-                  "whole run")
-      ->check(CLI::Range(0, 1 << 20));
+      ->check(cli::Real(0.0, 3600.0));
+  cli::NoDefaultShown(
+      run->add_option(
+             "--cap-unit", options.cap_unit,
+             "--hosts netns: cap what reaches this unit's host at --cap-kbit (tc tbf), the "
+             "whole run")
+          ->check(cli::Integer<int>(0, 1 << 20)));
   run->add_option("--cap-kbit", options.cap_kbit, "the cap of --cap-unit, kbit/s")
-      ->check(CLI::Range(1, 10000000));
+      ->check(cli::Integer<int>(1, 10000000));
   run->add_option("--stall-by", options.stall_by,
                   "how --stall-unit stalls: signal (SIGSTOP/SIGCONT) or link (--hosts netns: its "
                   "host's link down, then up)")
       ->check(CLI::IsMember({"signal", "link"}));
-  run->add_option("--enroll-unit", options.enroll_unit,
-                  "--hosts netns: start this unit with no site key (--enroll); the lab accepts "
-                  "it as the operator would, once it asks (the report says how long it took)")
-      ->check(CLI::Range(0, 1 << 20));
-  run->add_option("--join-late", options.join_late,
-                  "start this unit only once the others hold their calibration: it joins the "
-                  "calibrated site (a live join; the report says whether any other unit was "
-                  "recalibrated)")
-      ->check(CLI::Range(0, 1 << 20));
+  cli::NoDefaultShown(
+      run->add_option("--enroll-unit", options.enroll_unit,
+                      "--hosts netns: start this unit with no site key (--enroll); the lab accepts "
+                      "it as the operator would, once it asks (the report says how long it took)")
+          ->check(cli::Integer<int>(0, 1 << 20)));
+  cli::NoDefaultShown(
+      run->add_option("--join-late", options.join_late,
+                      "start this unit only once the others hold their calibration: it joins the "
+                      "calibrated site (a live join; the report says whether any other unit was "
+                      "recalibrated)")
+          ->check(cli::Integer<int>(0, 1 << 20)));
 }
 
 // `run`'s show, blend, node and terminal flags.
@@ -187,15 +196,15 @@ void AddRunShowFlags(CLI::App* run, sim::LabRunOptions& options, std::string& pr
                   "GPU (there they slowed a re-blend's first frame by ~30 ms)")
       ->check(CLI::IsMember({"on", "off"}));
   run->add_option("--show-s", options.show_s, "how long the show plays (s)")
-      ->check(CLI::Range(0.0, 3600.0));
+      ->check(cli::Real(0.0, 3600.0));
   run->add_option("--render-max-fps", options.render_max_fps, "frames a second per node at most")
-      ->check(CLI::Range(0.1, 240.0));
+      ->check(cli::Real(0.1, 240.0));
   run->add_option("--image-width", options.image_width_px, "Width of the report's pictures (px)")
       ->check(cli::Integer<int>(16, 8192));
   run->add_option("--resolution-scale", options.resolution_scale,
                   "Every projector and camera at this fraction of its resolution (large sites on "
                   "a small machine)")
-      ->check(CLI::Range(0.05, 1.0));
+      ->check(cli::Real(0.05, 1.0));
   run->add_option("--heartbeat-ms", options.heartbeat_ms,
                   "Membership heartbeat of coordinator and nodes, ms (0: 100, or 100 x units / 16 "
                   "past 16 units)")
@@ -250,7 +259,7 @@ void AddScaleFlags(CLI::App* scale, sim::LabScaleOptions& scale_options) {
   scale
       ->add_option("--resolution-scale", scale_options.resolution_scale,
                    "Every projector and camera at this fraction of its resolution")
-      ->check(CLI::Range(0.05, 1.0));
+      ->check(cli::Real(0.05, 1.0));
   scale->add_flag("--reblend", scale_options.reblend,
                   "with the show and the blend, unit 0 killed after calibration: the re-blend "
                   "time per N (much slower)");

@@ -107,5 +107,47 @@ TEST(CommandLineTest, SubcommandErrorsAndHelpNameTheSubcommand) {
   EXPECT_NE(err.find("--value"), std::string::npos) << "required: " << err;
 }
 
+// A mistyped flag or subcommand gets the name meant; a missing subcommand the list of them; a
+// sentinel default is not shown.
+TEST(CommandLineTest, TyposGetTheNameMeantAndMissingSubcommandsTheList) {
+  Program p;
+  std::string err;
+  EXPECT_EQ(p.Run({"--cuont", "3"}, nullptr, &err), kExitUsage);
+  EXPECT_NE(err.find("did you mean --count (not --cuont)?"), std::string::npos) << err;
+  Program far;
+  EXPECT_EQ(far.Run({"--colour", "red"}, nullptr, &err), kExitUsage);
+  EXPECT_EQ(err.find("did you mean"), std::string::npos) << "nothing close: " << err;
+  Program sub;
+  EXPECT_EQ(sub.Run({"sub", "--valeu", "1"}, nullptr, &err), kExitUsage);
+  EXPECT_NE(err.find("did you mean --value"), std::string::npos) << err;
+
+  CLI::App app{"a program with subcommands", "tool"};
+  Configure(app);
+  app.require_subcommand(1);
+  app.add_subcommand("run", "runs");
+  app.add_subcommand("sweep", "sweeps");
+  int unit = -1;
+  NoDefaultShown(
+      app.add_option("--unit", unit, "a unit (none by default)")->check(Integer(0, 100)));
+  for (const std::vector<std::string>& args :
+       std::vector<std::vector<std::string>>{{}, {"rnu"}, {"bogus"}}) {
+    std::ostringstream out, errs;
+    EXPECT_EQ(Parse(app, args, out, errs), kExitUsage);
+    const std::string text = errs.str();
+    EXPECT_NE(text.find("the subcommands are run, sweep"), std::string::npos) << text;
+    if (!args.empty()) {
+      EXPECT_NE(text.find("'" + args[0] + "' is not a subcommand"), std::string::npos) << text;
+    }
+    if (!args.empty() && args[0] == "rnu") {
+      EXPECT_NE(text.find("did you mean run?"), std::string::npos) << text;
+    }
+  }
+  std::ostringstream help, none;
+  EXPECT_EQ(Parse(app, {"--help"}, help, none), kExitOk);
+  EXPECT_NE(help.str().find("--unit INT"), std::string::npos) << help.str();
+  EXPECT_EQ(help.str().find("=-1"), std::string::npos)
+      << "a sentinel default shown: " << help.str();
+}
+
 }  // namespace
 }  // namespace sandtable::cli

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -26,6 +27,7 @@
 #include "net/curve.h"
 #include "sim/site/site_json.h"
 #include "sim/site/site_presets.h"
+#include "tests/common/cli/help_text.h"
 #include "tests/coordinator/membership/child_process.h"
 
 namespace sandtable::sim {
@@ -788,6 +790,35 @@ TEST_F(LabRunTest, HelpListsEveryFlag) {
                            "--max-rms-mm"}) {
     EXPECT_NE(text.find(flag), std::string::npos) << flag;
   }
+  // The guide's synopsis (docs/lab.md) names every flag `run --help` lists.
+  std::ifstream guide(std::string(SANDTABLE_SOURCE_DIR) + "/docs/lab.md");
+  ASSERT_TRUE(guide.good());
+  const std::string doc((std::istreambuf_iterator<char>(guide)), std::istreambuf_iterator<char>());
+  const size_t from = doc.find("    sandtable-lab run ");
+  const size_t to = doc.find("    sandtable-lab sweep ", from);
+  ASSERT_NE(from, std::string::npos);
+  ASSERT_NE(to, std::string::npos);
+  const std::string synopsis = doc.substr(from, to - from);
+  for (const std::string& flag : testing::FlagsInHelp(text)) {
+    bool whole = false;  // the flag itself, not the start of a longer one
+    for (size_t at = synopsis.find(flag); at != std::string::npos && !whole;
+         at = synopsis.find(flag, at + 1)) {
+      const size_t end = at + flag.size();
+      whole = end == synopsis.size() ||
+              !(std::isalnum(static_cast<unsigned char>(synopsis[end])) || synopsis[end] == '-');
+    }
+    EXPECT_TRUE(whole) << flag << " is missing from docs/lab.md's synopsis of run";
+  }
+}
+
+// A refused run (a site that is not there) says why, exits 2 and leaves nothing behind.
+TEST_F(LabRunTest, ARefusedRunWritesNothing) {
+  const std::filesystem::path out = dir_ / "refused";
+  ChildProcess lab({SANDTABLE_LAB_BIN, "run", "--out", out.string(), "--site", "no-such-site"});
+  while (lab.ReadLine(kRunDeadline)) {
+  }
+  EXPECT_EQ(lab.Wait(), 2);
+  EXPECT_FALSE(std::filesystem::exists(out)) << "a refused run left " << out;
 }
 
 }  // namespace
