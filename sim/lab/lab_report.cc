@@ -41,7 +41,8 @@ json LabReportJson(const LabResult& r) {
               {"status", r.status},
               {"command", r.command},
               {"seed", r.seed},
-              {"total_s", r.total_s}};
+              {"total_s", r.total_s},
+              {"machine", {{"load_average", r.load_average}, {"cores", r.cores}}}};
   json reasons = json::array();
   for (const LabReason& reason : r.reasons) {
     reasons.push_back({{"what", reason.what}, {"detail", reason.detail}});

@@ -71,6 +71,10 @@ struct LabResult {
   int scene_triangles = 0;
   std::vector<std::pair<std::string, double>> phase_seconds;
   double total_s = 0.0;
+  // The machine's 1-minute load average at the end of the run (-1: not known) and its cores:
+  // every timing figure depends on them.
+  double load_average = -1.0;
+  int cores = 0;
   std::vector<LabProcess> processes;
   // The children's report lines read, and those that did not parse (cluster/report_lines.h).
   uint64_t report_lines = 0, bad_report_lines = 0;

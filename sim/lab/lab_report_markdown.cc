@@ -65,16 +65,19 @@ std::string StatsRow(const std::string& label, const ErrorStats& s) {
          Fixed(s.p99_mm) + " | " + Fixed(s.max_mm) + " | " + Fixed(s.rms_px) + " |\n";
 }
 
-// The one-screen summary: every headline figure beside its target (the issues' acceptance
-// numbers; "-" where a figure has none), pass or fail.
-std::string SummaryMarkdown(const LabResult& r) {
-  struct Row {
-    std::string figure, value, target, verdict;
-  };
+struct SummaryRow {
+  std::string figure, value, target, verdict;
+  bool timing = false;  // a figure that depends on the machine's load
+};
+
+// Every headline figure beside its target (the issues' acceptance numbers; "-" where a figure
+// has none), pass or fail.
+std::vector<SummaryRow> SummaryRows(const LabResult& r) {
+  using Row = SummaryRow;
   std::vector<Row> rows;
   auto add = [&](const std::string& figure, double value, int digits, const std::string& unit,
-                 double target, bool below) {
-    Row row{figure, Fixed(value, digits) + unit, "-", "-"};
+                 double target, bool below, bool timing = false) {
+    Row row{figure, Fixed(value, digits) + unit, "-", "-", timing};
     if (target > 0) {
       row.target = (below ? "< " : "> ") + Fixed(target, digits) + unit;
       row.verdict = (below ? value < target : value > target) ? "pass" : "**fail**";
@@ -107,10 +110,11 @@ std::string SummaryMarkdown(const LabResult& r) {
     const bool software =
         r.render.value("context", std::string()).find("llvmpipe") != std::string::npos;
     add(software ? "frame time p50 (llvmpipe)" : "frame time p50 (GPU)",
-        r.render.value("frame_ms_p50", 0.0), 1, " ms", 16, true);
+        r.render.value("frame_ms_p50", 0.0), 1, " ms", 16, true, /*timing=*/true);
     const double floor = r.render.value("floor_ms", 0.0);
     if (floor > 0) {
-      add("frame time p50 / floor", r.render.value("frame_ms_p50", 0.0) / floor, 2, "x", 2, true);
+      add("frame time p50 / floor", r.render.value("frame_ms_p50", 0.0) / floor, 2, "x", 2, true,
+          /*timing=*/true);
     }
   }
   if (r.render.contains("timeline_skew_ms_p99")) {
@@ -153,17 +157,37 @@ std::string SummaryMarkdown(const LabResult& r) {
   if (p.contains("gamma_error"))
     add("gamma error (largest)", p.value("gamma_error", 0.0), 3, "", 0, true);
   if (r.live.contains("reblend_ms_max")) {
-    add("re-blend after a kill", r.live.value("reblend_ms_max", 0.0), 0, " ms", 100, true);
+    add("re-blend after a kill", r.live.value("reblend_ms_max", 0.0), 0, " ms", 100, true,
+        /*timing=*/true);
   }
   if (r.live.contains("join_reblend_ms")) {
     add("re-blend after a join", r.live.value("join_reblend_ms", 0.0), 0, " ms", 0, true);
   }
+  return rows;
+}
+
+// The machine's load in words, for timing figures ("load average 1.42 on 2 cores").
+std::string LoadWords(const LabResult& r) {
+  if (r.load_average < 0) return "load not known";
+  return "load average " + Fixed(r.load_average, 2) + " on " + std::to_string(r.cores) +
+         (r.cores == 1 ? " core" : " cores");
+}
+
+// The one-screen summary table.
+std::string SummaryMarkdown(const LabResult& r) {
+  const std::vector<SummaryRow> rows = SummaryRows(r);
   if (rows.empty()) return "";
   std::ostringstream md;
   md << "## Summary\n\n| figure | value | target | |\n| --- | --- | --- | --- |\n";
-  for (const Row& row : rows) {
-    md << "| " << row.figure << " | " << row.value << " | " << row.target << " | " << row.verdict
-       << " |\n";
+  bool timing = false;
+  for (const SummaryRow& row : rows) {
+    md << "| " << row.figure << (row.timing ? " *" : "") << " | " << row.value << " | "
+       << row.target << " | " << row.verdict << " |\n";
+    timing |= row.timing;
+  }
+  if (timing) {
+    md << "\n\\* A timing: it depends on the machine and its load (" << LoadWords(r)
+       << " at the end of the run).\n";
   }
   md << "\n";
   return md.str();
@@ -175,6 +199,21 @@ void HeaderMarkdown(const LabResult& r, std::ostringstream& md) {
   md << "Status: **" << r.status << "**";
   if (!r.reasons.empty()) {
     md << ": " << r.reasons.size() << (r.reasons.size() == 1 ? " reason" : " reasons");
+  }
+  // Targets of the summary that were missed, named, whatever the status (the status fails only
+  // on the verdict's reasons: docs/lab.md).
+  int targets = 0;
+  std::vector<std::string> missed;
+  for (const SummaryRow& row : SummaryRows(r)) {
+    if (row.target == "-") continue;
+    ++targets;
+    if (row.verdict == "**fail**" || row.value == "not measured") {
+      missed.push_back(row.figure + (row.value == "not measured" ? " (not measured)" : ""));
+    }
+  }
+  if (targets > 0) {
+    md << "; " << missed.size() << " of " << targets << " targets missed";
+    for (size_t i = 0; i < missed.size(); ++i) md << (i == 0 ? ": " : ", ") << missed[i];
   }
   md << ". Command:\n\n    " << r.command << "\n\n";
   if (!r.reasons.empty()) {

@@ -2,6 +2,10 @@
 
 #include "sim/lab/lab_run_internal.h"
 
+#include <cstdio>
+#include <cstdlib>
+#include <thread>
+
 namespace sandtable::sim {
 namespace lab_internal {
 
@@ -368,6 +372,9 @@ int LabRun::Finish() {
   if (!result_.reasons.empty()) result_.status = "failed";
   result_.total_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  double load[1] = {-1.0};
+  if (::getloadavg(load, 1) == 1) result_.load_average = load[0];
+  result_.cores = static_cast<int>(std::thread::hardware_concurrency());
   const Status written = WriteLabReport(result_, options_.out_dir);
   const std::string report_path = (fs::path(options_.out_dir) / "report.json").string();
   report::WriteReportLine(out_, report::LabDone{result_.status, report_path});
@@ -386,9 +393,11 @@ int LabRun::Finish() {
   }
   if (result_.registration) {
     const ErrorStats& s = result_.registration->site.all;
+    char figures[160];
+    std::snprintf(figures, sizeof(figures), "rms %.3f mm, p99 %.2f mm, max %.2f mm, rms %.3f px",
+                  s.rms_mm, s.p99_mm, s.max_mm, s.rms_px);
     err_ << "sandtable-lab run: " << result_.site_name << ", calibration "
-         << result_.calibration_source << ": rms " << s.rms_mm << " mm, p99 " << s.p99_mm
-         << " mm, max " << s.max_mm << " mm, rms " << s.rms_px << " px\n";
+         << result_.calibration_source << ": " << figures << "\n";
   }
   for (const LabReason& reason : result_.reasons) {
     err_ << "sandtable-lab run: failed: " << reason.what << ": " << reason.detail << "\n";

@@ -109,5 +109,25 @@ TEST(LabVerdict, AnInterruptedOrCrashedRunIsJudgedByItsFailureAlone) {
   EXPECT_FALSE(bad.Check().ok());
 }
 
+// An "ok" run still says which targets of its summary it missed, and a timing figure says it
+// depends on the machine's load.
+TEST(LabVerdict, TheStatusLineCountsTheTargetsMissedAndTimingsGiveTheLoad) {
+  LabResult r = MeasuredRun(0.2);
+  r.max_rms_mm = 1.0;
+  r.photometric["max_step_pct_per_5mm"]["table"] = 2.3;  // over its 1.5 % target
+  r.render = {{"frame_ms_p50", 30.0}, {"floor_ms", 5.0}, {"context", "llvmpipe"}};
+  r.load_average = 1.5;
+  r.cores = 2;
+  ASSERT_TRUE(JudgeLabRun(r, LabVerdictOptions{}).empty()) << "the verdict is the registration's";
+  const std::string md = LabReportMarkdown(r);
+  EXPECT_NE(md.find("Status: **ok**; 3 of 5 targets missed: frame time p50 (llvmpipe), frame time "
+                    "p50 / floor, largest step per 5 mm, table."),
+            std::string::npos)
+      << md;
+  EXPECT_NE(md.find("| frame time p50 (llvmpipe) * |"), std::string::npos) << md;
+  EXPECT_NE(md.find("load average 1.50 on 2 cores"), std::string::npos) << md;
+  EXPECT_EQ(LabReportJson(r)["machine"]["cores"], 2);
+}
+
 }  // namespace
 }  // namespace sandtable::sim
