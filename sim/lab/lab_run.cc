@@ -412,7 +412,7 @@ void LabRun::Phase(const std::string& name, int total) {
   progress_phase_ = name;
   report::LabPhase line{name, std::nullopt};
   if (name == "hold") line.hold_s = options_.hold_s;
-  report::WriteReportLine(out_, line);
+  if (options_.phase_lines) report::WriteReportLine(out_, line);
 }
 
 std::string LabRun::RelativeToOut(const std::string& path) const {
@@ -489,7 +489,12 @@ bool LabRun::Wait(const std::string& phase, const std::function<bool()>& done,
                   milliseconds deadline, const std::string& what, const ChildProcess* waited_for,
                   const std::function<int()>& count, const std::function<std::string()>& missing) {
   if (count) progress_.Update(count());
-  const WaitOutcome outcome = supervisor_.WaitUntil(done, deadline, stop_, Handler());
+  // While it waits the progress line says for how long and for whom.
+  const auto waiting = [&] {
+    if (missing) progress_.Tick(missing());
+    return done();
+  };
+  const WaitOutcome outcome = supervisor_.WaitUntil(waiting, deadline, stop_, Handler());
   if (outcome == WaitOutcome::kDone) {
     progress_.End();
     return true;

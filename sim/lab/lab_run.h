@@ -94,6 +94,9 @@ struct LabRunOptions {
   // starved coordinator declared 56 of 64 nodes dead at once after a stall).
   int heartbeat_ms = 0;
   bool progress_tty = false;
+  // The machine-readable phase lines on stdout ({"lab":"phase",...}); off when stdout is a
+  // terminal, where they would land on the progress bar's line.
+  bool phase_lines = true;
   bool curve = false;  // generate OUT/site.key (0600); world, coordinator, nodes require CURVE
   // Where the children run: "local" (this host's loopback) or "netns" (each on a host of its
   // own, a network namespace on a bridge, sim/lab/lab_hosts.h; the nodes find the coordinator

@@ -375,6 +375,7 @@ static int Run(int argc, char** argv) {
   }
 
   options.progress_tty = progress == "bar" || (progress == "auto" && isatty(STDERR_FILENO));
+  options.phase_lines = !isatty(STDOUT_FILENO);
   for (int i = 0; i < argc; ++i) options.command_line += (i ? " " : "") + std::string(argv[i]);
   struct sigaction action {};
   action.sa_handler = OnSignal;

@@ -15,6 +15,7 @@ double Progress::Elapsed_s() const {
 void Progress::Begin(const std::string& phase, int total) {
   if (active_) End();
   phase_ = phase;
+  waiting_for_.clear();
   total_ = total;
   done_ = 0;
   active_ = true;
@@ -26,6 +27,26 @@ void Progress::Update(int done) {
   if (!active_ || done == done_) return;
   done_ = done;
   Draw(false);
+}
+
+void Progress::Tick(const std::string& waiting_for) {
+  if (!active_) return;
+  const auto now = std::chrono::steady_clock::now();
+  const std::chrono::steady_clock::duration gap =
+      tty_ ? std::chrono::milliseconds(200) : plain_gap_;
+  if (now - last_tick_ < gap || (!tty_ && now - start_ < gap)) return;
+  last_tick_ = now;
+  waiting_for_ = waiting_for;
+  if (tty_) {
+    Draw(false);
+    return;
+  }
+  char time_text[32];
+  std::snprintf(time_text, sizeof(time_text), "%.1f s", Elapsed_s());
+  out_ << "lab: " << phase_ << " "
+       << (total_ > 0 ? std::to_string(done_) + "/" + std::to_string(total_) + " " : "") << "("
+       << time_text << (waiting_for.empty() ? "" : "; waiting for " + waiting_for) << ")\n"
+       << std::flush;
 }
 
 void Progress::End(const std::string& outcome) {
@@ -57,7 +78,8 @@ void Progress::Draw(bool final_line) {
   const int filled = total_ > 0 ? kBarWidth * done_ / total_ : (final_line ? kBarWidth : 0);
   for (int i = 0; i < filled; ++i) bar[i] = '=';
   if (filled < kBarWidth && filled > 0) bar[filled] = '>';
-  out_ << "\r\033[K[" << bar << "] " << phase_ << counts << "  " << time_text << std::flush;
+  out_ << "\r\033[K[" << bar << "] " << phase_ << counts << "  " << time_text
+       << (final_line || waiting_for_.empty() ? "" : "  waiting for " + waiting_for_) << std::flush;
 }
 
 }  // namespace sandtable::sim

@@ -18,10 +18,16 @@ namespace sandtable::sim {
 class Progress {
  public:
   // `tty`: draw bars (the caller decides, e.g. isatty(STDERR_FILENO)).
-  Progress(std::ostream& out, bool tty) : out_(out), tty_(tty) {}
+  // `plain_gap`: how often a waiting phase prints a plain line (Tick).
+  Progress(std::ostream& out, bool tty,
+           std::chrono::milliseconds plain_gap = std::chrono::milliseconds(10000))
+      : out_(out), tty_(tty), plain_gap_(plain_gap) {}
 
   void Begin(const std::string& phase, int total);
   void Update(int done);
+  // While waiting: the elapsed time and what is awaited ("node-0, node-2"), redrawn on a TTY
+  // (at most 5 times a second), a plain line every plain_gap otherwise.
+  void Tick(const std::string& waiting_for);
   // Ends the current phase: "ok" or a short failure word.
   void End(const std::string& outcome = "ok");
 
@@ -34,10 +40,12 @@ class Progress {
 
   std::ostream& out_;
   bool tty_;
+  std::chrono::milliseconds plain_gap_;
   std::string phase_;
   int total_ = 0, done_ = -1;
   bool active_ = false;
-  std::chrono::steady_clock::time_point start_;
+  std::string waiting_for_;
+  std::chrono::steady_clock::time_point start_, last_tick_;
   std::vector<std::pair<std::string, double>> seconds_;
 };
 

@@ -1,0 +1,48 @@
+// The lab's progress on the terminal (sim/lab/progress.h): a phase that waits says for how long
+// and for whom, on its bar or in a plain line.
+#include "sim/lab/progress.h"
+
+#include <chrono>
+#include <sstream>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+namespace sandtable::sim {
+namespace {
+
+using std::chrono::milliseconds;
+
+constexpr milliseconds kPlainGap{50};
+constexpr milliseconds kPastTheGap{80};
+
+TEST(ProgressTest, AWaitingPhaseSaysForHowLongAndForWhomInPlainLines) {
+  std::ostringstream out;
+  Progress progress(out, /*tty=*/false, kPlainGap);
+  progress.Begin("calibration held", 3);
+  progress.Tick("node-0, node-2");  // too soon: nothing
+  EXPECT_EQ(out.str().find("waiting for"), std::string::npos) << out.str();
+  std::this_thread::sleep_for(kPastTheGap);
+  progress.Tick("node-0, node-2");
+  EXPECT_NE(out.str().find("lab: calibration held 0/3 ("), std::string::npos) << out.str();
+  EXPECT_NE(out.str().find("; waiting for node-0, node-2)"), std::string::npos) << out.str();
+  progress.End();
+  EXPECT_NE(out.str().find("lab: calibration held: ok"), std::string::npos) << out.str();
+}
+
+TEST(ProgressTest, OnATerminalTheBarCarriesWhatItWaitsForUntilTheEnd) {
+  std::ostringstream out;
+  Progress progress(out, /*tty=*/true);
+  progress.Begin("start nodes", 3);
+  std::this_thread::sleep_for(kPastTheGap * 3);  // past the bar's redraw interval (200 ms)
+  progress.Tick("node-1");
+  EXPECT_NE(out.str().find("start nodes 0/3"), std::string::npos) << out.str();
+  EXPECT_NE(out.str().find("waiting for node-1"), std::string::npos) << out.str();
+  progress.End();
+  const std::string last = out.str().substr(out.str().rfind('\r'));
+  EXPECT_EQ(last.find("waiting for"), std::string::npos) << "the final line: " << last;
+  EXPECT_NE(last.find("ok"), std::string::npos) << last;
+}
+
+}  // namespace
+}  // namespace sandtable::sim
