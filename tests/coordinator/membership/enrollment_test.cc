@@ -233,6 +233,11 @@ class EnrollmentExchangeTest : public ::testing::Test {
     }
     return "";
   }
+  // A unit started and seen asking by the operator: its fingerprint (empty if it never asked).
+  std::string UnitThatAsks(const EnrollingCoordinator& coordinator, const std::string& key_file) {
+    StartUnit(coordinator, key_file);
+    return WaitForPending(coordinator);
+  }
   void JoinUnit() {
     if (unit_.joinable()) unit_.join();
   }
@@ -248,8 +253,7 @@ TEST_F(EnrollmentExchangeTest, AnAcceptedUnitIsHandedTheSiteKeyAndWritesItPrivat
   EnrollingCoordinator coordinator(site_);
   ASSERT_TRUE(coordinator.started().ok()) << coordinator.started().ToString();
   const std::string key_file = (dir_ / "site.keys").string();
-  StartUnit(coordinator, key_file);
-  const std::string fingerprint = WaitForPending(coordinator);
+  const std::string fingerprint = UnitThatAsks(coordinator, key_file);
   ASSERT_FALSE(fingerprint.empty()) << "no unit asked";
   // Asking is all a stranger's key may do: it is not let onto the requests socket.
   Expected<net::CurveKeyPair> own = net::ReadCurveKeyFile(key_file + ".request");
@@ -282,8 +286,7 @@ TEST_F(EnrollmentExchangeTest, ARefusedUnitIsToldSoAndWritesNothing) {
   EnrollingCoordinator coordinator(site_);
   ASSERT_TRUE(coordinator.started().ok()) << coordinator.started().ToString();
   const std::string key_file = (dir_ / "site.keys").string();
-  StartUnit(coordinator, key_file);
-  const std::string fingerprint = WaitForPending(coordinator);
+  const std::string fingerprint = UnitThatAsks(coordinator, key_file);
   ASSERT_FALSE(fingerprint.empty()) << "no unit asked";
   std::optional<wire::EnrollmentReply> unknown =
       Operator(coordinator, site_, "1234-5678-9abc-def0");

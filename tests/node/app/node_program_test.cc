@@ -312,18 +312,26 @@ TEST_F(NodeProgramTest, AnOpenCoordinatorIsRefusedUnlessAskedFor) {
   EXPECT_EQ(open.Wait(), 0);
 }
 
+// A network namespace's link for the discovery tests: two addresses on a veth pair, so a
+// beacon has an interface that broadcasts.
+constexpr char kSiteLink[] =
+    "ip link add site0 type veth peer name site0p && "
+    "ip addr add 10.64.0.1/24 dev site0 && ip addr add 10.64.0.2/24 dev site0p && "
+    "ip link set site0p up && ip link set site0 up";
+
+void GenerateSiteKeys(const std::string& path) {
+  ChildProcess generate({SANDTABLE_COORDINATOR_BIN, "--generate-curve-keys", path});
+  ASSERT_EQ(testing::RunToEnd(generate, milliseconds(10000)), 0);
+}
+
 // LAN discovery with the two programs, in a network namespace of their own: a coordinator that
 // beacons its site and a node given no address at all but the site's key file; the node hears
 // the beacon, trusts the key, and registers.
 TEST_F(NodeProgramTest, ANodeWithNoAddressFindsItsSiteByTheBeacon) {
   const std::string keys = (dir_ / "site.keys").string();
-  ChildProcess generate({SANDTABLE_COORDINATOR_BIN, "--generate-curve-keys", keys});
-  ASSERT_EQ(testing::RunToEnd(generate, milliseconds(10000)), 0);
-  const test_support::NamespaceRun run = test_support::InOwnNetworkNamespace(
-      "ip link add site0 type veth peer name site0p && "
-      "ip addr add 10.64.0.1/24 dev site0 && ip addr add 10.64.0.2/24 dev site0p && "
-      "ip link set site0p up && ip link set site0 up",
-      [&](std::string* text) {
+  ASSERT_NO_FATAL_FAILURE(GenerateSiteKeys(keys));
+  const test_support::NamespaceRun run =
+      test_support::InOwnNetworkNamespace(kSiteLink, [&](std::string* text) {
         ChildProcess coordinator(
             {SANDTABLE_COORDINATOR_BIN, "--requests", "tcp://*:7000", "--events", "tcp://*:7001",
              "--curve-keys", keys, "--beacon", "5673", "--site-name", "lab-1"},
@@ -359,13 +367,9 @@ TEST_F(NodeProgramTest, AUnitWithNoKeyJoinsOnceTheOperatorAcceptsIt) {
   const std::string keys = (dir_ / "site.keys").string();
   const std::string unit_keys = (dir_ / "unit" / "site.keys").string();
   std::filesystem::create_directories(dir_ / "unit");
-  ChildProcess generate({SANDTABLE_COORDINATOR_BIN, "--generate-curve-keys", keys});
-  ASSERT_EQ(testing::RunToEnd(generate, milliseconds(10000)), 0);
-  const test_support::NamespaceRun run = test_support::InOwnNetworkNamespace(
-      "ip link add site0 type veth peer name site0p && "
-      "ip addr add 10.64.0.1/24 dev site0 && ip addr add 10.64.0.2/24 dev site0p && "
-      "ip link set site0p up && ip link set site0 up",
-      [&](std::string* text) {
+  ASSERT_NO_FATAL_FAILURE(GenerateSiteKeys(keys));
+  const test_support::NamespaceRun run =
+      test_support::InOwnNetworkNamespace(kSiteLink, [&](std::string* text) {
         ChildProcess coordinator({SANDTABLE_COORDINATOR_BIN, "--requests", "tcp://*:7000",
                                   "--events", "tcp://*:7001", "--enroll", "tcp://*:7002",
                                   "--curve-keys", keys, "--beacon", "5674", "--site-name", "lab-2"},
@@ -434,8 +438,7 @@ TEST_F(NodeProgramTest, AUnitWithNoKeyJoinsOnceTheOperatorAcceptsIt) {
 // The operator's command says what is wrong instead of waiting forever or guessing.
 TEST_F(NodeProgramTest, TheEnrollmentCommandSaysWhenNobodyAnswers) {
   const std::string keys = (dir_ / "site.keys").string();
-  ChildProcess generate({SANDTABLE_COORDINATOR_BIN, "--generate-curve-keys", keys});
-  ASSERT_EQ(testing::RunToEnd(generate, milliseconds(10000)), 0);
+  ASSERT_NO_FATAL_FAILURE(GenerateSiteKeys(keys));
   std::string output;
   ChildProcess nobody({SANDTABLE_COORDINATOR_BIN, "enrollment", "--requests", "tcp://127.0.0.1:9",
                        "--curve-keys", keys, "--timeout-ms", "500"},
