@@ -464,7 +464,9 @@ void UnitsMarkdown(const LabResult& r, std::ostringstream& md) {
   }
   if (!r.top_white_png.empty()) {
     md << "## The world, every projector white (top view)\n\n![top view, all white]("
-       << r.top_white_png << ")\n\n";
+       << r.top_white_png
+       << ")\n*The world seen from above (orthographic) with every projector white and no "
+          "blend: the footprints and their overlaps.*\n\n";
   }
   if (!r.heatmap_png.empty()) {
     md << "## Registration error seen from above\n\n![registration error](" << r.heatmap_png
@@ -548,7 +550,10 @@ void RenderMarkdown(const LabResult& r, std::ostringstream& md) {
          << " patches.\n\n";
     }
     if (rd.contains("grid_top_png")) {
-      md << "![table grid from above](" << rd["grid_top_png"].get<std::string>() << ")\n\n";
+      md << "![table grid from above](" << rd["grid_top_png"].get<std::string>()
+         << ")\n*The table grid every unit draws, seen from above through the world "
+            "(orthographic, the whole table): where two projectors' lines do not coincide they "
+            "show doubled.*\n\n";
     }
     if (rd.contains("unit_grid_top_png") && rd["unit_grid_top_png"].is_object()) {
       md << "Each projector's output alone, seen from above (its table grid):\n\n";
@@ -560,7 +565,9 @@ void RenderMarkdown(const LabResult& r, std::ostringstream& md) {
       }
     }
     if (rd.contains("show_top_png")) {
-      md << "![the show from above](" << rd["show_top_png"].get<std::string>() << ")\n\n";
+      md << "![the show from above](" << rd["show_top_png"].get<std::string>()
+         << ")\n*The show seen from above through the world: every projector's output with the "
+            "model's colours and cast shadows.*\n\n";
     }
   }
 }
@@ -645,16 +652,24 @@ void BlendMarkdown(const LabResult& r, std::ostringstream& md) {
        << Fixed(p.value("bytes_per_node_max", 0.0), 0) << ".\n\n";
     if (p.contains("pictures")) {
       const json& pic = p["pictures"];
-      if (pic.contains("before"))
-        md << "![raw white from above](" << pic["before"].get<std::string>() << ")\n";
-      if (pic.contains("after"))
-        md << "![blended white from above](" << pic["after"].get<std::string>() << ")\n";
+      if (pic.contains("before")) {
+        md << "![raw white from above](" << pic["before"].get<std::string>()
+           << ")\n*Raw white: every projector at full white, seen from above (brighter where "
+              "footprints overlap).*\n\n";
+      }
+      if (pic.contains("after")) {
+        md << "![blended white from above](" << pic["after"].get<std::string>()
+           << ")\n*White through the full pipeline (blend masks, intensity correction), seen "
+              "from above.*\n\n";
+      }
       if (pic.contains("steps_over_1pct")) {
         md << "![where the step exceeds 1 %](" << pic["steps_over_1pct"].get<std::string>()
-           << ")\n";
+           << ")\n*From above, white where the blended white's luminance changes by more than "
+              "1 % over 5 mm, black elsewhere and where no projector lights.*\n\n";
       }
       if (pic.contains("alpha")) {
-        md << "\nAlpha masks (projector images):\n\n";
+        md << "\nAlpha masks, each in its own projector's pixels (white: 1, the unit gives full "
+              "light; black: 0, a neighbour lights that part):\n\n";
         for (const auto& [id, path] : pic["alpha"].items()) {
           md << "![alpha of unit " << id << "](" << path.get<std::string>() << ")\n";
         }
