@@ -206,6 +206,7 @@ Expected<ReportLine> ParseRender(const json& j) {
   r.Optional("groups_culled", &line.groups_culled);
   r.Optional("frame_ms_p50", &line.frame_ms_p50);
   r.Optional("frame_ms_p99", &line.frame_ms_p99);
+  r.Optional("first_frame_ms", &line.first_frame_ms);
   r.Optional("floor_ms", &line.floor_ms);
   r.Optional("show_ms_p50", &line.show_ms_p50);
   r.Optional("passes", &line.passes);
@@ -362,6 +363,7 @@ json ToJson(const ReportLine& line) {
                     {"rewarped", l.rewarped},
                     {"frame_ms_p50", l.frame_ms_p50},
                     {"frame_ms_p99", l.frame_ms_p99},
+                    {"first_frame_ms", l.first_frame_ms},
                     {"floor_ms", l.floor_ms},
                     {"show_ms_p50", l.show_ms_p50},
                     {"passes", l.passes},

@@ -91,6 +91,9 @@ struct RenderSummary {
   NodeId id = kInvalidNodeId;
   int64_t frames = 0, failed = 0, unchanged = 0, rewarped = 0, groups_culled = 0;
   double frame_ms_p50 = 0.0, frame_ms_p99 = 0.0, floor_ms = 0.0, show_ms_p50 = 0.0;
+  // The first frame drawn (its shaders compiled, its surface cache filled), kept out of the
+  // percentiles above; 0 when none was drawn.
+  double first_frame_ms = 0.0;
   std::map<std::string, int64_t> passes;  // frames each pass ran in, by PassName
   std::string context;                    // the GL renderer's description
 };

@@ -678,7 +678,14 @@ void RenderLoop::RecordFrame(FrameWork& work, const Expected<FrameStats>& stats)
     ++summary_.frames_shown;
     // A re-warped frame is one pass, not a frame's work: kept out of the frame times.
     if (work.rewarp || work.late_stats) ++summary_.frames_rewarped;
-    if (!work.rewarp) Keep(&frame_ms_, stats->frame_ms);
+    if (!work.rewarp) {
+      if (!first_frame_kept_) {
+        summary_.first_frame_ms = stats->frame_ms;  // compiles and caches: not a frame's cost
+        first_frame_kept_ = true;
+      } else {
+        Keep(&frame_ms_, stats->frame_ms);
+      }
+    }
     Keep(&show_ms_, work.show_ms);
     for (int p = 0; p < kPassCount; ++p) summary_.pass_runs[p] += stats->ran[p] ? 1 : 0;
     summary_.groups_culled += static_cast<uint64_t>(stats->groups_culled);

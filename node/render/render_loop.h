@@ -78,8 +78,10 @@ struct RenderSummary {
   uint64_t frames_rewarped = 0;   // a new mask over the last frame (Renderer::Rewarp)
   int masks_prepared = 0;         // prepared masks the renderer holds now (PrepareBlends)
   double frame_ms_p50 = 0.0, frame_ms_p99 = 0.0;  // rendering, GL work finished
-  double show_ms_p50 = 0.0;                       // read back and projector's Show
-  double floor_ms = 0.0;                          // one full-screen textured pass (median)
+  // The first frame drawn (shaders compiled, surface cache filled): kept out of the percentiles.
+  double first_frame_ms = 0.0;
+  double show_ms_p50 = 0.0;  // read back and projector's Show
+  double floor_ms = 0.0;     // one full-screen textured pass (median)
   std::array<uint64_t, kPassCount> pass_runs{};
   uint64_t groups_culled = 0;
   std::string pattern = "none";
@@ -241,6 +243,7 @@ class RenderLoop {
   // Stats (under mutex_).
   RenderSummary summary_;
   std::deque<double> frame_ms_, show_ms_;
+  bool first_frame_kept_ = false;  // summary_.first_frame_ms holds the first frame's time
 };
 
 }  // namespace sandtable::node

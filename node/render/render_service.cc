@@ -94,6 +94,7 @@ report::RenderSummary RenderService::Summary(NodeId id) const {
   line.rewarped = s.frames_rewarped;
   line.frame_ms_p50 = s.frame_ms_p50;
   line.frame_ms_p99 = s.frame_ms_p99;
+  line.first_frame_ms = s.first_frame_ms;
   line.floor_ms = s.floor_ms;
   line.show_ms_p50 = s.show_ms_p50;
   for (int p = 0; p < kPassCount; ++p) line.passes[PassName(static_cast<Pass>(p))] = s.pass_runs[p];

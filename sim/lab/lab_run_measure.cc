@@ -189,7 +189,7 @@ void LabRun::CollectSelfCalibration() {
 
 void LabRun::CollectRender() {
   if (lines_.render_summary.empty()) return;
-  std::vector<double> p50, p99, floor;
+  std::vector<double> p50, p99, floor, first;
   json units = json::object();
   for (const auto& [id, line] : lines_.render_summary) {
     units[std::to_string(id)] = report::ToJson(line);
@@ -197,6 +197,7 @@ void LabRun::CollectRender() {
       p50.push_back(line.frame_ms_p50);
       p99.push_back(line.frame_ms_p99);
       floor.push_back(line.floor_ms);
+      first.push_back(line.first_frame_ms);
     }
   }
   result_.render["units"] = units;
@@ -208,6 +209,7 @@ void LabRun::CollectRender() {
   result_.render["frame_ms_p50"] = median(p50);
   result_.render["frame_ms_p99"] = *std::max_element(p99.begin(), p99.end());
   result_.render["floor_ms"] = median(floor);
+  result_.render["first_frame_ms_max"] = *std::max_element(first.begin(), first.end());
   result_.render["context"] = lines_.render_summary.begin()->second.context;
 }
 

@@ -37,6 +37,7 @@ std::vector<ReportLine> OneOfEach() {
   summary.groups_culled = 7;
   summary.frame_ms_p50 = 12.5;
   summary.frame_ms_p99 = 30.25;
+  summary.first_frame_ms = 812.5;
   summary.floor_ms = 2.5;
   summary.show_ms_p50 = 1.5;
   summary.passes = {{"scene", 10}, {"warp", 600}};
