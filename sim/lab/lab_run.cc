@@ -491,7 +491,7 @@ bool LabRun::Wait(const std::string& phase, const std::function<bool()>& done,
   if (count) progress_.Update(count());
   // While it waits the progress line says for how long and for whom.
   const auto waiting = [&] {
-    if (missing) progress_.Tick(missing());
+    if (missing) progress_.Tick(missing);
     return done();
   };
   const WaitOutcome outcome = supervisor_.WaitUntil(waiting, deadline, stop_, Handler());

@@ -29,14 +29,14 @@ void Progress::Update(int done) {
   Draw(false);
 }
 
-void Progress::Tick(const std::string& waiting_for) {
+void Progress::Tick(const std::function<std::string()>& waiting_for) {
   if (!active_) return;
   const auto now = std::chrono::steady_clock::now();
   const std::chrono::steady_clock::duration gap =
       tty_ ? std::chrono::milliseconds(200) : plain_gap_;
   if (now - last_tick_ < gap || (!tty_ && now - start_ < gap)) return;
   last_tick_ = now;
-  waiting_for_ = waiting_for;
+  waiting_for_ = waiting_for();
   if (tty_) {
     Draw(false);
     return;
@@ -45,7 +45,7 @@ void Progress::Tick(const std::string& waiting_for) {
   std::snprintf(time_text, sizeof(time_text), "%.1f s", Elapsed_s());
   out_ << "lab: " << phase_ << " "
        << (total_ > 0 ? std::to_string(done_) + "/" + std::to_string(total_) + " " : "") << "("
-       << time_text << (waiting_for.empty() ? "" : "; waiting for " + waiting_for) << ")\n"
+       << time_text << (waiting_for_.empty() ? "" : "; waiting for " + waiting_for_) << ")\n"
        << std::flush;
 }
 

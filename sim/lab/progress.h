@@ -8,6 +8,7 @@
 #pragma once
 
 #include <chrono>
+#include <functional>
 #include <ostream>
 #include <string>
 #include <utility>
@@ -27,7 +28,8 @@ class Progress {
   void Update(int done);
   // While waiting: the elapsed time and what is awaited ("node-0, node-2"), redrawn on a TTY
   // (at most 5 times a second), a plain line every plain_gap otherwise.
-  void Tick(const std::string& waiting_for);
+  // `waiting_for` is asked only when a line is due.
+  void Tick(const std::function<std::string()>& waiting_for);
   // Ends the current phase: "ok" or a short failure word.
   void End(const std::string& outcome = "ok");
 

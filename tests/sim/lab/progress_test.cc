@@ -20,10 +20,10 @@ TEST(ProgressTest, AWaitingPhaseSaysForHowLongAndForWhomInPlainLines) {
   std::ostringstream out;
   Progress progress(out, /*tty=*/false, kPlainGap);
   progress.Begin("calibration held", 3);
-  progress.Tick("node-0, node-2");  // too soon: nothing
+  progress.Tick([] { return std::string("node-0, node-2"); });  // too soon: nothing
   EXPECT_EQ(out.str().find("waiting for"), std::string::npos) << out.str();
   std::this_thread::sleep_for(kPastTheGap);
-  progress.Tick("node-0, node-2");
+  progress.Tick([] { return std::string("node-0, node-2"); });
   EXPECT_NE(out.str().find("lab: calibration held 0/3 ("), std::string::npos) << out.str();
   EXPECT_NE(out.str().find("; waiting for node-0, node-2)"), std::string::npos) << out.str();
   progress.End();
@@ -35,7 +35,7 @@ TEST(ProgressTest, OnATerminalTheBarCarriesWhatItWaitsForUntilTheEnd) {
   Progress progress(out, /*tty=*/true);
   progress.Begin("start nodes", 3);
   std::this_thread::sleep_for(kPastTheGap * 3);  // past the bar's redraw interval (200 ms)
-  progress.Tick("node-1");
+  progress.Tick([] { return std::string("node-1"); });
   EXPECT_NE(out.str().find("start nodes 0/3"), std::string::npos) << out.str();
   EXPECT_NE(out.str().find("waiting for node-1"), std::string::npos) << out.str();
   progress.End();
