@@ -62,31 +62,39 @@ struct Grid {
 // mean of the known cells within that many cells around it (a high-pass: any plane, such as a
 // table frame tilted against the model's, leaves no trace away from the map's edges), so the
 // classes are "stands above its surroundings" (+1) or not (-1).
+// The highest z per cell of `points` turned by `rotation` (-inf where a cell has none), on a
+// grid of `cell` from the points' smallest x and y (set in *min_x, *min_y).
+cv::Mat TopHeights(std::span<const Eigen::Vector3d> points, const Eigen::Matrix3d& rotation,
+                   double cell, double* min_x, double* min_y) {
+  *min_x = *min_y = std::numeric_limits<double>::infinity();
+  double max_x = -std::numeric_limits<double>::infinity(), max_y = max_x;
+  for (const Eigen::Vector3d& p0 : points) {
+    const Eigen::Vector3d p = rotation * p0;
+    *min_x = std::min(*min_x, p.x());
+    *min_y = std::min(*min_y, p.y());
+    max_x = std::max(max_x, p.x());
+    max_y = std::max(max_y, p.y());
+  }
+  const int width = static_cast<int>(std::floor((max_x - *min_x) / cell)) + 1;
+  const int height = static_cast<int>(std::floor((max_y - *min_y) / cell)) + 1;
+  cv::Mat top(height, width, CV_32F, cv::Scalar(-std::numeric_limits<float>::infinity()));
+  for (const Eigen::Vector3d& p0 : points) {
+    const Eigen::Vector3d p = rotation * p0;
+    const int i = std::clamp(static_cast<int>((p.x() - *min_x) / cell), 0, width - 1);
+    const int j = std::clamp(static_cast<int>((p.y() - *min_y) / cell), 0, height - 1);
+    float& v = top.at<float>(j, i);
+    v = std::max(v, static_cast<float>(p.z()));
+  }
+  return top;
+}
+
 Grid HeightGrid(std::span<const Eigen::Vector3d> points, const Eigen::Matrix3d& rotation,
                 double cell, double structure_height, int relief_window = 0) {
   Grid g;
   g.cell = cell;
-  double min_x = std::numeric_limits<double>::infinity(), min_y = min_x, max_x = -min_x,
-         max_y = -min_x;
-  for (const Eigen::Vector3d& p0 : points) {
-    const Eigen::Vector3d p = rotation * p0;
-    min_x = std::min(min_x, p.x());
-    min_y = std::min(min_y, p.y());
-    max_x = std::max(max_x, p.x());
-    max_y = std::max(max_y, p.y());
-  }
-  g.min_x = min_x;
-  g.min_y = min_y;
-  g.width = static_cast<int>(std::floor((max_x - min_x) / cell)) + 1;
-  g.height = static_cast<int>(std::floor((max_y - min_y) / cell)) + 1;
-  cv::Mat top(g.height, g.width, CV_32F, cv::Scalar(-std::numeric_limits<float>::infinity()));
-  for (const Eigen::Vector3d& p0 : points) {
-    const Eigen::Vector3d p = rotation * p0;
-    const int i = std::clamp(static_cast<int>((p.x() - min_x) / cell), 0, g.width - 1);
-    const int j = std::clamp(static_cast<int>((p.y() - min_y) / cell), 0, g.height - 1);
-    float& v = top.at<float>(j, i);
-    v = std::max(v, static_cast<float>(p.z()));
-  }
+  const cv::Mat top = TopHeights(points, rotation, cell, &g.min_x, &g.min_y);
+  g.width = top.cols;
+  g.height = top.rows;
   const cv::Mat known = top != -std::numeric_limits<float>::infinity();  // CV_8U 255/0
   cv::Mat ground(g.height, g.width, CV_32F, cv::Scalar(0));
   if (relief_window > 0) {
@@ -132,22 +140,7 @@ struct TopMap {
 TopMap ModelTop(std::span<const Eigen::Vector3d> points, double cell) {
   TopMap m;
   m.cell = cell;
-  double max_x = -std::numeric_limits<double>::infinity(), max_y = max_x;
-  m.min_x = m.min_y = std::numeric_limits<double>::infinity();
-  for (const Eigen::Vector3d& p : points) {
-    m.min_x = std::min(m.min_x, p.x());
-    m.min_y = std::min(m.min_y, p.y());
-    max_x = std::max(max_x, p.x());
-    max_y = std::max(max_y, p.y());
-  }
-  const int w = static_cast<int>(std::floor((max_x - m.min_x) / cell)) + 1;
-  const int h = static_cast<int>(std::floor((max_y - m.min_y) / cell)) + 1;
-  m.z = cv::Mat(h, w, CV_32F, cv::Scalar(-std::numeric_limits<float>::infinity()));
-  for (const Eigen::Vector3d& p : points) {
-    float& v = m.z.at<float>(static_cast<int>((p.y() - m.min_y) / cell),
-                             static_cast<int>((p.x() - m.min_x) / cell));
-    v = std::max(v, static_cast<float>(p.z()));
-  }
+  m.z = TopHeights(points, Eigen::Matrix3d::Identity(), cell, &m.min_x, &m.min_y);
   m.z.setTo(std::numeric_limits<float>::quiet_NaN(),
             m.z == -std::numeric_limits<float>::infinity());
   return m;
