@@ -41,10 +41,8 @@
 // Exit status: 0 after SIGINT/SIGTERM (Goodbye said), 1 when it cannot start, 2 for a bad flag
 // or a bad input file.
 #include <csignal>
-#include <filesystem>
 #include <iostream>
 #include <string>
-#include <system_error>
 
 #include "cluster/report_lines.h"
 #include "common/base/host_clock.h"
@@ -52,11 +50,9 @@
 #include "common/base/main_guard.h"
 #include "common/cli/command_line.h"
 #include "common/cli/config_file.h"
-#include "net/curve.h"
-#include "net/discovery.h"
-#include "net/site_enrollment.h"
 #include "node/app/node_app.h"
 #include "node/app/node_config.h"
+#include "node/app/node_discovery.h"
 #include "node/calibration/calibrate_unit_command.h"
 #include "node/render/render_frame_command.h"
 
@@ -64,64 +60,6 @@ namespace {
 
 std::atomic<bool> g_stop{false};
 void OnSignal(int) { g_stop = true; }
-
-// --coordinator discover: listens for the site's beacon until one it trusts is heard (the key
-// of its --curve-keys or --enroll file, or an open site with --insecure) and takes the
-// coordinator's endpoints from it. With --enroll and no key file yet, takes a site that accepts
-// new units and asks its operator (net/site_enrollment.h); accepted, the key file is written and
-// used. An exit code when it should not go on (stopped, refused, or a bad key file).
-std::optional<int> Discover(const CLI::App& app, sandtable::node::NodeConfig& config) {
-  using namespace sandtable;
-  net::DiscoveryOptions options;
-  options.port = config.discovery_port;
-  options.site = config.site_name;
-  options.accept_open_site = config.insecure;
-  const std::string& enroll = config.enroll_keys_path;
-  std::error_code ec;
-  if (!enroll.empty() && std::filesystem::exists(enroll, ec)) config.curve_keys_path = enroll;
-  options.enrolling = !enroll.empty() && config.curve_keys_path.empty();
-  if (!config.curve_keys_path.empty()) {
-    Expected<net::CurveKeyPair> keys = net::ReadCurveKeyFile(config.curve_keys_path);
-    if (!keys.ok()) {
-      return cli::UsageError(
-          app, (enroll.empty() ? "--curve-keys: " : "--enroll: ") + keys.status().ToString());
-    }
-    options.trusted_key = keys->public_key_z85;
-  }
-  if (Status s = options.Check(); !s.ok()) return cli::UsageError(app, s.message());
-  ST_LOG(kInfo) << "discovery: listening for the site's beacon on UDP port " << options.port
-                << (options.enrolling ? " (no site key yet: a site that accepts new units)" : "");
-  Expected<net::SiteBeacon> found = net::DiscoverSite(options, &g_stop);
-  if (!found.ok()) {
-    if (g_stop) return 0;
-    std::cerr << "sandtable-node: " << found.status().message() << "\n";
-    return cli::kExitFailure;
-  }
-  ST_LOG(kInfo) << "discovery: site " << found->site << " at " << found->host << " ("
-                << (options.enrolling          ? "accepts new units"
-                    : found->curve_key.empty() ? "open"
-                                               : "CURVE key trusted")
-                << ")";
-  if (options.enrolling) {
-    net::EnrollmentClientOptions ask;
-    ask.endpoint = found->EnrollEndpoint();
-    ask.site_public_key = found->curve_key;
-    ask.key_file = enroll;
-    ask.node_id = config.id;
-    Expected<net::CurveKeyPair> site = net::EnrollWithSite(
-        ask, &g_stop, [](const std::string& line) { ST_LOG(kWarning) << line; });
-    if (!site.ok()) {
-      if (g_stop) return 0;
-      std::cerr << "sandtable-node: " << site.status().message() << "\n";
-      return cli::kExitFailure;
-    }
-    config.curve_keys_path = enroll;
-  }
-  config.coordinator_requests = found->RequestsEndpoint();
-  config.coordinator_events = found->EventsEndpoint();
-  config.enroll_keys_path.clear();  // done: the site's key file is curve_keys_path now
-  return std::nullopt;
-}
 
 }  // namespace
 
@@ -162,19 +100,21 @@ static int Run(int argc, char** argv) {
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
 
+  // A bad flag or file is a usage error (2); anything else stops the node (1).
+  auto fail = [&](const Status& s) {
+    if (s.code() == StatusCode::kInvalidArgument) return cli::UsageError(app, s.message());
+    std::cerr << "sandtable-node: " << s.message() << "\n";
+    return cli::kExitFailure;
+  };
   if (config.coordinator_requests == node::kDiscover) {
-    if (std::optional<int> exit = Discover(app, config)) return *exit;
+    const Status found = node::DiscoverCoordinator(config, &g_stop);
+    if (g_stop) return 0;
+    if (!found.ok()) return fail(found);
   }
   Expected<std::unique_ptr<node::NodeApp>> node = node::NodeApp::Create(
       std::move(config),
       [](const report::ReportLine& line) { report::WriteReportLine(std::cout, line); });
-  if (!node.ok()) {
-    if (node.status().code() == StatusCode::kInvalidArgument) {
-      return cli::UsageError(app, node.status().message());
-    }
-    std::cerr << "sandtable-node: " << node.status().message() << "\n";
-    return cli::kExitFailure;
-  }
+  if (!node.ok()) return fail(node.status());
   return (*node)->Run(g_stop) == 0 ? 0 : cli::kExitFailure;
 }
 

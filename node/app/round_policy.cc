@@ -19,6 +19,30 @@ RoundDecision Decide(RoundAction action, std::string why, bool transient = false
 
 std::string Unit(NodeId id) { return "unit " + std::to_string(id); }
 
+wire::CalibrationState StateOf(const RoundView& v, NodeId id) {
+  for (const RoundMember& m : v.members) {
+    if (m.id == id) return m.state;
+  }
+  return wire::CALIBRATION_STATE_UNSPECIFIED;
+}
+
+// Members that were not in the last round, or left it and are back, linked, without a
+// calibration; a member whose saved calibration held its check is not joining.
+std::vector<NodeId> JoiningMembers(const RoundView& v, const std::vector<NodeId>& ids) {
+  std::vector<NodeId> joining;
+  for (NodeId m : ids) {
+    const bool new_member = !Contains(v.last_round_members, m);
+    const bool came_back = v.departed.count(m) &&
+                           StateOf(v, m) != wire::CALIBRATION_STATE_CALIBRATED &&
+                           std::any_of(v.members.begin(), v.members.end(),
+                                       [&](const RoundMember& r) { return r.id == m && r.linked; });
+    if ((new_member || came_back) && StateOf(v, m) != wire::CALIBRATION_STATE_VERIFIED) {
+      joining.push_back(m);
+    }
+  }
+  return joining;
+}
+
 }  // namespace
 
 Status RoundPolicyOptions::Check() const {
@@ -52,12 +76,6 @@ RoundDecision DecideRound(const RoundView& v, const RoundPolicyOptions& options)
   if (v.members.empty()) return Decide(RoundAction::kNone, "no member has a projector and camera");
   std::vector<NodeId> ids;
   for (const RoundMember& m : v.members) ids.push_back(m.id);
-  auto state_of = [&](NodeId id) {
-    for (const RoundMember& m : v.members) {
-      if (m.id == id) return m.state;
-    }
-    return wire::CALIBRATION_STATE_UNSPECIFIED;
-  };
   const bool lowest = ids.front() == v.self;
   const bool site_runner = v.ran_round && v.holds_site_solution;
   // Who decides for a unit calibrated by another runner: that runner while it is a member.
@@ -111,17 +129,7 @@ RoundDecision DecideRound(const RoundView& v, const RoundPolicyOptions& options)
       out.why = "the site's runner (" + Unit(v.calibrated_by) +
                 ") left and units joined; calibrating all again";
     } else {
-      for (NodeId m : ids) {
-        const bool new_member = !Contains(v.last_round_members, m);
-        // Left out of the last round because it left, back without a calibration.
-        const bool came_back =
-            v.departed.count(m) && state_of(m) != wire::CALIBRATION_STATE_CALIBRATED &&
-            std::any_of(v.members.begin(), v.members.end(),
-                        [&](const RoundMember& r) { return r.id == m && r.linked; });
-        if ((new_member || came_back) && state_of(m) != wire::CALIBRATION_STATE_VERIFIED) {
-          joining.push_back(m);
-        }
-      }
+      joining = JoiningMembers(v, ids);
       if (joining.empty()) {
         out.action = RoundAction::kNone;
         out.why = "every member was in the last round";

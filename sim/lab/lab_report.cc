@@ -32,46 +32,9 @@ json ErrorsJson(const RegistrationErrors& e) {
   return out;
 }
 
-// (The markdown helpers are in lab_report_markdown.cc.)
-}  // namespace
-
-json LabReportJson(const LabResult& r) {
-  json out = {{"format", "sandtable.lab_report"},
-              {"version", 1},
-              {"status", r.status},
-              {"command", r.command},
-              {"seed", r.seed},
-              {"total_s", r.total_s},
-              {"machine", {{"load_average", r.load_average}, {"cores", r.cores}}}};
-  json reasons = json::array();
-  for (const LabReason& reason : r.reasons) {
-    reasons.push_back({{"what", reason.what}, {"detail", reason.detail}});
-  }
-  out["reasons"] = reasons;
-  out["max_rms_mm"] = r.max_rms_mm;
-  json phases = json::array();
-  for (const auto& [name, seconds] : r.phase_seconds) {
-    phases.push_back({{"name", name}, {"seconds", seconds}});
-  }
-  out["phases"] = phases;
-  out["site"] = {{"name", r.site_name},
-                 {"label", r.site_label},
-                 {"units", r.num_units},
-                 {"file", r.site_path}};
-  out["scene"] = {
-      {"label", r.scene_label}, {"file", r.scene_path}, {"triangles", r.scene_triangles}};
-  json processes = json::array();
-  for (const LabProcess& p : r.processes) {
-    processes.push_back({{"name", p.name},
-                         {"pid", p.pid},
-                         {"role", p.role},
-                         {"exit", p.exit_text},
-                         {"cpu_s", p.cpu_s},
-                         {"max_rss_mb", p.max_rss_mb}});
-  }
-  out["processes"] = processes;
-  out["report_lines"] = {{"parsed", r.report_lines}, {"bad", r.bad_report_lines}};
-  if (r.bad_report_lines > 0) out["report_lines"]["last_bad"] = r.last_bad_report_line;
+// report.json's "calibration": the measured registration per site and unit, the
+// self-calibration's own figures, and the lab's join, kill, stall and enrollment checks.
+json CalibrationJson(const LabResult& r) {
   json calibration = {{"source", r.calibration_source}};
   if (r.measured_with_true_placement) calibration["placement"] = "true (the nodes found none)";
   if (r.registration) {
@@ -147,7 +110,68 @@ json LabReportJson(const LabResult& r) {
     for (const auto& [id, why] : r.unit_failures) failures[std::to_string(id)] = why;
     calibration["failures"] = failures;
   }
-  out["calibration"] = calibration;
+  return calibration;
+}
+
+// Why and where the run stopped, with the child that stopped it when one did.
+json FailureJson(const LabFailure& f) {
+  json failure = {{"phase", f.phase}, {"reason", f.reason}};
+  if (!f.child.empty()) {
+    failure["child"] = f.child;
+    failure["role"] = f.role;
+    failure["pid"] = f.pid;
+    failure["exit"] = f.exit_text;
+    failure["exit_code"] = f.exit_code ? json(*f.exit_code) : json(nullptr);
+    failure["signal"] = f.signal ? json(*f.signal) : json(nullptr);
+    failure["signal_name"] = f.signal ? json(SignalName(*f.signal)) : json(nullptr);
+    failure["log"] = f.log_path;
+    failure["log_tail"] = f.log_tail;
+  }
+  return failure;
+}
+
+// (The markdown helpers are in lab_report_markdown.cc.)
+}  // namespace
+
+json LabReportJson(const LabResult& r) {
+  json out = {{"format", "sandtable.lab_report"},
+              {"version", 1},
+              {"status", r.status},
+              {"command", r.command},
+              {"seed", r.seed},
+              {"total_s", r.total_s},
+              {"machine", {{"load_average", r.load_average}, {"cores", r.cores}}}};
+  json reasons = json::array();
+  for (const LabReason& reason : r.reasons) {
+    reasons.push_back({{"what", reason.what}, {"detail", reason.detail}});
+  }
+  out["reasons"] = reasons;
+  out["max_rms_mm"] = r.max_rms_mm;
+  json phases = json::array();
+  for (const auto& [name, seconds] : r.phase_seconds) {
+    phases.push_back({{"name", name}, {"seconds", seconds}});
+  }
+  out["phases"] = phases;
+  out["site"] = {{"name", r.site_name},
+                 {"label", r.site_label},
+                 {"units", r.num_units},
+                 {"file", r.site_path}};
+  out["scene"] = {
+      {"label", r.scene_label}, {"file", r.scene_path}, {"triangles", r.scene_triangles}};
+  json processes = json::array();
+  for (const LabProcess& p : r.processes) {
+    processes.push_back({{"name", p.name},
+                         {"pid", p.pid},
+                         {"role", p.role},
+                         {"exit", p.exit_text},
+                         {"cpu_s", p.cpu_s},
+                         {"max_rss_mb", p.max_rss_mb}});
+  }
+  out["processes"] = processes;
+  out["report_lines"] = {{"parsed", r.report_lines}, {"bad", r.bad_report_lines}};
+  if (r.bad_report_lines > 0) out["report_lines"]["last_bad"] = r.last_bad_report_line;
+  out["calibration"] = CalibrationJson(r);
+  const json& sc = r.self_calibration;
   if (!r.render.empty()) out["render"] = r.render;
   if (!r.photometric.empty()) out["photometric"] = r.photometric;
   if (!r.live.empty()) out["live"] = r.live;
@@ -169,22 +193,7 @@ json LabReportJson(const LabResult& r) {
   out["images"] = {{"top_white", r.top_white_png},
                    {"registration_error", r.heatmap_png},
                    {"registration_error_scale_mm", r.heatmap_scale_mm}};
-  if (r.failure) {
-    const LabFailure& f = *r.failure;
-    json failure = {{"phase", f.phase}, {"reason", f.reason}};
-    if (!f.child.empty()) {
-      failure["child"] = f.child;
-      failure["role"] = f.role;
-      failure["pid"] = f.pid;
-      failure["exit"] = f.exit_text;
-      failure["exit_code"] = f.exit_code ? json(*f.exit_code) : json(nullptr);
-      failure["signal"] = f.signal ? json(*f.signal) : json(nullptr);
-      failure["signal_name"] = f.signal ? json(SignalName(*f.signal)) : json(nullptr);
-      failure["log"] = f.log_path;
-      failure["log_tail"] = f.log_tail;
-    }
-    out["failure"] = failure;
-  }
+  if (r.failure) out["failure"] = FailureJson(*r.failure);
   return out;
 }
 
