@@ -667,8 +667,9 @@ void BlendMarkdown(const LabResult& r, std::ostringstream& md) {
       }
       if (pic.contains("steps_over_1pct")) {
         md << "![where the step exceeds 1 %](" << pic["steps_over_1pct"].get<std::string>()
-           << ")\n*From above, white where the blended white's luminance changes by more than "
-              "1 % over 5 mm, black elsewhere and where no projector lights.*\n\n";
+           << ")\n*From above: the blended white dimmed, in red where its luminance changes by "
+              "more than 1 % between samples 5 mm apart, each projector's true footprint "
+              "outlined; legend and scale bar below the view.*\n\n";
       }
       if (pic.contains("alpha")) {
         md << "\nAlpha masks, each in its own projector's pixels (white: 1, the unit gives full "

@@ -2,6 +2,9 @@
 // views, the grid coincidence and the photometric measure.
 #include "sim/lab/lab_run_internal.h"
 
+#include "common/estimation/footprint.h"
+#include "sim/lab/lab_pictures.h"
+
 namespace sandtable::sim::lab_internal {
 
 Status LabRun::SetPattern(const std::string& pattern) {
@@ -288,7 +291,17 @@ bool LabRun::Blend() {
   };
   write("blend_before_top.png", LuminancePicture(before.view->luminance), "before");
   write("blend_after_top.png", LuminancePicture(after.view->luminance), "after");
-  write("blend_steps_over_1pct.png", measured.over, "steps_over_1pct");
+  std::vector<PictureFootprint> footprints;
+  for (const UnitSpec& unit : inputs_.site.units) {
+    if (!lines_.calibrated.count(unit.id)) continue;
+    footprints.push_back(
+        {static_cast<int>(unit.id),
+         TableFootprint(unit.projector.model, unit.projector.table_from_projector)});
+  }
+  write("blend_steps_over_1pct.png",
+        StepsPicture(LuminancePicture(after.view->luminance), measured.over,
+                     {after.view->area_min_m, after.view->area_max_m}, footprints),
+        "steps_over_1pct");
   for (const auto& [id, line] : lines_.blend) {
     const fs::path alpha = dir / "calibration" / ("blend-" + std::to_string(id) + ".png");
     if (fs::exists(alpha)) {
