@@ -39,6 +39,9 @@ pkg_check_modules(CMARK_GFM REQUIRED IMPORTED_TARGET libcmark-gfm)  # PkgConfig:
 if(SANDTABLE_BUILD_TESTS)
   find_package(GTest REQUIRED)                        # GTest::gtest, GTest::gmock
   find_package(Python3 REQUIRED COMPONENTS Interpreter)  # tests/check_layering.py
+  # The console's browser tests (tests/browser): Node.js runs playwright-core, which drives
+  # Debian's Chromium; both from deploy/install-deps.sh.
+  find_program(SANDTABLE_NODEJS node REQUIRED)
   include(GoogleTest)
 endif()
 if(SANDTABLE_BUILD_BENCHMARKS)

@@ -76,6 +76,7 @@
 #include "coordinator/display/test_pattern_service.h"
 #include "coordinator/membership/coordinator_server.h"
 #include "coordinator/membership/enrollment_command.h"
+#include "coordinator/status/console_actions.h"
 #include "coordinator/status/http_status_server.h"
 #include "coordinator/status/status_service.h"
 #include "coordinator/timeline/timeline_service.h"
@@ -418,6 +419,7 @@ static int Run(int argc, char** argv) {
   std::unique_ptr<coordinator::WandService> wand;
   if (int exit = MakeWand(f, &wand); exit != 0) return exit;
   if (wand) wand->EnablePainting(coordinator::WandPainterOptions{}, &annotations);
+  coordinator::TestPatternService test_patterns;
   std::unique_ptr<coordinator::HttpStatusServer> http;
   std::unique_ptr<coordinator::StatusService> status;
   if (!f.status_address.empty()) {
@@ -429,7 +431,8 @@ static int Run(int argc, char** argv) {
     }
     http = std::move(*started);
     status = std::make_unique<coordinator::StatusService>(
-        http.get(), coordinator::StatusSources{&annotations, timeline.get(), wand.get()});
+        http.get(),
+        coordinator::StatusSources{&annotations, timeline.get(), wand.get(), &test_patterns});
   }
 
   struct sigaction action {};
@@ -439,7 +442,6 @@ static int Run(int argc, char** argv) {
 
   coordinator::CoordinatorServer server(f.options);
   server.AddService(&annotations);
-  coordinator::TestPatternService test_patterns;
   server.AddService(&test_patterns);
   if (timeline) server.AddService(timeline.get());
   if (wand) server.AddService(wand.get());
@@ -462,6 +464,10 @@ static int Run(int argc, char** argv) {
   if (http) {
     http->Publish(status->BuildJson(server));  // served before the first step
     ready.status = http->url();
+    // The console's actions go to the requests socket like any operator's requests.
+    auto actions =
+        std::make_shared<coordinator::ConsoleActions>(server.request_endpoint(), f.options.curve);
+    http->SetActionHandler([actions](const std::string& body) { return actions->Handle(body); });
   }
   report::WriteReportLine(std::cout, ready);
   Status ran = server.Run(g_stop);

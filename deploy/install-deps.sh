@@ -31,6 +31,9 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox python3
   # sites across hosts: network namespaces, veth, sockets' backlogs (ip, ss)
   iproute2
+  # the operator console's browser tests (tests/browser): headless Chromium, a font for its
+  # screenshots; Node.js and npm are added below when no node is installed
+  chromium fonts-dejavu-core
   # the rollout's test (tests/deploy): a systemd, an sshd and a system bus on each namespace host
   openssh-server dbus systemd
 )
@@ -41,16 +44,30 @@ for p in "${PACKAGES[@]}"; do
     missing+=("$p")
   fi
 done
-
-if [ ${#missing[@]} -eq 0 ]; then
-  echo "install-deps: all ${#PACKAGES[@]} packages present"
-  exit 0
+# Node.js for the browser tests: Debian's nodejs and npm, unless a node is already installed
+# (another distribution of it, e.g. with its own npm).
+if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+  missing+=(nodejs npm)
 fi
 
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
-echo "install-deps: installing ${#missing[@]} packages: ${missing[*]}"
-export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -q
-$SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#PACKAGES[@]} packages present"
+else
+  echo "install-deps: installing ${#missing[@]} packages: ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -q
+  $SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
+fi
+
+# The browser tests' npm packages (tests/browser/package-lock.json: playwright-core, which
+# drives the Chromium above), installed once and again when the lock file changes.
+browser_dir="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/tests/browser"
+stamp="$browser_dir/node_modules/.sandtable-lock"
+if ! cmp -s "$browser_dir/package-lock.json" "$stamp" 2>/dev/null; then
+  echo "install-deps: npm packages for tests/browser"
+  (cd "$browser_dir" && npm ci --no-audit --no-fund --loglevel=error)
+  cp "$browser_dir/package-lock.json" "$stamp"
+fi
 echo "install-deps: done"

@@ -18,6 +18,7 @@ constexpr uint32_t kWorldSenderId = 0xFFFFFFF1u;
 constexpr uint32_t kLabSenderId = 0xFFFFFFF2u;
 constexpr uint32_t kLabPainterSenderId = 0xFFFFFFF3u;  // the lab's annotation client (chaos)
 constexpr uint32_t kOperatorSenderId = 0xFFFFFFF4u;    // an operator's command (enrollment)
+constexpr uint32_t kConsoleSenderId = 0xFFFFFFF5u;     // the coordinator's browser console
 constexpr bool IsValidNodeId(NodeId id) { return id < kFirstReservedSenderId; }
 
 // A projector within a site; today equal to its unit's NodeId.

@@ -319,6 +319,8 @@ void CoordinatorServer::HandleRequest(net::Incoming request) {
       }
       break;
     }
+    case wire::Envelope::kUnitStatus:
+      return;  // for the console (StatusService); without one, nobody reads it: no reply
     case wire::Envelope::kTimeRequest: {
       auto* time = reply.mutable_time_reply();
       time->set_t0_client_send_ns(in.time_request().t0_client_send_ns());

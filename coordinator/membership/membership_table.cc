@@ -180,4 +180,15 @@ wire::MemberList MembershipTable::ToWire() const {
   return list;
 }
 
+bool MembershipTable::IsMemberConnection(NodeId id, const std::string& routing_id) const {
+  auto it = members_.find(id);
+  return it != members_.end() && it->second.routing_id == routing_id;
+}
+
+std::optional<Clock::time_point> MembershipTable::LastHeard(NodeId id) const {
+  auto it = members_.find(id);
+  if (it == members_.end()) return std::nullopt;
+  return it->second.last_heard;
+}
+
 }  // namespace sandtable::coordinator

@@ -23,6 +23,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -89,6 +90,11 @@ class MembershipTable {
   std::vector<NodeId> ExpireSilent(Clock::time_point now);
 
   bool Contains(NodeId id) const { return members_.count(id) > 0; }
+  // True when `id` is a member whose connection is `routing_id` (a message from it is the
+  // member's own, not another client's claim).
+  bool IsMemberConnection(NodeId id, const std::string& routing_id) const;
+  // When the member was last heard (Hello or heartbeat); nullopt for a non-member.
+  std::optional<Clock::time_point> LastHeard(NodeId id) const;
   size_t size() const { return members_.size(); }
   uint64_t version() const { return version_; }
   const MembershipOptions& options() const { return options_; }

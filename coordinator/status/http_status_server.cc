@@ -17,11 +17,12 @@
 
 #include "common/base/file_io.h"
 #include "common/base/log.h"
+#include "coordinator/console/assets.h"
 
 namespace sandtable::coordinator {
 namespace {
 
-constexpr size_t kMaxPayloadBytes = 64 * 1024;  // bodies are never read; refuse big ones early
+constexpr size_t kMaxPayloadBytes = 64 * 1024;  // actions are small JSON; refuse big ones early
 constexpr auto kStartDeadline = std::chrono::seconds(5);
 const char* const kText = "text/plain; charset=utf-8";
 
@@ -62,16 +63,52 @@ void SocketOptions(int fd) {
 std::string ErrorBody(int status) {
   switch (status) {
     case 404:
-      return "not found: try GET /status\n";
+      return "not found: try GET / (the console) or GET /status\n";
     case 405:
-      return "only GET /status\n";
+      return "method not allowed here (see the Allow header)\n";
     case 413:
       return "request body too large\n";
     case 401:
-      return "unauthorized: send Authorization: Bearer TOKEN\n";
+      return "unauthorized: send Authorization: Bearer TOKEN (the site's operator token)\n";
+    case 403:
+      return "the console is read-only: the coordinator has no operator token "
+             "(--status-token-file)\n";
+    case 503:
+      return "too many live streams open; close a console tab\n";
     default:
-      return "bad request: not an HTTP/1.x request for GET /status\n";
+      return "bad request: not an HTTP/1.x request\n";
   }
+}
+
+// The paths served, and the methods each allows.
+enum class Access { kPublic, kRead, kAction };
+struct Route {
+  const char* path;
+  Access access;
+  const char* allow;
+};
+constexpr Route kRoutes[] = {
+    {"/", Access::kPublic, "GET, HEAD"},
+    {"/console.js", Access::kPublic, "GET, HEAD"},
+    {"/console.css", Access::kPublic, "GET, HEAD"},
+    {"/status", Access::kRead, "GET, HEAD"},
+    {"/events", Access::kRead, "GET"},
+    {"/api/action", Access::kAction, "POST"},
+};
+
+const Route* FindRoute(const std::string& path) {
+  for (const Route& r : kRoutes) {
+    if (path == r.path) return &r;
+  }
+  return nullptr;
+}
+
+bool Allows(const Route& route, const std::string& method) {
+  const std::string allow = route.allow;
+  return method == "GET"    ? allow.find("GET") != std::string::npos
+         : method == "HEAD" ? allow.find("HEAD") != std::string::npos
+         : method == "POST" ? allow == "POST"
+                            : false;
 }
 
 // Compares without an early exit, so the time taken does not tell how much of a guess matched.
@@ -147,8 +184,11 @@ Status HttpStatusOptions::Check() const {
   if (worker_threads < 1 || worker_threads > 256) {
     return InvalidArgumentError("status: worker_threads must be in [1, 256]");
   }
-  if (read_timeout.count() <= 0 || write_timeout.count() <= 0) {
-    return InvalidArgumentError("status: read_timeout and write_timeout must be > 0");
+  if (read_timeout.count() <= 0 || write_timeout.count() <= 0 || keep_alive.count() <= 0) {
+    return InvalidArgumentError("status: read_timeout, write_timeout and keep_alive must be > 0");
+  }
+  if (max_streams < 0 || max_streams >= worker_threads) {
+    return InvalidArgumentError("status: max_streams must be in [0, worker_threads)");
   }
   return OkStatus();
 }
@@ -213,61 +253,19 @@ Expected<std::unique_ptr<HttpStatusServer>> HttpStatusServer::Start(const std::s
     return UnavailableError("status: cannot set the listen backlog of " + parsed->host + ":" +
                             std::to_string(port) + " to " + std::to_string(kListenBacklog));
   }
-  return std::unique_ptr<HttpStatusServer>(new HttpStatusServer(
-      std::move(server), parsed->host, static_cast<uint16_t>(port), std::move(options.token)));
+  return std::unique_ptr<HttpStatusServer>(
+      new HttpStatusServer(std::move(server), parsed->host, static_cast<uint16_t>(port), options));
 }
 
 HttpStatusServer::HttpStatusServer(std::unique_ptr<httplib::Server> server, std::string host,
-                                   uint16_t port, std::string token)
-    : server_(std::move(server)), host_(std::move(host)), port_(port), token_(std::move(token)) {
-  // Routing of its own before httplib's: the path decides 404 before the method decides 405,
-  // and a target that is not a path is a bad request.
-  server_->set_pre_routing_handler(
-      [this](const httplib::Request& request, httplib::Response& response) {
-        using Result = httplib::Server::HandlerResponse;
-        if (!token_.empty() &&
-            !SameToken(request.get_header_value("Authorization"), "Bearer " + token_)) {
-          response.status = 401;
-          response.set_header("WWW-Authenticate", "Bearer");
-          return Result::Handled;
-        }
-        if (request.path.empty() || request.path.front() != '/') {
-          response.status = 400;
-          return Result::Handled;
-        }
-        if (request.path != "/status") {
-          response.status = 404;
-          return Result::Handled;
-        }
-        if (request.method != "GET" && request.method != "HEAD") {
-          response.status = 405;
-          response.set_header("Allow", "GET, HEAD");
-          return Result::Handled;
-        }
-        return Result::Unhandled;
-      });
-  server_->Get("/status", [this](const httplib::Request&, httplib::Response& response) {
-    ++counters_.ok;
-    response.set_content(Document() + "\n", "application/json");
-  });
-  // Every answer >= 400 (ours above, and httplib's for requests it cannot parse) passes here.
-  server_->set_error_handler(httplib::Server::HandlerWithResponse(
-      [this](const httplib::Request&, httplib::Response& response) {
-        if (response.status == 404) {
-          ++counters_.not_found;
-        } else if (response.status == 401) {
-          ++counters_.unauthorized;
-        } else {
-          ++counters_.bad_request;
-        }
-        response.set_content(ErrorBody(response.status), kText);
-        return httplib::Server::HandlerResponse::Handled;
-      }));
-  server_->set_exception_handler(
-      [](const httplib::Request&, httplib::Response& response, std::exception_ptr) {
-        response.status = 500;
-        response.set_content("internal error\n", kText);
-      });
+                                   uint16_t port, const HttpStatusOptions& options)
+    : server_(std::move(server)),
+      host_(std::move(host)),
+      port_(port),
+      token_(options.token),
+      max_streams_(options.max_streams),
+      keep_alive_(options.keep_alive) {
+  AddRoutes();
   thread_ = std::thread([this] {
     if (!server_->listen_after_bind()) ST_LOG(kWarning) << "status: the server stopped early";
   });
@@ -283,7 +281,146 @@ HttpStatusServer::HttpStatusServer(std::unique_ptr<httplib::Server> server, std:
   }
 }
 
+void HttpStatusServer::AddRoutes() {
+  // Routing of its own before httplib's: the path decides 404 before the method decides 405,
+  // a target that is not a path is a bad request, and access is decided per route.
+  server_->set_pre_routing_handler([this](const httplib::Request& request,
+                                          httplib::Response& response) {
+    using Result = httplib::Server::HandlerResponse;
+    if (request.path.empty() || request.path.front() != '/') {
+      response.status = 400;
+      return Result::Handled;
+    }
+    const Route* route = FindRoute(request.path);
+    const bool has_token =
+        !token_.empty() && SameToken(request.get_header_value("Authorization"), "Bearer " + token_);
+    const bool loopback = request.remote_addr.rfind("127.", 0) == 0;
+    if (route == nullptr) {
+      // Nothing here to find for a client that may not read the site.
+      response.status = has_token || loopback ? 404 : 401;
+    } else if (!Allows(*route, request.method)) {
+      response.status = 405;
+      response.set_header("Allow", route->allow);
+    } else if (route->access == Access::kRead && !has_token && !loopback) {
+      response.status = 401;
+    } else if (route->access == Access::kAction && !has_token) {
+      response.status = token_.empty() ? 403 : 401;
+    } else {
+      return Result::Unhandled;
+    }
+    if (response.status == 401) response.set_header("WWW-Authenticate", "Bearer");
+    return Result::Handled;
+  });
+  server_->Get("/status", [this](const httplib::Request&, httplib::Response& response) {
+    ++counters_.ok;
+    response.set_content(Document() + "\n", "application/json");
+  });
+  server_->Get("/", [this](const httplib::Request&, httplib::Response& response) {
+    ++counters_.ok;
+    response.set_content(console::kIndexHtml, "text/html; charset=utf-8");
+  });
+  server_->Get("/console.js", [this](const httplib::Request&, httplib::Response& response) {
+    ++counters_.ok;
+    response.set_content(console::kConsoleJs, "text/javascript; charset=utf-8");
+  });
+  server_->Get("/console.css", [this](const httplib::Request&, httplib::Response& response) {
+    ++counters_.ok;
+    response.set_content(console::kConsoleCss, "text/css; charset=utf-8");
+  });
+  server_->Get("/events", [this](const httplib::Request&, httplib::Response& response) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (open_streams_ >= max_streams_) {
+        response.status = 503;
+        return;
+      }
+      ++open_streams_;
+    }
+    ++counters_.streams;
+    auto last = std::make_shared<uint64_t>(0);
+    response.set_header("X-Accel-Buffering", "no");
+    response.set_chunked_content_provider(
+        "text/event-stream",
+        [this, last](size_t, httplib::DataSink& sink) {
+          std::string chunk;
+          if (!StreamNext(last.get(), &chunk)) {
+            sink.done();
+            return true;
+          }
+          return sink.write(chunk.data(), chunk.size());
+        },
+        [this](bool) {
+          std::lock_guard<std::mutex> lock(mutex_);
+          --open_streams_;
+        });
+  });
+  server_->Post("/api/action",
+                [this](const httplib::Request& request, httplib::Response& response) {
+                  ++counters_.actions;
+                  const ActionResult result = Act(request.body);
+                  response.status = result.http_status;
+                  response.set_content(result.json + "\n", "application/json");
+                });
+  // Every answer >= 400 (ours above, and httplib's for requests it cannot parse) passes here;
+  // an action's own answer (a JSON body saying why) is kept.
+  server_->set_error_handler(httplib::Server::HandlerWithResponse(
+      [this](const httplib::Request&, httplib::Response& response) {
+        if (response.status == 404) {
+          ++counters_.not_found;
+        } else if (response.status == 401) {
+          ++counters_.unauthorized;
+        } else {
+          ++counters_.bad_request;
+        }
+        if (response.get_header_value("Content-Type") == "application/json") {
+          return httplib::Server::HandlerResponse::Unhandled;
+        }
+        response.set_content(ErrorBody(response.status), kText);
+        return httplib::Server::HandlerResponse::Handled;
+      }));
+  server_->set_exception_handler(
+      [](const httplib::Request&, httplib::Response& response, std::exception_ptr) {
+        response.status = 500;
+        response.set_content("internal error\n", kText);
+      });
+}
+
+// The next chunk of a stream: the document when it changed since `last_version`, else a
+// comment line after keep_alive (so a dead client is noticed). False when the server stops.
+bool HttpStatusServer::StreamNext(uint64_t* last_version, std::string* out) {
+  std::unique_lock<std::mutex> lock(mutex_);
+  changed_.wait_for(lock, keep_alive_, [&] { return stopping_ || version_ != *last_version; });
+  if (stopping_) return false;
+  if (version_ == *last_version) {
+    *out = ": nothing new\n\n";
+    return true;
+  }
+  *last_version = version_;
+  *out = "data: " + document_ + "\n\n";
+  return true;
+}
+
+ActionResult HttpStatusServer::Act(const std::string& body) {
+  ActionHandler handler;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    handler = action_handler_;
+  }
+  if (!handler) return {503, R"({"ok":false,"message":"actions are not served yet"})"};
+  return handler(body);
+}
+
+void HttpStatusServer::SetActionHandler(ActionHandler handler) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  action_handler_ = std::move(handler);
+}
+
 HttpStatusServer::~HttpStatusServer() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+  }
+  changed_.notify_all();
   server_->stop();
   if (thread_.joinable()) thread_.join();
 }
@@ -293,8 +430,12 @@ std::string HttpStatusServer::url() const {
 }
 
 void HttpStatusServer::Publish(std::string json) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  document_ = std::move(json);
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    document_ = std::move(json);
+    ++version_;
+  }
+  changed_.notify_all();
 }
 
 std::string HttpStatusServer::Document() {

@@ -3,6 +3,7 @@
 #include <nlohmann/json.hpp>
 
 #include "common/base/check.h"
+#include "common/base/log.h"
 #include "proto/envelope_stamper.h"
 
 namespace sandtable::coordinator {
@@ -13,8 +14,16 @@ StatusService::StatusService(HttpStatusServer* http, StatusSources sources,
   ST_CHECK(http_ != nullptr) << "StatusService needs a started HttpStatusServer";
 }
 
+void StatusService::OnRequest(net::Incoming request, CoordinatorServer& server) {
+  const wire::Envelope& in = request.envelope;
+  Status kept = board_.Update(in.sender_id(), request.routing_id, in.unit_status(),
+                              server.members(), std::chrono::steady_clock::now());
+  if (!kept.ok()) ST_LOG(kDebug) << "unit status refused: " << kept.message();
+}
+
 Status StatusService::OnStep(CoordinatorServer& server) {
   const auto now = std::chrono::steady_clock::now();
+  board_.Sweep(server.members(), now);
   if (last_ != std::chrono::steady_clock::time_point{} && now - last_ < refresh_period_) {
     return OkStatus();
   }
@@ -23,9 +32,10 @@ Status StatusService::OnStep(CoordinatorServer& server) {
   return OkStatus();
 }
 
-std::string StatusService::BuildJson(const CoordinatorServer& server) const {
+std::string StatusService::BuildJson(CoordinatorServer& server) {
   using nlohmann::json;
   const int64_t now_ns = proto::SteadyNowNs();
+  const auto clock_now = std::chrono::steady_clock::now();
   json doc;
   doc["time_ns"] = now_ns;
   const wire::MemberList list = server.members().ToWire();
@@ -36,9 +46,38 @@ std::string StatusService::BuildJson(const CoordinatorServer& server) const {
                        {"incarnation", m.incarnation()},
                        {"joined_time_ns", m.joined_time_ns()},
                        {"peer_router", m.endpoints().peer_router()},
-                       {"calibration", nullptr}});
+                       {"capabilities",
+                        {{"projector_width_px", m.capabilities().projector_width_px()},
+                         {"projector_height_px", m.capabilities().projector_height_px()},
+                         {"camera_width_px", m.capabilities().camera_width_px()},
+                         {"camera_height_px", m.capabilities().camera_height_px()},
+                         {"projector_output", m.capabilities().projector_output()},
+                         {"camera_input", m.capabilities().camera_input()}}},
+                       {"state", board_.ConsoleState(m.node_id(), server.members(), clock_now)}});
   }
   doc["members"] = std::move(members);
+  doc["units"] = board_.Json(server.members(), clock_now);
+  doc["unit_status_refused"] = board_.refused();
+  if (sources_.patterns != nullptr) {
+    const wire::TestPatternState& p = sources_.patterns->state();
+    json nodes = json::object();
+    for (const auto& [id, pattern] : p.node_patterns()) nodes[std::to_string(id)] = pattern;
+    doc["test_patterns"] = {
+        {"site", p.site_pattern()}, {"nodes", nodes}, {"change_count", p.change_count()}};
+  } else {
+    doc["test_patterns"] = nullptr;
+  }
+  json enrolling = json::array();
+  for (const EnrollingUnit& u : server.enrollment().Units(clock_now)) {
+    enrolling.push_back(
+        {{"fingerprint", u.fingerprint},
+         {"host_name", u.host_name},
+         {"address", u.address},
+         {"node_id", u.node_id},
+         {"waiting_s", std::chrono::duration<double>(clock_now - u.first_asked).count()},
+         {"state", EnrollStateName(u.state)}});
+  }
+  doc["enrollment"] = {{"on", !server.enroll_endpoint().empty()}, {"units", enrolling}};
 
   const proto::MessageCounters& c = server.counters();
   json rejected = json::object();
@@ -108,7 +147,10 @@ std::string StatusService::BuildJson(const CoordinatorServer& server) const {
   const HttpStatusCounters& h = http_->counters();
   doc["http"] = {{"ok", h.ok.load()},
                  {"not_found", h.not_found.load()},
-                 {"bad_request", h.bad_request.load()}};
+                 {"bad_request", h.bad_request.load()},
+                 {"unauthorized", h.unauthorized.load()},
+                 {"actions", h.actions.load()},
+                 {"streams", h.streams.load()}};
   return doc.dump();
 }
 

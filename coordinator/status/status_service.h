@@ -1,21 +1,25 @@
 // StatusService: builds the coordinator's status document on the server thread (every
 // refresh_period, in OnStep) and hands it to an HttpStatusServer, so the HTTP thread never
-// touches coordinator state.
+// touches coordinator state. It also serves the units' unit_status messages (no reply) into a
+// UnitStatusBoard (coordinator/status/unit_status_board.h).
 //
 // Document (JSON): {"time_ns", "members": [{"node_id", "incarnation", "joined_time_ns",
-// "peer_router", "calibration": null}], "member_list_version", "messages": {"accepted",
-// "rejected": {reason: count}, "rejected_total"}, "annotations": {...} or null,
-// "timeline": {...} or null, "tracker": {"state": "replaying" | "finished" | ... |
-// "not_running", "source", "rate_hz", "samples", "poses_published", ...}, "http": {"ok",
-// "not_found", "bad_request"}}. calibration is null: nodes do not report calibration state to the
-// coordinator yet.
+// "peer_router", "capabilities": {...}, "state"}], "units": [UnitStatusBoard::Json],
+// "member_list_version", "messages": {"accepted", "rejected": {reason: count},
+// "rejected_total"}, "annotations": {...} or null, "timeline": {...} or null, "tracker":
+// {"state": "replaying" | "finished" | ... | "not_running", ...}, "test_patterns":
+// {"site", "nodes": {id: pattern}} or null, "enrollment": {"on", "units": [{"fingerprint",
+// "host_name", "address", "node_id", "waiting_s", "state"}]}, "http": {"ok", "not_found",
+// "bad_request", "unauthorized", "actions"}}. docs/console.md.
 #pragma once
 
 #include <chrono>
 
 #include "coordinator/annotations/annotation_service.h"
+#include "coordinator/display/test_pattern_service.h"
 #include "coordinator/membership/coordinator_server.h"
 #include "coordinator/status/http_status_server.h"
+#include "coordinator/status/unit_status_board.h"
 #include "coordinator/timeline/timeline_service.h"
 #include "coordinator/wand/wand_service.h"
 
@@ -25,6 +29,7 @@ struct StatusSources {
   const AnnotationService* annotations = nullptr;  // null: not running
   const TimelineService* timeline = nullptr;
   const WandService* tracker = nullptr;  // null: "tracker": {"state": "not_running"}
+  const TestPatternService* patterns = nullptr;
 };
 
 class StatusService : public CoordinatorService {
@@ -32,18 +37,23 @@ class StatusService : public CoordinatorService {
   StatusService(HttpStatusServer* http, StatusSources sources,
                 std::chrono::milliseconds refresh_period = std::chrono::milliseconds(200));
 
-  bool Serves(wire::Envelope::BodyCase) const override { return false; }
-  void OnRequest(net::Incoming, CoordinatorServer&) override {}
+  bool Serves(wire::Envelope::BodyCase body) const override {
+    return body == wire::Envelope::kUnitStatus;
+  }
+  void OnRequest(net::Incoming request, CoordinatorServer& server) override;
   Status OnStep(CoordinatorServer& server) override;
 
   // The document now (also what OnStep publishes).
-  std::string BuildJson(const CoordinatorServer& server) const;
+  std::string BuildJson(CoordinatorServer& server);
+
+  const UnitStatusBoard& board() const { return board_; }
 
  private:
   HttpStatusServer* http_;
   StatusSources sources_;
   std::chrono::milliseconds refresh_period_;
   std::chrono::steady_clock::time_point last_{};
+  UnitStatusBoard board_;
 };
 
 }  // namespace sandtable::coordinator

@@ -1,5 +1,7 @@
 #include "node/app/node_app.h"
 
+#include <unistd.h>
+
 #include <filesystem>
 #include <system_error>
 #include <utility>
@@ -58,8 +60,24 @@ void ExportAndBlend::OnCalibrated(const SelfCalibrationOutcome& outcome) {
       });
 }
 
+namespace {
+
+std::string HostName() {
+  char name[256] = {};
+  if (::gethostname(name, sizeof(name) - 1) != 0) return "";
+  return name;
+}
+
+}  // namespace
+
 NodeApp::NodeApp(NodeConfig config, LineSink out)
-    : config_(std::move(config)), out_(std::move(out)), options_(config_.RuntimeOptions()) {}
+    : config_(std::move(config)),
+      unit_status_(std::make_unique<UnitStatusService>(HostName())),
+      out_([status = unit_status_.get(), out = std::move(out)](const report::ReportLine& line) {
+        status->OnLine(line);
+        out(line);
+      }),
+      options_(config_.RuntimeOptions()) {}
 
 NodeApp::~NodeApp() = default;
 
@@ -198,6 +216,10 @@ Status NodeApp::StartRenderLoop() {
 Status NodeApp::MakeServices() {
   runtime_ = std::make_unique<NodeRuntime>(options_);
   runtime_->AddService(&events_);
+  runtime_->AddService(unit_status_.get());
+  if (calibration_ && calibration_->table_from_projector) {
+    unit_status_->SetCalibration(*calibration_, std::nullopt);  // held at start (true pose)
+  }
   if (render_loop_) {
     RenderServiceOptions render_service_options;
     render_service_options.sun = config_.sun;
@@ -234,6 +256,7 @@ void NodeApp::MakeSelfCalibration() {
       config_.id, config_.export_dir, &runtime_->workers(),
       [this](const SelfCalibrationOutcome& outcome) {
         calibration_ = outcome.calibration;
+        unit_status_->SetCalibration(outcome.calibration, outcome.overlapping);
         if (!blend_) return;
         if (outcome.site_mpcdi && !config_.export_dir.empty()) {
           blend_->SetSiteMpcdi(outcome.site_mpcdi, config_.export_dir + "/site.mpcdi");

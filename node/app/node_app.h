@@ -32,6 +32,7 @@
 #include "common/scene/scene.h"
 #include "node/app/node_config.h"
 #include "node/app/self_calibration_service.h"
+#include "node/app/unit_status_service.h"
 #include "node/blend/blend_service.h"
 #include "node/devices/device_factory.h"
 #include "node/events/event_state_service.h"
@@ -102,6 +103,8 @@ class NodeApp {
   void WriteExitLines();
 
   NodeConfig config_;
+  // Before out_, which feeds it every line, and before runtime_, which steps it.
+  std::unique_ptr<UnitStatusService> unit_status_;
   LineSink out_;
   NodeOptions options_;
   std::string projector_spec_, camera_spec_;  // --world applied

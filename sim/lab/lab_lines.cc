@@ -18,6 +18,7 @@ void LabLines::Take(const std::string& role, const report::ReportLine& line,
                        if (role != "coordinator") return false;
                        coordinator_requests = l.requests;
                        coordinator_events = l.events;
+                       coordinator_status = l.status;
                        return true;
                      },
                      [&](const report::NodeReady& l) {

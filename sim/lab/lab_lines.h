@@ -24,6 +24,7 @@ struct LabLines {
 
   std::string world_endpoint;
   std::string coordinator_requests, coordinator_events;
+  std::string coordinator_status;  // its status page's URL (empty: not served)
   std::set<NodeId> nodes_ready;
   std::map<NodeId, report::Calibrated> calibrated;  // each unit's last calibrated line
   std::map<NodeId, std::chrono::steady_clock::time_point> calibrated_at;  // ... and when

@@ -190,6 +190,7 @@ json LabReportJson(const LabResult& r) {
     }
     out["registration"] = registration;
   }
+  if (!r.console_url.empty()) out["console"] = r.console_url;
   out["images"] = {{"top_white", r.top_white_png},
                    {"registration_error", r.heatmap_png},
                    {"registration_error_scale_mm", r.heatmap_scale_mm}};

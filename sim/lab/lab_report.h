@@ -84,6 +84,7 @@ struct LabResult {
   std::optional<RegistrationReport> registration;
   RegistrationMetricOptions metric_options;
   std::string top_white_png, heatmap_png;  // relative; empty when not made
+  std::string console_url;                 // the site's console while the run lasted
   double heatmap_scale_mm = 0.0;
   std::optional<LabFailure> failure;
   // A completed run's verdict (status "failed" when any): first in report.md, "reasons" in

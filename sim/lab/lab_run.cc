@@ -2,12 +2,42 @@
 
 #include "sim/lab/lab_run_internal.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <cstdio>
 #include <cstdlib>
 #include <thread>
 
 namespace sandtable::sim {
 namespace lab_internal {
+namespace {
+
+// A fresh operator token for the run's console: 32 hex characters from /dev/urandom in a file
+// only its owner reads (as the coordinator requires).
+Status WriteConsoleToken(const std::string& path) {
+  unsigned char bytes[16];
+  std::FILE* random = std::fopen("/dev/urandom", "rb");
+  const bool read =
+      random != nullptr && std::fread(bytes, 1, sizeof(bytes), random) == sizeof(bytes);
+  if (random != nullptr) std::fclose(random);
+  if (!read) return IoError("console token: cannot read /dev/urandom");
+  std::string token;
+  for (unsigned char b : bytes) {
+    static const char kHex[] = "0123456789abcdef";
+    token += kHex[b >> 4];
+    token += kHex[b & 15];
+  }
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+  if (fd < 0) return IoError("console token: cannot write " + path);
+  token += "\n";
+  const bool written =
+      ::write(fd, token.data(), token.size()) == static_cast<ssize_t>(token.size());
+  ::close(fd);
+  return written ? OkStatus() : IoError("console token: cannot write " + path);
+}
+
+}  // namespace
 
 int LabRun::Run() {
   result_.command = options_.command_line;
@@ -53,6 +83,15 @@ int LabRun::Prepare() {
     }
     curve_keys_path_ = key_path;
     site_keys_ = *keys;
+  }
+  if (!hosts_) {
+    const std::string token_path = fs::absolute(fs::path(options_.out_dir) / "console.token");
+    if (Status written = WriteConsoleToken(token_path); !written.ok()) {
+      progress_.End("failed");
+      err_ << "sandtable-lab run: " << written.ToString() << "\n";
+      return kExitFailure;
+    }
+    console_token_path_ = token_path;
   }
   // The personnel tracks the coordinator replays and the nodes draw (docs/render.md).
   tracks_path_ = fs::absolute(fs::path(options_.out_dir) / "tracks.csv").string();
@@ -147,6 +186,11 @@ std::vector<std::string> LabRun::CoordinatorArgs(const std::string& requests,
     argv.insert(argv.end(),
                 {"--annotations", fs::absolute(fs::path(options_.out_dir) / "annotations.db")});
   }
+  if (!hosts_ && !console_token_path_.empty()) {
+    // The operator's console on loopback (docs/console.md); its token for actions.
+    argv.insert(argv.end(),
+                {"--status", "127.0.0.1:0", "--status-token-file", console_token_path_});
+  }
   if (hosts_) {
     argv.insert(argv.end(),
                 {"--beacon", std::to_string(kLabDiscoveryPort), "--site-name", kLabSiteName});
@@ -164,12 +208,33 @@ bool LabRun::StartCoordinator() {
              : CoordinatorArgs("tcp://127.0.0.1:*", "tcp://127.0.0.1:*");
   ChildProcess* coordinator = StartChild("coordinator", "coordinator", argv);
   if (!coordinator) return false;
-  return Wait(
+  const bool ready = Wait(
       "start coordinator", [&] { return !lines_.coordinator_events.empty(); },
       ToMs(options_.start_timeout_s),
       "sandtable-coordinator printed no readiness line "
       "{\"ready\":\"sandtable-coordinator\",\"requests\":..,\"events\":..} on stdout",
       coordinator);
+  if (ready) WriteConsoleFile();
+  return ready;
+}
+
+// OUT/console.json: where the site's console is while the run lasts, and its token's file.
+void LabRun::WriteConsoleFile() {
+  const std::string& status = lines_.coordinator_status;
+  const std::string suffix = "/status";
+  if (status.size() <= suffix.size() || status.rfind(suffix) != status.size() - suffix.size()) {
+    return;
+  }
+  result_.console_url = status.substr(0, status.size() - suffix.size()) + "/";
+  const nlohmann::json console = {
+      {"url", result_.console_url}, {"status", status}, {"token_file", console_token_path_}};
+  const fs::path path = fs::path(options_.out_dir) / "console.json";
+  if (Status written = WriteFileAtomically(path, console.dump(2) + "\n"); !written.ok()) {
+    ST_LOG(kWarning) << "console: " << written.ToString();
+    return;
+  }
+  ST_LOG(kInfo) << "console: " << result_.console_url << " while the run lasts (operator token in "
+                << console_token_path_ << ")";
 }
 
 bool LabRun::Late(NodeId id) const {

@@ -141,6 +141,7 @@ class LabRun {
   bool Chaos() const { return options_.annotate || options_.kill_coordinator_at_s >= 0; }
 
   bool StartCoordinator();
+  void WriteConsoleFile();
 
   bool Late(NodeId id) const;
   int HeartbeatMs() const;
@@ -325,7 +326,8 @@ class LabRun {
   Scene scene_;
   LabResult result_;
   std::string world_bin_, coordinator_bin_, node_bin_;
-  std::string curve_keys_path_;  // --curve: the run's site key file
+  std::string curve_keys_path_;     // --curve: the run's site key file
+  std::string console_token_path_;  // the console's operator token (local runs)
   std::optional<net::CurveKeyPair> site_keys_;
   std::string tracks_path_;
   LabLines lines_;  // what the children reported

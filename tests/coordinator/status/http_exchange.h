@@ -16,19 +16,22 @@ namespace sandtable::testing {
 
 constexpr std::chrono::milliseconds kHttpDeadline{5000};
 
-// A TCP connection to 127.0.0.1:port (-1 on failure).
-inline int ConnectLoopback(uint16_t port) {
+// A TCP connection to host:port (IPv4; -1 on failure).
+inline int ConnectTo(const std::string& host, uint16_t port) {
   const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
   sockaddr_in addr{};
   addr.sin_family = AF_INET;
   addr.sin_port = htons(port);
-  ::inet_pton(AF_INET, "127.0.0.1", &addr.sin_addr);
+  ::inet_pton(AF_INET, host.c_str(), &addr.sin_addr);
   if (::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
     ::close(fd);
     return -1;
   }
   return fd;
 }
+
+// A TCP connection to 127.0.0.1:port (-1 on failure).
+inline int ConnectLoopback(uint16_t port) { return ConnectTo("127.0.0.1", port); }
 
 // True when the server closes `fd` (EOF or reset) within `deadline`; what it sent is dropped.
 inline bool ClosedByServerWithin(int fd, std::chrono::milliseconds deadline) {
@@ -44,8 +47,11 @@ inline bool ClosedByServerWithin(int fd, std::chrono::milliseconds deadline) {
 
 // Sends `request` to 127.0.0.1:port and returns everything received until the server closes
 // (empty on connection failure or deadline).
-inline std::string HttpExchange(uint16_t port, const std::string& request) {
-  const int fd = ConnectLoopback(port);
+// With `until_seen`, stops as soon as that text has arrived (a stream the server keeps open).
+inline std::string HttpExchange(uint16_t port, const std::string& request,
+                                const std::string& host = "127.0.0.1",
+                                const std::string& until_seen = "") {
+  const int fd = ConnectTo(host, port);
   if (fd < 0) return {};
   if (!request.empty()) (void)::send(fd, request.data(), request.size(), MSG_NOSIGNAL);
   std::string response;
@@ -57,6 +63,7 @@ inline std::string HttpExchange(uint16_t port, const std::string& request) {
     const ssize_t n = ::recv(fd, buffer, sizeof(buffer), 0);
     if (n <= 0) break;
     response.append(buffer, static_cast<size_t>(n));
+    if (!until_seen.empty() && response.find(until_seen) != std::string::npos) break;
   }
   ::close(fd);
   return response;

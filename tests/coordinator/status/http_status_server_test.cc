@@ -1,5 +1,6 @@
 // HttpStatusServer over real sockets, in process: answers, malformed requests, bad addresses,
 // and clients served concurrently (held-open and slow clients do not block the page).
+#include <ifaddrs.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -31,6 +32,7 @@ constexpr int kHeldOpenClients = 4;
 
 using testing::Body;
 using testing::ClosedByServerWithin;
+using testing::ConnectLoopback;
 using testing::HttpExchange;
 using testing::StatusLine;
 
@@ -53,7 +55,7 @@ TEST(HttpStatusServerTest, AnswersGetStatusAndRefusesEverythingElse) {
             "HTTP/1.1 200 OK");
   EXPECT_EQ(StatusLine(HttpExchange(http.port(), "GET /metrics HTTP/1.1\r\n\r\n")),
             "HTTP/1.1 404 Not Found");
-  r = HttpExchange(http.port(), "POST /status HTTP/1.1\r\n\r\n");
+  r = HttpExchange(http.port(), "POST /status HTTP/1.1\r\nContent-Length: 0\r\n\r\n");
   EXPECT_EQ(StatusLine(r), "HTTP/1.1 405 Method Not Allowed");
   EXPECT_NE(r.find("Allow: GET, HEAD"), std::string::npos) << r;
   r = HttpExchange(http.port(), "HEAD /status HTTP/1.1\r\n\r\n");
@@ -173,35 +175,160 @@ TEST(HttpStatusServerTest, FiftyHeldOpenAndEightSlowClientsDoNotDelayARealReques
   }
 }
 
-TEST(HttpStatusServerTest, TokenIsRequiredWhenSetAndBeyondLoopbackNeedsOne) {
+// This host's first IPv4 address that is not loopback ("" when it has none).
+std::string NonLoopbackAddress() {
+  ifaddrs* list = nullptr;
+  if (::getifaddrs(&list) != 0) return "";
+  std::string found;
+  for (ifaddrs* a = list; a != nullptr && found.empty(); a = a->ifa_next) {
+    if (a->ifa_addr == nullptr || a->ifa_addr->sa_family != AF_INET) continue;
+    char text[INET_ADDRSTRLEN] = {};
+    ::inet_ntop(AF_INET, &reinterpret_cast<sockaddr_in*>(a->ifa_addr)->sin_addr, text,
+                sizeof(text));
+    if (std::string(text).rfind("127.", 0) != 0) found = text;
+  }
+  ::freeifaddrs(list);
+  return found;
+}
+
+std::string Post(const std::string& path, const std::string& body, const std::string& token) {
+  std::string request = "POST " + path + " HTTP/1.1\r\nContent-Type: application/json\r\n";
+  if (!token.empty()) request += "Authorization: Bearer " + token + "\r\n";
+  return request + "Content-Length: " + std::to_string(body.size()) + "\r\n\r\n" + body;
+}
+
+// With a token: loopback reads without it (read-only), actions need it, and a client beyond
+// loopback without it reads nothing. Without a token: no binding beyond loopback, no actions.
+TEST(HttpStatusServerTest, TokenIsNeededForActionsAndBeyondLoopback) {
   HttpStatusOptions options;
   options.token = "0123456789abcdef-token";
   Expected<std::unique_ptr<HttpStatusServer>> server =
-      HttpStatusServer::Start("127.0.0.1:0", options);
+      HttpStatusServer::Start("0.0.0.0:0", options);
   ASSERT_TRUE(server.ok()) << server.status().ToString();
   HttpStatusServer& http = **server;
   http.Publish(R"({"annotations":{"database":"/secret/path.db"}})");
+  std::string seen_body;
+  http.SetActionHandler([&](const std::string& body) {
+    seen_body = body;
+    return ActionResult{200, R"({"ok":true,"message":"done"})"};
+  });
+  // Loopback without the token: read-only.
+  std::string r = HttpExchange(http.port(), "GET /status HTTP/1.1\r\n\r\n");
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 200 OK");
+  EXPECT_NE(r.find("/secret/path.db"), std::string::npos);
+  for (const std::string& token : {std::string(), std::string("wrong")}) {
+    r = HttpExchange(http.port(), Post("/api/action", R"({"action":"x"})", token));
+    EXPECT_EQ(StatusLine(r), "HTTP/1.1 401 Unauthorized") << token;
+  }
+  EXPECT_EQ(seen_body, "") << "a refused action reached the handler";
+  // With the token: the action reaches the handler and its answer comes back.
+  r = HttpExchange(http.port(), Post("/api/action", R"({"action":"x"})", options.token));
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 200 OK");
+  EXPECT_EQ(seen_body, R"({"action":"x"})");
+  EXPECT_NE(Body(r).find("\"ok\":true"), std::string::npos) << r;
+  EXPECT_EQ(http.counters().actions.load(), 1u);
+  r = HttpExchange(http.port(), "GET /api/action HTTP/1.1\r\n\r\n");
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 405 Method Not Allowed");
+  EXPECT_NE(r.find("Allow: POST"), std::string::npos) << r;
+
+  // Beyond loopback without the token: nothing of the site, not even which paths exist; the
+  // page itself (no site data in it) is served.
+  const std::string lan = NonLoopbackAddress();
+  if (lan.empty()) {
+    GTEST_SKIP() << "this host has no IPv4 address beyond loopback to test from";
+  }
   for (const std::string& request :
-       {std::string("GET /status HTTP/1.1\r\n\r\n"),
+       {std::string("GET /status HTTP/1.1\r\n\r\n"), std::string("GET /events HTTP/1.1\r\n\r\n"),
         std::string("GET /status HTTP/1.1\r\nAuthorization: Bearer wrong\r\n\r\n"),
         std::string("GET /other HTTP/1.1\r\n\r\n")}) {
-    const std::string r = HttpExchange(http.port(), request);
+    r = HttpExchange(http.port(), request, lan);
     EXPECT_EQ(StatusLine(r), "HTTP/1.1 401 Unauthorized") << request;
     EXPECT_EQ(r.find("/secret/path.db"), std::string::npos) << r;
   }
-  const std::string r = HttpExchange(
-      http.port(), "GET /status HTTP/1.1\r\nAuthorization: Bearer " + options.token + "\r\n\r\n");
+  r = HttpExchange(http.port(),
+                   "GET /status HTTP/1.1\r\nAuthorization: Bearer " + options.token + "\r\n\r\n",
+                   lan);
   EXPECT_EQ(StatusLine(r), "HTTP/1.1 200 OK");
   EXPECT_NE(r.find("/secret/path.db"), std::string::npos);
-  EXPECT_EQ(http.counters().unauthorized.load(), 3u);
+  EXPECT_EQ(StatusLine(HttpExchange(http.port(), "GET / HTTP/1.1\r\n\r\n", lan)),
+            "HTTP/1.1 200 OK");
+}
 
-  // Beyond loopback without a token: refused before binding.
+TEST(HttpStatusServerTest, WithoutATokenOnlyLoopbackAndNoActions) {
   Expected<std::unique_ptr<HttpStatusServer>> open = HttpStatusServer::Start("0.0.0.0:0");
   EXPECT_EQ(open.status().code(), StatusCode::kInvalidArgument);
   EXPECT_NE(open.status().message().find("token"), std::string::npos);
   EXPECT_TRUE(IsLoopbackAddress("8080"));
   EXPECT_TRUE(IsLoopbackAddress("127.0.0.1:0"));
   EXPECT_FALSE(IsLoopbackAddress("0.0.0.0:80"));
+
+  Expected<std::unique_ptr<HttpStatusServer>> server = HttpStatusServer::Start("127.0.0.1:0");
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  bool called = false;
+  (*server)->SetActionHandler([&](const std::string&) {
+    called = true;
+    return ActionResult{};
+  });
+  const std::string r = HttpExchange((*server)->port(), Post("/api/action", "{}", "anything"));
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 403 Forbidden");
+  EXPECT_NE(Body(r).find("read-only"), std::string::npos) << r;
+  EXPECT_FALSE(called);
+}
+
+// The console's page, script and style are served; the stream sends the document at once and
+// each new one as it is published; more streams than max_streams are refused.
+TEST(HttpStatusServerTest, ServesTheConsoleAndStreamsTheDocument) {
+  HttpStatusOptions options;
+  options.max_streams = 1;
+  Expected<std::unique_ptr<HttpStatusServer>> server =
+      HttpStatusServer::Start("127.0.0.1:0", options);
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  HttpStatusServer& http = **server;
+  std::string r = HttpExchange(http.port(), "GET / HTTP/1.1\r\n\r\n");
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 200 OK");
+  EXPECT_NE(r.find("text/html"), std::string::npos);
+  EXPECT_NE(r.find("<title>Sandtable console</title>"), std::string::npos);
+  r = HttpExchange(http.port(), "GET /console.js HTTP/1.1\r\n\r\n");
+  EXPECT_NE(r.find("text/javascript"), std::string::npos);
+  EXPECT_NE(r.find("/api/action"), std::string::npos);
+  EXPECT_NE(HttpExchange(http.port(), "GET /console.css HTTP/1.1\r\n\r\n").find("text/css"),
+            std::string::npos);
+
+  http.Publish(R"({"n":1})");
+  const int fd = ConnectLoopback(http.port());
+  ASSERT_GE(fd, 0);
+  const std::string get = "GET /events HTTP/1.1\r\n\r\n";
+  ASSERT_EQ(::send(fd, get.data(), get.size(), MSG_NOSIGNAL), static_cast<ssize_t>(get.size()));
+  auto read_until = [&](const std::string& needle) {
+    std::string got;
+    const auto until = std::chrono::steady_clock::now() + kDeadline;
+    while (got.find(needle) == std::string::npos && std::chrono::steady_clock::now() < until) {
+      pollfd p{fd, POLLIN, 0};
+      if (::poll(&p, 1, 50) <= 0) continue;
+      char buffer[4096];
+      const ssize_t n = ::recv(fd, buffer, sizeof(buffer), 0);
+      if (n <= 0) break;
+      got.append(buffer, static_cast<size_t>(n));
+    }
+    return got;
+  };
+  std::string got = read_until(R"(data: {"n":1})");
+  EXPECT_NE(got.find("text/event-stream"), std::string::npos) << got;
+  EXPECT_NE(got.find(R"(data: {"n":1})"), std::string::npos) << got;
+  // A second stream while the first is open: refused.
+  EXPECT_EQ(StatusLine(HttpExchange(http.port(), get)), "HTTP/1.1 503 Service Unavailable");
+  http.Publish(R"({"n":2})");
+  got = read_until(R"(data: {"n":2})");
+  EXPECT_NE(got.find(R"(data: {"n":2})"), std::string::npos) << got;
+  ::close(fd);
+  EXPECT_EQ(http.counters().streams.load(), 1u);
+  // The server stops with a stream open (its destructor does not wait for the client).
+  const int held = ConnectLoopback(http.port());
+  ASSERT_EQ(::send(held, get.data(), get.size(), MSG_NOSIGNAL), static_cast<ssize_t>(get.size()));
+  const auto stop_started = std::chrono::steady_clock::now();
+  server->reset();
+  EXPECT_LT(std::chrono::steady_clock::now() - stop_started, kDeadline);
+  ::close(held);
 }
 
 // The status socket's kernel queue holds kListenBacklog connections, not the 5 compiled into

@@ -78,5 +78,123 @@ TEST(StatusServerTest, CoordinatorServesStatusWithTimelineAndRejectedCounters) {
   EXPECT_EQ(child.Wait(), 0);
 }
 
+std::string Post(const std::string& body, const std::string& token) {
+  std::string request = "POST /api/action HTTP/1.1\r\nContent-Type: application/json\r\n";
+  if (!token.empty()) request += "Authorization: Bearer " + token + "\r\n";
+  return request + "Content-Length: " + std::to_string(body.size()) + "\r\n\r\n" + body;
+}
+
+nlohmann::json GetStatus(uint16_t port) {
+  return nlohmann::json::parse(Body(HttpExchange(port, "GET /status HTTP/1.1\r\n\r\n")), nullptr,
+                               false);
+}
+
+// The console through the program: a member's unit_status shows in the document with its state,
+// the page's actions (with the operator token) become the coordinator's own requests and are
+// answered with its verdict, and a member that leaves is shown lost.
+TEST(StatusServerTest, ConsoleShowsUnitsAndItsActionsReachTheCoordinator) {
+  namespace fs = std::filesystem;
+  const fs::path token_file =
+      fs::temp_directory_path() / ("sandtable_console_token_" + std::to_string(::getpid()));
+  const std::string token = "console-test-token-0123456789";
+  {
+    std::ofstream out(token_file);
+    out << token << "\n";
+  }
+  fs::permissions(token_file, fs::perms::owner_read | fs::perms::owner_write);
+  testing::ChildProcess child({SANDTABLE_COORDINATOR_BIN, "--status", "127.0.0.1:0",
+                               "--status-token-file", token_file.string()});
+  std::string error;
+  const std::optional<nlohmann::json> ready =
+      testing::ReadReadyLine(child, "sandtable-coordinator", kDeadline, &error);
+  ASSERT_TRUE(ready.has_value()) << error;
+  fs::remove(token_file);
+  const std::string url = testing::ReadyString(*ready, "status");
+  const uint16_t port =
+      static_cast<uint16_t>(std::stoi(url.substr(std::string("http://127.0.0.1:").size())));
+
+  // Node 7 joins and reports a footprint.
+  zmq::context_t context;
+  auto dealer = net::Socket::Create(&context, net::SocketType::kDealer);
+  ASSERT_TRUE(dealer.ok());
+  ASSERT_TRUE((*dealer)->Connect(testing::ReadyString(*ready, "requests")).ok());
+  proto::MessageCounters counters;
+  net::Channel node(std::move(*dealer), 7, 1, &counters);
+  wire::Envelope hello;
+  hello.mutable_hello()->set_role(wire::ROLE_NODE);
+  hello.mutable_hello()->set_incarnation(1);
+  hello.mutable_hello()->mutable_endpoints()->set_peer_router("tcp://127.0.0.1:45007");
+  ASSERT_TRUE(node.Send(std::move(hello)).ok());
+  EXPECT_TRUE(net::testing::WaitFor(
+      [&] {
+        nlohmann::json d = GetStatus(port);
+        return !d.is_discarded() && d["members"].size() == 1u;
+      },
+      kDeadline));
+  wire::Envelope status;
+  wire::UnitStatus* unit = status.mutable_unit_status();
+  unit->set_calibration_state(wire::CALIBRATION_STATE_CALIBRATED);
+  unit->set_phase("calibrated");
+  unit->set_blended(true);
+  unit->set_host_name("table-pc-7");
+  for (const auto& [x, y] : {std::pair{-0.5, -0.3}, {0.5, -0.3}, {0.5, 0.3}, {-0.5, 0.3}}) {
+    wire::Vector2* p = unit->add_footprint_m();
+    p->set_x(x);
+    p->set_y(y);
+  }
+  ASSERT_TRUE(node.Send(std::move(status)).ok());
+  nlohmann::json doc;
+  EXPECT_TRUE(net::testing::WaitFor(
+      [&] {
+        doc = GetStatus(port);
+        return !doc.is_discarded() && doc["units"].size() == 1u &&
+               doc["units"][0]["state"] == "blending";
+      },
+      kDeadline))
+      << doc.dump();
+  EXPECT_EQ(doc["units"][0]["host_name"], "table-pc-7");
+  EXPECT_EQ(doc["units"][0]["footprint_m"].size(), 4u);
+  EXPECT_EQ(doc["members"][0]["state"], "blending");
+
+  // Actions: with the token they reach the coordinator and come back with its verdict.
+  std::string r =
+      HttpExchange(port, Post(R"({"action":"test_pattern","pattern":"grid","node_id":7})", token));
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 200 OK") << r;
+  EXPECT_TRUE(net::testing::WaitFor(
+      [&] {
+        doc = GetStatus(port);
+        return !doc.is_discarded() && doc["test_patterns"]["nodes"].value("7", "") == "grid";
+      },
+      kDeadline))
+      << doc.dump();
+  r = HttpExchange(port, Post(R"({"action":"test_pattern","pattern":"plaid"})", token));
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 409 Conflict") << r;
+  EXPECT_NE(Body(r).find("plaid"), std::string::npos) << r;
+  r = HttpExchange(port, Post(R"({"action":"timeline","op":"seek"})", token));
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 400 Bad Request") << r;
+  EXPECT_NE(Body(r).find("value"), std::string::npos) << r;
+  EXPECT_EQ(StatusLine(HttpExchange(port, Post("not json", token))), "HTTP/1.1 400 Bad Request");
+  EXPECT_EQ(StatusLine(HttpExchange(port, Post(R"({"action":"annotations_clear"})", token))),
+            "HTTP/1.1 200 OK");
+  EXPECT_EQ(StatusLine(HttpExchange(port, Post(R"({"action":"annotations_clear"})", ""))),
+            "HTTP/1.1 401 Unauthorized");
+
+  // The member leaves: shown lost, with its last status.
+  wire::Envelope bye;
+  bye.mutable_goodbye()->set_reason("test");
+  ASSERT_TRUE(node.Send(std::move(bye)).ok());
+  EXPECT_TRUE(net::testing::WaitFor(
+      [&] {
+        doc = GetStatus(port);
+        return !doc.is_discarded() && doc["units"].size() == 1u &&
+               doc["units"][0]["state"] == "lost";
+      },
+      kDeadline))
+      << doc.dump();
+  EXPECT_EQ(doc["members"].size(), 0u);
+  child.Signal(SIGTERM);
+  EXPECT_EQ(child.Wait(), 0);
+}
+
 }  // namespace
 }  // namespace sandtable::coordinator

@@ -1,0 +1,190 @@
+// The operator console in a real browser (Debian's Chromium, headless, driven by playwright-core)
+// against a lab site on localhost (sandtable-lab run --hold-s, which kills one unit during the
+// hold): the page loads read-only, the operator signs in, the units' footprints appear, a test
+// pattern chosen on the page reaches every node (each node reports the pattern its renderer
+// shows), the timeline pauses, annotations clear, actions without the token are refused, and
+// the unit the lab kills turns "lost" on the page within kLostWithinMs of its process ending.
+// Screenshots go to OUT (console.png, console_lost.png).
+//
+//   node tests/browser/console_test.mjs --lab build/sim/lab/sandtable-lab --out DIR
+// Exit 0: passed; 1: failed (the reason on stderr); 77: skipped, Chromium cannot start here.
+import {spawn} from "node:child_process";
+import fs from "node:fs";
+import path from "node:path";
+import {chromium} from "playwright-core";
+
+const kLostWithinMs = 2000;      // issue 38: a killed unit turns "lost" within 2 s
+const kConsoleWaitMs = 60000;    // the lab's coordinator up and its console.json written
+const kFootprintWaitMs = 240000; // the site calibrated (a loaded 2-core machine: minutes)
+const kPatternWaitMs = 15000;    // a test pattern shown by every node
+const kKillUnit = 2;
+const kUnits = 3;                // sandtable-3
+
+function arg(name, fallback) {
+  const i = process.argv.indexOf(name);
+  return i >= 0 && i + 1 < process.argv.length ? process.argv[i + 1] : fallback;
+}
+const labPath = arg("--lab");
+const outDir = path.resolve(arg("--out", "console_test_out"));
+const chromiumPath = arg("--chromium", "/usr/bin/chromium");
+if (!labPath) {
+  console.error("usage: console_test.mjs --lab PATH/sandtable-lab --out DIR [--chromium PATH]");
+  process.exit(2);
+}
+
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+function fail(message) {
+  throw new Error(message);
+}
+
+async function until(what, timeoutMs, check, pollMs = 50) {
+  const start = Date.now();
+  for (;;) {
+    const value = await check();
+    if (value) return value;
+    if (Date.now() - start > timeoutMs) fail(`${what}: not within ${timeoutMs} ms`);
+    await sleep(pollMs);
+  }
+}
+
+// The pid of the lab's sandtable-node --id N (a child of the lab).
+function nodePid(labPid, id) {
+  for (const entry of fs.readdirSync("/proc")) {
+    if (!/^\d+$/.test(entry)) continue;
+    try {
+      const stat = fs.readFileSync(`/proc/${entry}/stat`, "utf8");
+      const ppid = Number(stat.slice(stat.lastIndexOf(")") + 2).split(" ")[1]);
+      if (ppid !== labPid) continue;
+      const argv = fs.readFileSync(`/proc/${entry}/cmdline`, "utf8").split("\0");
+      if (path.basename(argv[0]) !== "sandtable-node") continue;
+      const at = argv.indexOf("--id");
+      if (at >= 0 && Number(argv[at + 1]) === id) return Number(entry);
+    } catch (e) {
+      // the process ended while we looked
+    }
+  }
+  return null;
+}
+
+const alive = (pid) => fs.existsSync(`/proc/${pid}`) &&
+    !/\) Z /.test(fs.readFileSync(`/proc/${pid}/stat`, "utf8"));
+
+let browser;
+try {
+  browser = await chromium.launch({executablePath: chromiumPath, headless: true});
+} catch (e) {
+  console.log(`SKIP: Chromium cannot start here (${chromiumPath}): ${e.message.split("\n")[0]}`);
+  process.exit(77);
+}
+
+fs.rmSync(outDir, {recursive: true, force: true});
+fs.mkdirSync(outDir, {recursive: true});
+const labOut = path.join(outDir, "lab");
+const lab = spawn(labPath, ["run", "--site", "sandtable-3", "--out", labOut, "--hold-s", "600",
+                            "--kill-unit", String(kKillUnit), "--kill-after-calibration",
+                            "--kill-at-s", "45", "--samples", "500"],
+                  {stdio: ["ignore", "pipe", "pipe"]});
+const labLog = fs.createWriteStream(path.join(outDir, "lab.log"));
+let labStdout = "";  // its JSON phase lines: the hold phase is when the lab stops switching patterns
+lab.stdout.on("data", (chunk) => {
+  labStdout += chunk.toString();
+  labLog.write(chunk);
+});
+lab.stderr.pipe(labLog);
+let labExited = false;
+lab.on("exit", () => { labExited = true; });
+
+let failed = null;
+try {
+  const consoleFile = path.join(labOut, "console.json");
+  await until("the lab's console.json", kConsoleWaitMs, () => {
+    if (labExited) fail("the lab ended before its coordinator was up (see lab.log)");
+    return fs.existsSync(consoleFile);
+  });
+  const site = JSON.parse(fs.readFileSync(consoleFile, "utf8"));
+  const token = fs.readFileSync(site.token_file, "utf8").trim();
+  const page = await browser.newPage({viewport: {width: 1400, height: 900}});
+  page.on("dialog", (d) => d.accept());
+  await page.goto(site.url);
+
+  // Read-only from loopback without the token: units listed, actions disabled and refused.
+  await until("the units listed", kConsoleWaitMs,
+              async () => (await page.locator("#units tbody tr").count()) === kUnits);
+  if (!(await page.locator("#pattern-apply").isDisabled())) fail("actions enabled before sign-in");
+  const refused = await page.evaluate(async () => (await fetch("/api/action", {
+    method: "POST", body: JSON.stringify({action: "timeline", op: "pause"})})).status);
+  if (refused !== 401) fail(`an action without the token answered ${refused}, not 401`);
+
+  // Signed in: footprints once the site is calibrated.
+  await page.fill("#token", token);
+  await page.click("#login button[type=submit]");
+  await until("every unit's footprint", kFootprintWaitMs, async () => {
+    if (labExited) fail("the lab ended before the site was calibrated (see lab.log)");
+    return (await page.locator("#top polygon.footprint").count()) === kUnits;
+  }, 500);
+  await until("every unit blending", kFootprintWaitMs, async () =>
+      (await page.locator('#units tbody tr[data-state="blending"]').count()) === kUnits, 500);
+  await page.screenshot({path: path.join(outDir, "console.png")});
+  fs.writeFileSync(path.join(outDir, "status.json"),
+                   JSON.stringify(await (await fetch(site.status)).json(), null, 1) + "\n");
+  // The lab measures the show and the blend with test patterns of its own: the page's wait for
+  // its hold phase.
+  await until("the lab's hold phase", kFootprintWaitMs, () => {
+    if (labExited) fail("the lab ended before its hold phase (see lab.log)");
+    return labStdout.includes('"phase":"hold"');
+  }, 200);
+
+  // A test pattern for every unit, from the page, shown by every node.
+  await page.selectOption("#pattern", "grid");
+  await page.selectOption("#pattern-target", "all");
+  await page.click("#pattern-apply");
+  await until("the pattern accepted", kPatternWaitMs,
+              async () => (await page.textContent("#result")).startsWith("done"));
+  await until("every node showing the grid", kPatternWaitMs, async () => {
+    const status = await (await fetch(site.status)).json();
+    return status.units.filter((u) => u.pattern === "grid").length === kUnits;
+  });
+  await page.screenshot({path: path.join(outDir, "console_pattern.png")});
+  await page.selectOption("#pattern", "none");
+  await page.click("#pattern-apply");
+  await until("the show back on every node", kPatternWaitMs, async () => {
+    const status = await (await fetch(site.status)).json();
+    return status.units.filter((u) => u.pattern === "none").length === kUnits;
+  });
+
+  // Timeline and annotations through the page.
+  await page.click("#pause");
+  await until("the timeline paused", kPatternWaitMs,
+              async () => (await page.textContent("#timeline-state")).startsWith("paused"));
+  await page.click("#clear");
+  await until("annotations cleared", kPatternWaitMs,
+              async () => (await page.textContent("#result")).startsWith("done"));
+
+  // The lab kills a unit during its hold: the page shows it lost.
+  const labPid = lab.pid;
+  const pid = await until("the node's process", 5000, () => nodePid(labPid, kKillUnit));
+  await until("the kill (the lab's --kill-at-s)", 120000, () => !alive(pid), 10);
+  const killedAt = Date.now();
+  const lost = `#top polygon[data-unit-id="${kKillUnit}"][data-state="lost"]`;
+  await until("the killed unit shown lost", 10000,
+              async () => (await page.locator(lost).count()) === 1, 20);
+  const lostAfterMs = Date.now() - killedAt;
+  await page.screenshot({path: path.join(outDir, "console_lost.png")});
+  console.log(`unit ${kKillUnit} shown lost ${lostAfterMs} ms after its process ended`);
+  if (lostAfterMs > kLostWithinMs) {
+    fail(`unit ${kKillUnit} shown lost after ${lostAfterMs} ms (bar ${kLostWithinMs} ms)`);
+  }
+  fs.writeFileSync(path.join(outDir, "result.json"),
+                   JSON.stringify({lost_after_ms: lostAfterMs, bar_ms: kLostWithinMs}) + "\n");
+} catch (e) {
+  failed = e;
+} finally {
+  await browser.close();
+  if (!labExited) lab.kill("SIGINT");
+  await until("the lab's exit", 120000, () => labExited, 100).catch(() => lab.kill("SIGKILL"));
+}
+if (failed) {
+  console.error(`FAILED: ${failed.message} (lab output: ${path.join(outDir, "lab.log")})`);
+  process.exit(1);
+}
+console.log("passed; screenshots in " + outDir);
