@@ -85,6 +85,18 @@ Expected<ProjectorResponse> FitProjectorResponse(const cv::Mat& black, const cv:
     }
     out.black_level = std::max(0.0, sum_difference(black, muted) / over_muted);
   }
+  if (!(out.gamma >= kMinPlausibleGamma && out.gamma <= kMaxPlausibleGamma)) {
+    return OutOfRangeError("projector response: fitted gamma " + std::to_string(out.gamma) +
+                           " is not a projector's (" + std::to_string(kMinPlausibleGamma) + ".." +
+                           std::to_string(kMaxPlausibleGamma) +
+                           "): is the camera's auto exposure or its own gamma on?");
+  }
+  if (out.black_level > kMaxPlausibleBlackLevel) {
+    return OutOfRangeError("projector response: black level " + std::to_string(out.black_level) +
+                           " of peak is not a projector's (at most " +
+                           std::to_string(kMaxPlausibleBlackLevel) +
+                           "): did the muted capture see the projector's light?");
+  }
   return out;
 }
 

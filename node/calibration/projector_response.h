@@ -23,6 +23,13 @@
 
 namespace sandtable::node {
 
+// What projectors do: a fitted gamma outside [kMinPlausibleGamma, kMaxPlausibleGamma] or a black
+// level over kMaxPlausibleBlackLevel says the camera did not see the projector's own response
+// (its auto exposure or its own gamma on, a camera that is not linear), not the projector.
+inline constexpr double kMinPlausibleGamma = 1.0;
+inline constexpr double kMaxPlausibleGamma = 4.0;
+inline constexpr double kMaxPlausibleBlackLevel = 0.25;  // fraction of peak
+
 struct ProjectorResponseOptions {
   int saturation_dn = 250;  // 8-bit captures: a white pixel at or above this is left out
   int min_signal_dn = 16;   // white - black at least this
@@ -41,7 +48,8 @@ struct ProjectorResponse {
 // camera, same size; `lit`: CV_8UC1 mask of the camera pixels this projector lights (empty: all).
 // Levels must be in 1..254. INVALID_ARGUMENT for sizes, types or levels that do not fit;
 // DEGENERATE when too few pixels are usable or a ratio is not in (0, 1) (a
-// projector that does not respond, or a camera that cannot see it).
+// projector that does not respond, or a camera that cannot see it); OUT_OF_RANGE naming the value
+// when the fitted gamma or black level is not one a projector has (above).
 Expected<ProjectorResponse> FitProjectorResponse(const cv::Mat& black, const cv::Mat& white,
                                                  const cv::Mat& muted,
                                                  const std::vector<std::pair<int, cv::Mat>>& greys,

@@ -23,6 +23,9 @@ namespace {
 constexpr double kGammaTolerance = 0.03;
 constexpr double kBlackLevelTolerance = 5e-4;  // fraction of peak
 constexpr int kLitThreshold = 20;
+// Uniform captures rounded to whole codes: the darkest grey (about 10 codes over black) is off
+// by up to half a code, 5 % of its ratio.
+constexpr double kQuantisedGammaTolerance = 0.1;
 
 struct Captured {
   cv::Mat black, white, muted;
@@ -59,6 +62,33 @@ Expected<Captured> CaptureResponse(sim::World& world, NodeId id, NodeId other,
   c.muted = *image;
   ST_RETURN_IF_ERROR(world.SetProjectorOn(id, true));
   return c;
+}
+
+// Uniform 8-bit captures of a projector with this response (black 10, white 210 codes).
+Captured Uniform(double gamma, const std::vector<int>& levels) {
+  Captured c;
+  c.black = cv::Mat(40, 40, CV_8UC1, cv::Scalar(10));
+  c.white = cv::Mat(40, 40, CV_8UC1, cv::Scalar(210));
+  for (int level : levels) {
+    const double value = 10.0 + 200.0 * std::pow(level / 255.0, gamma);
+    c.greys.emplace_back(level, cv::Mat(40, 40, CV_8UC1, cv::Scalar(std::round(value))));
+  }
+  return c;
+}
+
+TEST(ProjectorResponse, AGammaNoProjectorHasIsRefusedNamingIt) {
+  const Captured plausible = Uniform(2.2, {64, 128, 192});
+  Expected<ProjectorResponse> ok =
+      FitProjectorResponse(plausible.black, plausible.white, cv::Mat(), plausible.greys, cv::Mat());
+  ASSERT_TRUE(ok.ok()) << ok.status().ToString();
+  EXPECT_NEAR(ok->gamma, 2.2, kQuantisedGammaTolerance);
+  const Captured flat = Uniform(0.64, {64, 128, 192});  // a camera applying its own gamma
+  Expected<ProjectorResponse> refused =
+      FitProjectorResponse(flat.black, flat.white, cv::Mat(), flat.greys, cv::Mat());
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), StatusCode::kOutOfRange);
+  EXPECT_NE(refused.status().message().find("gamma 0.6"), std::string::npos)
+      << refused.status().message();
 }
 
 class ProjectorResponseTest : public ::testing::Test {
