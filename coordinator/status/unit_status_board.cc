@@ -110,7 +110,10 @@ std::string UnitStatusBoard::ConsoleState(NodeId id, const MembershipTable& memb
   if (s.calibration_state() == wire::CALIBRATION_STATE_VERIFIED) {
     return s.blended() ? "blending" : "verified";
   }
-  return s.phase() == "failed" ? "failed" : "calibrating";
+  // A unit that says what keeps it from calibrating ("failed", "no camera", ...) has failed.
+  const bool stuck =
+      s.phase() != "calibrating" && s.phase() != "starting" && !s.last_error().empty();
+  return s.phase() == "failed" || stuck ? "failed" : "calibrating";
 }
 
 nlohmann::json UnitStatusBoard::Json(const MembershipTable& members, Clock::time_point now) const {

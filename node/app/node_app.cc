@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <system_error>
+#include <thread>
 #include <utility>
 
 #include "common/base/log.h"
@@ -17,6 +18,16 @@ namespace {
 // in time: UNAVAILABLE is tried again, this many attempts in all; anything else (a bad spec, a
 // refused request) fails at once.
 constexpr int kCameraOpenAttempts = 5;
+// The wait before the second attempt; it doubles for each later one (0.25 + 0.5 + 1 + 2 s).
+constexpr std::chrono::milliseconds kCameraRetryFirstWait{250};
+
+// Sleeps `wait`, or less when `stop` is set.
+void SleepUnlessStopped(std::chrono::milliseconds wait, const std::atomic<bool>& stop) {
+  const auto until = std::chrono::steady_clock::now() + wait;
+  while (!stop && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+}
 
 // A file flag's error: INVALID_ARGUMENT naming the flag, whatever the loader's code.
 Status FlagError(const std::string& flag, const Status& status) {
@@ -31,6 +42,20 @@ Status SameUnit(const std::string& flag, const std::string& path, NodeId file_un
 }
 
 }  // namespace
+
+Status CheckCameraMatchesFactory(cv::Size camera_size, const std::string& camera,
+                                 const CameraModel& factory_camera) {
+  if (camera_size.width == factory_camera.width_px &&
+      camera_size.height == factory_camera.height_px) {
+    return OkStatus();
+  }
+  return InvalidArgumentError("camera " + camera + " gives " + std::to_string(camera_size.width) +
+                              "x" + std::to_string(camera_size.height) +
+                              " images but the factory calibration (--factory) is of a " +
+                              std::to_string(factory_camera.width_px) + "x" +
+                              std::to_string(factory_camera.height_px) +
+                              " camera: another camera, or another unit's factory file");
+}
 
 ExportAndBlend::ExportAndBlend(NodeId id, std::string export_dir, WorkerPool* workers,
                                OnOutcome start_blend, OnOutcome exported, LineSink out)
@@ -247,6 +272,13 @@ Status NodeApp::MakeServices() {
 // Self-calibration (structured light with the neighbours) when the unit has its factory
 // calibration, a projector and a camera, and is not in the lab's true-pose test mode.
 void NodeApp::MakeSelfCalibration() {
+  if (!calibration_ && projector_ && !camera_spec_.empty()) {
+    const std::string why =
+        "no factory calibration (--factory): this unit cannot calibrate itself and shows black "
+        "until it has one (sandtable-node calibrate-unit, docs/unit-calibration.md)";
+    ST_LOG(kWarning) << why;
+    unit_status_->SetProblem("no factory calibration", why);
+  }
   if (!calibration_ || !config_.true_pose_path.empty() || !projector_ || camera_spec_.empty()) {
     return;
   }
@@ -290,23 +322,32 @@ void NodeApp::OpenCamera(const std::atomic<bool>& stop) {
   runtime_->workers().Run<Expected<std::unique_ptr<CameraInput>>>(
       [spec = camera_spec_, device_options = device_options_, id = config_.id, &stop] {
         Expected<std::unique_ptr<CameraInput>> opened = MakeCameraInput(spec, device_options);
+        std::chrono::milliseconds wait = kCameraRetryFirstWait;
         for (int attempt = 2; attempt <= kCameraOpenAttempts && !opened.ok() &&
                               opened.status().code() == StatusCode::kUnavailable && !stop;
-             ++attempt) {
+             ++attempt, wait *= 2) {
           ST_LOG(kWarning) << "unit " << id << ": camera " << spec << ": "
-                           << opened.status().message() << "; trying again (attempt " << attempt
-                           << " of " << kCameraOpenAttempts << ")";
-          opened = MakeCameraInput(spec, device_options);
+                           << opened.status().message() << "; trying again in " << wait.count()
+                           << " ms (attempt " << attempt << " of " << kCameraOpenAttempts << ")";
+          SleepUnlessStopped(wait, stop);
+          if (!stop) opened = MakeCameraInput(spec, device_options);
         }
         return opened;
       },
       [this](Expected<std::unique_ptr<CameraInput>> opened) {
+        if (opened.ok() && calibration_) {
+          const Status matches = CheckCameraMatchesFactory(
+              (*opened)->size(), (*opened)->description(), calibration_->camera);
+          if (!matches.ok()) opened = matches;
+        }
         if (!opened.ok()) {
-          ST_LOG(kError) << "camera " << camera_spec_ << ": " << opened.status().message();
+          const std::string why = "camera " + camera_spec_ + ": " + opened.status().message();
+          ST_LOG(kError) << why << " (the unit cannot calibrate itself)";
           if (self_calibration_) {
-            out_(report::CalibrationFailed{config_.id, "unit " + std::to_string(config_.id) +
-                                                           ": camera " + camera_spec_ + ": " +
-                                                           opened.status().message()});
+            out_(report::CalibrationFailed{config_.id,
+                                           "unit " + std::to_string(config_.id) + ": " + why});
+          } else {
+            unit_status_->SetProblem("no camera", why);
           }
           return;
         }

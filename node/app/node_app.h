@@ -24,6 +24,7 @@
 #include <string>
 
 #include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
 
 #include "cluster/personnel_tracks.h"
 #include "cluster/report_lines.h"
@@ -74,6 +75,11 @@ class ExportAndBlend : public CalibrationHandoff {
   OnOutcome start_blend_, exported_;
   LineSink out_;
 };
+
+// OK when the camera's images are the size its factory calibration is of; INVALID_ARGUMENT
+// naming both sizes otherwise (`camera`: its description, for the message).
+Status CheckCameraMatchesFactory(cv::Size camera_size, const std::string& camera,
+                                 const CameraModel& factory_camera);
 
 class NodeApp {
  public:

@@ -82,6 +82,13 @@ void UnitStatusService::SetCalibration(const UnitCalibration& calibration,
   dirty_ = true;
 }
 
+void UnitStatusService::SetProblem(const std::string& phase, const std::string& why) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  status_.set_phase(Clip(phase));
+  status_.set_last_error(Clip(why));
+  dirty_ = true;
+}
+
 void UnitStatusService::OnRegistered(NodeRuntime&) {
   std::lock_guard<std::mutex> lock(mutex_);
   dirty_ = true;

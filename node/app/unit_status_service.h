@@ -31,6 +31,8 @@ class UnitStatusService : public NodeService {
   void OnLine(const report::ReportLine& line);
   void SetCalibration(const UnitCalibration& calibration,
                       const std::optional<std::set<NodeId>>& overlapping);
+  // Something that keeps the unit from doing its job: its phase in words and why.
+  void SetProblem(const std::string& phase, const std::string& why);
 
   void OnRegistered(NodeRuntime& node) override;
   Status OnStep(NodeRuntime& node) override;

@@ -72,6 +72,11 @@ TEST(UnitStatusBoardTest, KeepsAMembersOwnStatusAndSaysItsState) {
   failed.set_last_error("calibration failed: no plane");
   ASSERT_TRUE(site.board.Update(3, "conn-3", failed, site.members, site.t0).ok());
   EXPECT_EQ(site.board.ConsoleState(3, site.members, site.t0), "failed");
+  wire::UnitStatus stuck;  // a unit without self-calibration says why it cannot work
+  stuck.set_phase("no factory calibration");
+  stuck.set_last_error("no factory calibration (--factory): ...");
+  ASSERT_TRUE(site.board.Update(3, "conn-3", stuck, site.members, site.t0).ok());
+  EXPECT_EQ(site.board.ConsoleState(3, site.members, site.t0), "failed");
 }
 
 TEST(UnitStatusBoardTest, RefusesAnotherConnectionsClaimAndStatusOverTheLimits) {

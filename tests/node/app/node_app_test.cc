@@ -200,6 +200,16 @@ TEST(NodeApp, RefusesABadFactoryFileNamingTheFlag) {
   fs::remove_all(dir);
 }
 
+TEST(NodeApp, ACameraOfAnotherSizeThanTheFactoryFileIsRefused) {
+  const CameraModel factory(1024, 768, 900, 900, 511.5, 383.5);
+  EXPECT_TRUE(CheckCameraMatchesFactory(cv::Size(1024, 768), "replay:x", factory).ok());
+  const Status other = CheckCameraMatchesFactory(cv::Size(1280, 1024), "replay:x", factory);
+  EXPECT_EQ(other.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(other.message().find("1280x1024"), std::string::npos) << other.message();
+  EXPECT_NE(other.message().find("1024x768"), std::string::npos) << other.message();
+  EXPECT_NE(other.message().find("--factory"), std::string::npos) << other.message();
+}
+
 class ExportAndBlendTest : public ::testing::Test {
  protected:
   void SetUp() override {

@@ -48,5 +48,13 @@ TEST(UnitStatusServiceTest, LinesAndCalibrationFillTheStatus) {
   EXPECT_EQ(s.last_error(), "calibration failed: no plane");
 }
 
+TEST(UnitStatusServiceTest, AProblemSaysWhyTheUnitCannotWork) {
+  UnitStatusService service("host-a");
+  service.SetProblem("no factory calibration", "no factory calibration (--factory): ...");
+  const wire::UnitStatus s = service.Snapshot();
+  EXPECT_EQ(s.phase(), "no factory calibration");
+  EXPECT_EQ(s.last_error(), "no factory calibration (--factory): ...");
+}
+
 }  // namespace
 }  // namespace sandtable::node
