@@ -38,10 +38,15 @@ cv::Scalar UnitColour(int id) {
 
 cv::Mat WithLegend(const cv::Mat& image, double mm_per_px,
                    const std::vector<std::pair<cv::Scalar, std::string>>& entries) {
+  // Text and rows grow with pictures wider than 800 px, so they read the same when shown small.
+  const double grow = std::max(1.0, image.cols / 800.0);
+  const int row_px = static_cast<int>(std::lround(kLegendRowPx * grow));
+  const double font = kFontScale * grow;
+  const int thick = grow >= 1.75 ? 2 : 1;
   const int rows = 1 + static_cast<int>(entries.size());
-  cv::Mat out(image.rows + rows * kLegendRowPx + 8, image.cols, CV_8UC3, kPaper);
+  cv::Mat out(image.rows + rows * row_px + 8, image.cols, CV_8UC3, kPaper);
   image.copyTo(out(cv::Rect(0, 0, image.cols, image.rows)));
-  int y = image.rows + kLegendRowPx - 6;
+  int y = image.rows + row_px - 6;
   // The scale bar: a round length near a fifth of the width.
   const double bar_mm = RoundLength(0.2 * image.cols * mm_per_px);
   const int bar_px = static_cast<int>(std::lround(bar_mm / mm_per_px));
@@ -52,11 +57,13 @@ cv::Mat WithLegend(const cv::Mat& image, double mm_per_px,
                                 ? std::to_string(static_cast<int>(bar_mm / 1000.0)) + " m"
                                 : std::to_string(static_cast<int>(bar_mm)) + " mm";
   cv::putText(out, scale + " (table frame, seen from above)", {16 + bar_px, y},
-              cv::FONT_HERSHEY_SIMPLEX, kFontScale, kInk, 1, cv::LINE_AA);
+              cv::FONT_HERSHEY_SIMPLEX, font, kInk, thick, cv::LINE_AA);
+  const int swatch = static_cast<int>(std::lround(12 * grow));
   for (const auto& [colour, words] : entries) {
-    y += kLegendRowPx;
-    cv::rectangle(out, cv::Rect(8, y - 12, 24, 12), colour, cv::FILLED);
-    cv::putText(out, words, {40, y}, cv::FONT_HERSHEY_SIMPLEX, kFontScale, kInk, 1, cv::LINE_AA);
+    y += row_px;
+    cv::rectangle(out, cv::Rect(8, y - swatch, 2 * swatch, swatch), colour, cv::FILLED);
+    cv::putText(out, words, {16 + 2 * swatch, y}, cv::FONT_HERSHEY_SIMPLEX, font, kInk, thick,
+                cv::LINE_AA);
   }
   return out;
 }
@@ -87,7 +94,8 @@ cv::Mat StepsPicture(const cv::Mat& picture, const cv::Mat& over, const PictureA
     }
     cv::polylines(image, polygon, true, UnitColour(f.id), 2, cv::LINE_AA);
     cv::putText(image, std::to_string(f.id), ToPixel(centre, area, picture.size()),
-                cv::FONT_HERSHEY_SIMPLEX, 0.8, UnitColour(f.id), 2, cv::LINE_AA);
+                cv::FONT_HERSHEY_SIMPLEX, 0.8 * std::max(1.0, picture.cols / 800.0),
+                UnitColour(f.id), 2, cv::LINE_AA);
     legend.push_back(
         {UnitColour(f.id), "projector " + std::to_string(f.id) + "'s footprint (its true pose)"});
   }

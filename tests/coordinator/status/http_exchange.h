@@ -45,26 +45,31 @@ inline bool ClosedByServerWithin(int fd, std::chrono::milliseconds deadline) {
   return false;
 }
 
-// Sends `request` to 127.0.0.1:port and returns everything received until the server closes
-// (empty on connection failure or deadline).
-// With `until_seen`, stops as soon as that text has arrived (a stream the server keeps open).
-inline std::string HttpExchange(uint16_t port, const std::string& request,
-                                const std::string& host = "127.0.0.1",
-                                const std::string& until_seen = "") {
-  const int fd = ConnectTo(host, port);
-  if (fd < 0) return {};
-  if (!request.empty()) (void)::send(fd, request.data(), request.size(), MSG_NOSIGNAL);
-  std::string response;
+// What the server sends on `fd` until it closes, kHttpDeadline passes, or (when given)
+// `until_seen` has arrived (a stream the server keeps open).
+inline std::string ReadFrom(int fd, const std::string& until_seen = "") {
+  std::string got;
   const auto until = std::chrono::steady_clock::now() + kHttpDeadline;
   while (std::chrono::steady_clock::now() < until) {
     pollfd p{fd, POLLIN, 0};
-    if (::poll(&p, 1, 100) <= 0) continue;
+    if (::poll(&p, 1, 50) <= 0) continue;
     char buffer[4096];
     const ssize_t n = ::recv(fd, buffer, sizeof(buffer), 0);
     if (n <= 0) break;
-    response.append(buffer, static_cast<size_t>(n));
-    if (!until_seen.empty() && response.find(until_seen) != std::string::npos) break;
+    got.append(buffer, static_cast<size_t>(n));
+    if (!until_seen.empty() && got.find(until_seen) != std::string::npos) break;
   }
+  return got;
+}
+
+// Sends `request` to host:port (loopback unless given) and returns what comes back until the
+// server closes (empty on connection failure; what came before the deadline at the deadline).
+inline std::string HttpExchange(uint16_t port, const std::string& request,
+                                const std::string& host = "127.0.0.1") {
+  const int fd = ConnectTo(host, port);
+  if (fd < 0) return {};
+  if (!request.empty()) (void)::send(fd, request.data(), request.size(), MSG_NOSIGNAL);
+  std::string response = ReadFrom(fd);
   ::close(fd);
   return response;
 }

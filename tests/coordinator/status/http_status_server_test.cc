@@ -299,26 +299,13 @@ TEST(HttpStatusServerTest, ServesTheConsoleAndStreamsTheDocument) {
   ASSERT_GE(fd, 0);
   const std::string get = "GET /events HTTP/1.1\r\n\r\n";
   ASSERT_EQ(::send(fd, get.data(), get.size(), MSG_NOSIGNAL), static_cast<ssize_t>(get.size()));
-  auto read_until = [&](const std::string& needle) {
-    std::string got;
-    const auto until = std::chrono::steady_clock::now() + kDeadline;
-    while (got.find(needle) == std::string::npos && std::chrono::steady_clock::now() < until) {
-      pollfd p{fd, POLLIN, 0};
-      if (::poll(&p, 1, 50) <= 0) continue;
-      char buffer[4096];
-      const ssize_t n = ::recv(fd, buffer, sizeof(buffer), 0);
-      if (n <= 0) break;
-      got.append(buffer, static_cast<size_t>(n));
-    }
-    return got;
-  };
-  std::string got = read_until(R"(data: {"n":1})");
+  std::string got = testing::ReadFrom(fd, R"(data: {"n":1})");
   EXPECT_NE(got.find("text/event-stream"), std::string::npos) << got;
   EXPECT_NE(got.find(R"(data: {"n":1})"), std::string::npos) << got;
   // A second stream while the first is open: refused.
   EXPECT_EQ(StatusLine(HttpExchange(http.port(), get)), "HTTP/1.1 503 Service Unavailable");
   http.Publish(R"({"n":2})");
-  got = read_until(R"(data: {"n":2})");
+  got = testing::ReadFrom(fd, R"(data: {"n":2})");
   EXPECT_NE(got.find(R"(data: {"n":2})"), std::string::npos) << got;
   ::close(fd);
   EXPECT_EQ(http.counters().streams.load(), 1u);
