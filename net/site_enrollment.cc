@@ -14,12 +14,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-std::string ThisHostName() {
-  char name[256] = {};
-  if (::gethostname(name, sizeof(name) - 1) != 0) return "unknown";
-  return name;
-}
-
 // The unit's own key pair: the one kept beside the key file while it waits, or a new one.
 Expected<CurveKeyPair> RequestKeys(const std::string& key_file, const EnrollmentLog& log) {
   const std::string path = key_file + ".request";
@@ -40,6 +34,12 @@ std::string Seconds(Clock::duration d) {
 }
 
 }  // namespace
+
+std::string ThisHostName() {
+  char name[256] = {};
+  if (::gethostname(name, sizeof(name) - 1) != 0) return "unknown";
+  return name;
+}
 
 Status EnrollmentClientOptions::Check() const {
   if (endpoint.empty()) return InvalidArgumentError("enrollment: no endpoint to ask");

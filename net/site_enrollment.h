@@ -32,6 +32,9 @@ struct EnrollmentClientOptions {
   Status Check() const;
 };
 
+// This machine's host name ("unknown" when it cannot be read): what a unit tells the site.
+std::string ThisHostName();
+
 // What the unit logs while it waits (called on the caller's thread).
 using EnrollmentLog = std::function<void(const std::string& line)>;
 

@@ -144,9 +144,8 @@ Status ConsoleActions::Connect() {
       net::Socket::Create(context_.get(), net::SocketType::kDealer, options);
   if (!dealer.ok()) return dealer.status();
   ST_RETURN_IF_ERROR((*dealer)->Connect(endpoint_));
-  static proto::MessageCounters counters;  // one channel per process: its own counts
   channel_ = std::make_unique<net::Channel>(std::move(*dealer), kConsoleSenderId,
-                                            net::NewIncarnation(), &counters);
+                                            net::NewIncarnation(), &counters_);
   return OkStatus();
 }
 

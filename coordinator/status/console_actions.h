@@ -22,6 +22,7 @@
 #include "coordinator/status/http_status_server.h"
 #include "net/curve.h"
 #include "proto/envelope.pb.h"
+#include "proto/message_counters.h"
 
 namespace zmq {
 class context_t;
@@ -53,6 +54,7 @@ class ConsoleActions {
   std::optional<net::CurveKeyPair> curve_;
   std::chrono::milliseconds timeout_;
   std::mutex mutex_;
+  proto::MessageCounters counters_;  // the channel's (outlives it: declared before)
   std::unique_ptr<zmq::context_t> context_;
   std::unique_ptr<net::Channel> channel_;
 };

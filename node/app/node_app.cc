@@ -1,7 +1,5 @@
 #include "node/app/node_app.h"
 
-#include <unistd.h>
-
 #include <filesystem>
 #include <system_error>
 #include <thread>
@@ -9,6 +7,7 @@
 
 #include "common/base/log.h"
 #include "common/scene/gltf_loader.h"
+#include "net/site_enrollment.h"
 #include "node/app/calibration_service.h"
 
 namespace sandtable::node {
@@ -85,19 +84,9 @@ void ExportAndBlend::OnCalibrated(const SelfCalibrationOutcome& outcome) {
       });
 }
 
-namespace {
-
-std::string HostName() {
-  char name[256] = {};
-  if (::gethostname(name, sizeof(name) - 1) != 0) return "";
-  return name;
-}
-
-}  // namespace
-
 NodeApp::NodeApp(NodeConfig config, LineSink out)
     : config_(std::move(config)),
-      unit_status_(std::make_unique<UnitStatusService>(HostName())),
+      unit_status_(std::make_unique<UnitStatusService>(net::ThisHostName())),
       out_([status = unit_status_.get(), out = std::move(out)](const report::ReportLine& line) {
         status->OnLine(line);
         out(line);
