@@ -16,3 +16,11 @@ find_program(SANDTABLE_CCACHE ccache)
 if(SANDTABLE_CCACHE)
   set(CMAKE_CXX_COMPILER_LAUNCHER "${SANDTABLE_CCACHE}")
 endif()
+# Debug information goes to a .dwo file beside each object (split DWARF) instead of being copied
+# into every static library and every test executable that links it: with it inline the build
+# folder grew past 12 GB (98 % of each executable was .debug_*) and filled CI's disk. gdb reads
+# the .dwo files from the build folder.
+option(SANDTABLE_SPLIT_DWARF "Keep debug information in .dwo files beside the objects" ON)
+if(SANDTABLE_SPLIT_DWARF AND CMAKE_CXX_COMPILER_ID MATCHES "GNU|Clang")
+  add_compile_options($<$<AND:$<CONFIG:RelWithDebInfo,Debug>,$<COMPILE_LANGUAGE:C,CXX>>:-gsplit-dwarf>)
+endif()
