@@ -64,6 +64,26 @@ Expected<ClusterSolution> SolveJoin(const ClusterSolution& site, const ClusterOb
   const NodeId root = *options.held_units.begin();
   Expected<BundleResult> bundle = AdjustCluster(observations, projector_from_table, root, options);
   if (!bundle.ok()) return bundle.status();
+  // The first pose came from one neighbour camera's relative pose (factory models); a track
+  // that another camera also sees does not triangulate from it when that camera disagrees by
+  // more than the triangulation's gate, and the whole track is left out: the solve then rests
+  // on the first neighbour alone. Once more from the refined pose, so that every camera that
+  // sees the joining units counts; kept when more tracks triangulate.
+  if (bundle->report.tracks_untriangulated > 0) {
+    for (const auto& [id, unit] : observations.units) {
+      if (!options.held_units.count(id) && bundle->projector_from_world.count(id)) {
+        projector_from_table[id] = bundle->projector_from_world.at(id);
+      }
+    }
+    Expected<BundleResult> again = AdjustCluster(observations, projector_from_table, root, options);
+    if (again.ok() && again->report.tracks_untriangulated < bundle->report.tracks_untriangulated) {
+      out.notes.push_back("joined units posed again from the first solve: " +
+                          std::to_string(bundle->report.tracks_untriangulated) + " -> " +
+                          std::to_string(again->report.tracks_untriangulated) +
+                          " tracks that do not triangulate");
+      bundle = std::move(again);
+    }
+  }
   out.bundle = bundle->report;
   for (const auto& [id, unit] : bundle->units) {
     if (options.held_units.count(id)) continue;
