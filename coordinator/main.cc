@@ -30,7 +30,8 @@
 // line and field and imports nothing.
 //
 // Test patterns (docs/render.md): test_pattern_request on the ROUTER, site-wide or per node,
-// published as test_pattern_state.
+// published as test_pattern_state. Recalibration (docs/console.md): recalibrate_request on the
+// ROUTER, for the site or one member, published as recalibrate_ask.
 // --timeline: personnel tracks (CSV, docs/coordinator.md) replayed with play/pause/seek/rate
 // requests and a timeline_clock on the events socket. --status: JSON at http://HOST:PORT/status
 // (port 0: any free port; a bare PORT binds loopback). --status-token-file: a token (one
@@ -73,6 +74,7 @@
 #include "common/scene/gltf_loader.h"
 #include "coordinator/annotations/annotation_service.h"
 #include "coordinator/annotations/session_file.h"
+#include "coordinator/calibration/recalibration_service.h"
 #include "coordinator/display/test_pattern_service.h"
 #include "coordinator/membership/coordinator_server.h"
 #include "coordinator/membership/enrollment_command.h"
@@ -420,6 +422,7 @@ static int Run(int argc, char** argv) {
   if (int exit = MakeWand(f, &wand); exit != 0) return exit;
   if (wand) wand->EnablePainting(coordinator::WandPainterOptions{}, &annotations);
   coordinator::TestPatternService test_patterns;
+  coordinator::RecalibrationService recalibration;
   std::unique_ptr<coordinator::HttpStatusServer> http;
   std::unique_ptr<coordinator::StatusService> status;
   if (!f.status_address.empty()) {
@@ -431,8 +434,8 @@ static int Run(int argc, char** argv) {
     }
     http = std::move(*started);
     status = std::make_unique<coordinator::StatusService>(
-        http.get(),
-        coordinator::StatusSources{&annotations, timeline.get(), wand.get(), &test_patterns});
+        http.get(), coordinator::StatusSources{&annotations, timeline.get(), wand.get(),
+                                               &test_patterns, &recalibration});
   }
 
   struct sigaction action {};
@@ -443,6 +446,7 @@ static int Run(int argc, char** argv) {
   coordinator::CoordinatorServer server(f.options);
   server.AddService(&annotations);
   server.AddService(&test_patterns);
+  server.AddService(&recalibration);
   if (timeline) server.AddService(timeline.get());
   if (wand) server.AddService(wand.get());
   if (status) server.AddService(status.get());

@@ -219,6 +219,16 @@ function renderActions(units) {
                                                                        String(u.node_id))));
   target.value = selected !== null && units.some((u) => u.node_id === selected)
       ? String(selected) : ([...target.options].some((o) => o.value === keep) ? keep : "all");
+  const again = $("recalibrate-target");
+  const keepAgain = again.value;
+  again.replaceChildren(new Option("the whole site", "all"),
+      ...units.filter((u) => u.state !== "lost").map((u) => new Option("unit " + u.node_id,
+                                                                       String(u.node_id))));
+  again.value = [...again.options].some((o) => o.value === keepAgain) ? keepAgain : "all";
+  const r = doc.recalibration;
+  $("recalibration-state").textContent = !r ? "-"
+      : r.ask_id === 0 ? "not asked since the coordinator started"
+      : `ask ${r.ask_id}: ${r.all_units ? "the whole site" : "unit " + r.node_id}`;
   const t = doc.timeline;
   $("timeline-state").textContent = t
       ? `${t.playing ? "playing" : "paused"} at ${t.media_time_s.toFixed(1)} of ` +
@@ -293,6 +303,16 @@ function wire() {
   $("pattern-apply").addEventListener("click", () => {
     const target = $("pattern-target").value;
     const body = {action: "test_pattern", pattern: $("pattern").value};
+    if (target !== "all") body.node_id = Number(target);
+    act(body);
+  });
+  $("recalibrate-apply").addEventListener("click", () => {
+    const target = $("recalibrate-target").value;
+    const what = target === "all" ? "every unit of the site" : "unit " + target;
+    if (!confirm(`Calibrate ${what} again? Its projectors show structured light meanwhile.`)) {
+      return;
+    }
+    const body = {action: "recalibrate"};
     if (target !== "all") body.node_id = Number(target);
     act(body);
   });

@@ -50,26 +50,37 @@ Expected<wire::Envelope> TimelineRequest(const json& body) {
   return out;
 }
 
+// The unit a body's "node_id" names: nullopt when absent (every unit), or why it names none.
+Expected<std::optional<NodeId>> UnitOf(const json& body) {
+  if (!body.contains("node_id") || body["node_id"].is_null()) return std::optional<NodeId>();
+  if (!body["node_id"].is_number_unsigned() ||
+      !IsValidNodeId(static_cast<NodeId>(
+          std::min<uint64_t>(body["node_id"].get<uint64_t>(), kInvalidNodeId)))) {
+    return InvalidArgumentError("\"node_id\" is not a unit's id");
+  }
+  return std::optional<NodeId>(body["node_id"].get<uint32_t>());
+}
+
 // The request an action's body names, or why it names none.
 Expected<wire::Envelope> RequestFor(const json& body) {
   const std::string action = body.value("action", std::string());
   wire::Envelope out;
-  if (action == "test_pattern") {
+  if (action == "test_pattern" || action == "recalibrate") {
+    Expected<std::optional<NodeId>> unit = UnitOf(body);
+    if (!unit.ok()) return unit.status();
+    if (action == "recalibrate") {
+      auto* request = out.mutable_recalibrate_request();
+      request->set_all_units(!unit->has_value());
+      request->set_node_id(unit->value_or(0));
+      return out;
+    }
     if (!body.contains("pattern") || !body["pattern"].is_string()) {
       return InvalidArgumentError("test_pattern needs a \"pattern\" name");
     }
     auto* request = out.mutable_test_pattern_request();
     request->set_pattern(body["pattern"].get<std::string>());
-    if (body.contains("node_id") && !body["node_id"].is_null()) {
-      if (!body["node_id"].is_number_unsigned() ||
-          !IsValidNodeId(static_cast<NodeId>(
-              std::min<uint64_t>(body["node_id"].get<uint64_t>(), kInvalidNodeId)))) {
-        return InvalidArgumentError("\"node_id\" is not a unit's id");
-      }
-      request->set_node_id(body["node_id"].get<uint32_t>());
-    } else {
-      request->set_all_nodes(true);
-    }
+    request->set_all_nodes(!unit->has_value());
+    request->set_node_id(unit->value_or(0));
     return out;
   }
   if (action == "timeline") return TimelineRequest(body);
@@ -88,7 +99,7 @@ Expected<wire::Envelope> RequestFor(const json& body) {
     return out;
   }
   return InvalidArgumentError(
-      "\"action\" is test_pattern, timeline, annotations_clear or enrollment");
+      "\"action\" is test_pattern, recalibrate, timeline, annotations_clear or enrollment");
 }
 
 // The answer a reply carries, or nullopt for a reply to something else.
@@ -100,6 +111,10 @@ std::optional<ActionResult> FromReply(const wire::Envelope& reply) {
     case wire::Envelope::kTestPatternReply:
       return decided(reply.test_pattern_reply().accepted(), reply.test_pattern_reply().reason(),
                      "test pattern set");
+    case wire::Envelope::kRecalibrateReply:
+      return decided(
+          reply.recalibrate_reply().accepted(), reply.recalibrate_reply().reason(),
+          "recalibration asked (ask " + std::to_string(reply.recalibrate_reply().ask_id()) + ")");
     case wire::Envelope::kTimelineReply:
       return decided(reply.timeline_reply().accepted(), reply.timeline_reply().reason(),
                      "timeline changed");

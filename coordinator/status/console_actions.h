@@ -4,6 +4,7 @@
 // passes every check a request passes. One action at a time; each waits for its reply.
 //
 // Body (JSON): {"action": "test_pattern", "pattern": NAME, "node_id": N (absent: every unit)}
+//   | {"action": "recalibrate", "node_id": N (absent: the whole site)}
 //   | {"action": "timeline", "op": "play" | "pause" | "seek" | "rate", "value": X (seek: s,
 //      rate: timeline s per s)}
 //   | {"action": "annotations_clear"}

@@ -67,6 +67,15 @@ std::string StatusService::BuildJson(CoordinatorServer& server) {
   } else {
     doc["test_patterns"] = nullptr;
   }
+  if (sources_.recalibration != nullptr) {
+    const wire::RecalibrateAsk& a = sources_.recalibration->ask();
+    doc["recalibration"] = {
+        {"ask_id", a.ask_id()},
+        {"all_units", a.all_units()},
+        {"node_id", a.all_units() || a.ask_id() == 0 ? json(nullptr) : json(a.node_id())}};
+  } else {
+    doc["recalibration"] = nullptr;
+  }
   json enrolling = json::array();
   for (const EnrollingUnit& u : server.enrollment().Units(clock_now)) {
     enrolling.push_back(

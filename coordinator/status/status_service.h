@@ -16,6 +16,7 @@
 #include <chrono>
 
 #include "coordinator/annotations/annotation_service.h"
+#include "coordinator/calibration/recalibration_service.h"
 #include "coordinator/display/test_pattern_service.h"
 #include "coordinator/membership/coordinator_server.h"
 #include "coordinator/status/http_status_server.h"
@@ -30,6 +31,7 @@ struct StatusSources {
   const TimelineService* timeline = nullptr;
   const WandService* tracker = nullptr;  // null: "tracker": {"state": "not_running"}
   const TestPatternService* patterns = nullptr;
+  const RecalibrationService* recalibration = nullptr;  // null: "recalibration": null
 };
 
 class StatusService : public CoordinatorService {

@@ -41,6 +41,26 @@ CalibrationRunner::CalibrationRunner(const SelfCalibrationOptions& options,
 
 CalibrationRunner::~CalibrationRunner() = default;
 
+void CalibrationRunner::OnAsk(const wire::RecalibrateAsk& ask) {
+  // The first ask seen (and the first of a coordinator's new epoch) was made before this unit
+  // joined, or before the coordinator restarted: already answered.
+  if (!ask_epoch_ || *ask_epoch_ != ask.epoch()) {
+    ask_epoch_ = ask.epoch();
+    last_ask_id_ = ask.ask_id();
+    return;
+  }
+  if (ask.ask_id() <= last_ask_id_) return;  // seen (the coordinator publishes it every second)
+  last_ask_id_ = ask.ask_id();
+  RecalibrationAsk a;
+  a.id = ask.ask_id();
+  a.all_units = ask.all_units();
+  a.unit = ask.all_units() ? kInvalidNodeId : ask.node_id();
+  asked_ = a;
+  ST_LOG(kInfo) << "self-calibration: the operator asked to recalibrate "
+                << (a.all_units ? std::string("the site") : "unit " + std::to_string(a.unit))
+                << " (ask " << a.id << ")";
+}
+
 void CalibrationRunner::OnStep(NodeRuntime& node) {
   MaybeStartRound(node);
   RunnerStep(node);
@@ -78,15 +98,21 @@ RoundView CalibrationRunner::RoundViewNow(NodeRuntime& node) const {
   v.ran_round = round_ && round_->finished;
   v.holds_site_solution = v.ran_round && last_solution_ != nullptr;
   v.site_units = last_solution_ ? last_solution_->calibrations.size() : 0;
+  if (last_solution_) {
+    for (const auto& [id, c] : last_solution_->calibrations) v.site_unit_ids.push_back(id);
+  }
   if (round_) {
     v.last_round_members = round_->members;
     v.departed = round_->departed;
   }
+  v.failed_rounds = failed_rounds_;
+  v.last_round_ended = last_round_ended_;
   v.calibrated = unit_.calibrated();
   v.calibrated_by = unit_.calibrated_by();
   v.first_seen_calibrated_peer = first_seen_calibrated_peer_;
   v.last_step_from_other = unit_.last_step_from_other();
   v.first_seen_uncalibrated_member = first_seen_uncalibrated_member_;
+  v.asked = asked_;
   return v;
 }
 
@@ -106,6 +132,13 @@ void CalibrationRunner::MaybeStartRound(NodeRuntime& node) {
       ST_LOG(kInfo) << "self-calibration: " << d.why << " (" << RoundActionName(d.action) << ")";
     }
     last_round_why_ = d.why;
+  }
+  if (d.ask_done && asked_) {
+    if (d.action == RoundAction::kNone) {
+      ST_LOG(kInfo) << "self-calibration: recalibration ask " << asked_->id << " is not this "
+                    << "unit's to carry out (" << d.why << ")";
+    }
+    asked_.reset();
   }
   if (d.action != RoundAction::kRound && d.action != RoundAction::kJoinRound) return;
   std::map<NodeId, std::pair<int, int>> sizes;

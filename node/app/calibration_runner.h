@@ -9,6 +9,7 @@
 #include <deque>
 #include <functional>
 #include <map>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -38,6 +39,9 @@ class CalibrationRunner {
                     const CalibrationUnit& unit, CalibrationLink* link, CalibrationLedger* ledger);
   ~CalibrationRunner();
 
+  // The coordinator's recalibrate_ask (published every second): a new one is kept for the
+  // round policy (RoundView::asked) until it is answered.
+  void OnAsk(const wire::RecalibrateAsk& ask);
   // Every step of the node: a round started when the policy says so, the current one driven.
   void OnStep(NodeRuntime& node);
   // Messages for this side (the service routes them).
@@ -156,6 +160,15 @@ class CalibrationRunner {
   std::optional<std::chrono::steady_clock::time_point> first_seen_calibrated_peer_;
   std::optional<std::chrono::steady_clock::time_point> first_seen_uncalibrated_member_;
   std::string last_round_why_;
+  // The operator's asks: the coordinator's epoch and the newest ask id seen, and the one not
+  // answered yet.
+  std::optional<uint64_t> ask_epoch_;
+  uint64_t last_ask_id_ = 0;
+  std::optional<RecalibrationAsk> asked_;
+  // Rounds in a row that left a unit they were to calibrate without a calibration, and when
+  // the last round ended (the round policy's retries).
+  int failed_rounds_ = 0;
+  std::optional<std::chrono::steady_clock::time_point> last_round_ended_;
 };
 
 }  // namespace sandtable::node

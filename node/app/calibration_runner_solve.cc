@@ -222,6 +222,14 @@ void CalibrationRunner::StartJoinSolve(NodeRuntime& node) {
     double cpu_s = 0.0;
   };
   std::shared_ptr<const ClusterSolution> site = last_solution_;
+  // A unit the operator asked to recalibrate is in the held site: it is placed again, not held.
+  if (std::any_of(r.projecting.begin(), r.projecting.end(),
+                  [&](NodeId p) { return site->calibrations.count(p) > 0; })) {
+    auto without = std::make_shared<ClusterSolution>(*site);
+    for (NodeId p : r.projecting) without->calibrations.erase(p);
+    site = std::move(without);
+    r.path_reason = "the operator asked to recalibrate unit(s) of the site; the others are held";
+  }
   const BundleOptions bundle = options_.solve.bundle;
   node.workers().Run<Solved>(
       [observations = std::move(observations), local = std::move(local), site, bundle] {
@@ -422,6 +430,18 @@ void CalibrationRunner::FinishRound(const ClusterSolution* solution, const Statu
   SendResults(solution, status, report_text, node);
   r.solving = false;
   r.finished = true;
+  // Every unit it was to calibrate placed (or gone): the retries start over.
+  bool all_placed = solution != nullptr;
+  for (NodeId m : r.projecting) {
+    all_placed &=
+        r.departed.count(m) > 0 || (r.Active(m) && solution && solution->calibrations.count(m) > 0);
+  }
+  failed_rounds_ = all_placed ? 0 : failed_rounds_ + 1;
+  last_round_ended_ = std::chrono::steady_clock::now();
+  if (!all_placed) {
+    ST_LOG(kWarning) << "self-calibration: the round left units without a calibration ("
+                     << failed_rounds_ << " round(s) in a row)";
+  }
 }
 
 // Each projecting unit's CalibrationResult: its calibration from `solution`, or why it has

@@ -43,13 +43,82 @@ std::vector<NodeId> JoiningMembers(const RoundView& v, const std::vector<NodeId>
   return joining;
 }
 
+// Members the last round was to calibrate that hold no calibration (it failed them), linked.
+std::vector<NodeId> FailedMembers(const RoundView& v) {
+  std::vector<NodeId> failed;
+  for (const RoundMember& m : v.members) {
+    if (Contains(v.last_round_members, m.id) && m.linked &&
+        m.state != wire::CALIBRATION_STATE_CALIBRATED &&
+        m.state != wire::CALIBRATION_STATE_VERIFIED) {
+      failed.push_back(m.id);
+    }
+  }
+  return failed;
+}
+
+std::string Units(const std::vector<NodeId>& ids) {
+  std::string out;
+  for (NodeId id : ids) out += (out.empty() ? "unit " : ", ") + std::to_string(id);
+  return out;
+}
+
+// The operator asked to calibrate again (RoundView::asked): this unit is the one that decides.
+RoundDecision DecideAsked(const RoundView& v, const std::vector<NodeId>& ids, bool site_runner,
+                          bool runner_gone) {
+  const RecalibrationAsk& ask = *v.asked;
+  const std::string what = ask.all_units ? std::string("the site") : Unit(ask.unit);
+  RoundDecision out;
+  out.ask_done = true;
+  if (v.calibrated && !v.ran_round && !runner_gone && v.calibrated_by != v.self) {
+    out.action = RoundAction::kNone;
+    out.why = "calibrated by " + Unit(v.calibrated_by) +
+              ", which carries out the operator's recalibration of " + what;
+    return out;
+  }
+  if (!ask.all_units && !Contains(ids, ask.unit)) {
+    out.action = RoundAction::kNone;
+    out.why = "the operator asked to recalibrate " + what +
+              ", which is not a member with a projector and a camera";
+    return out;
+  }
+  for (const RoundMember& m : v.members) {
+    if (!m.linked) {
+      out.action = RoundAction::kWait;
+      out.ask_done = false;
+      out.why = "recalibration of " + what + " asked; " + Unit(m.id) +
+                " is not linked yet (no heartbeat)";
+      return out;
+    }
+  }
+  out.members = ids;
+  // One unit against the others: they are held, so at least two must be in the held site.
+  const bool in_site =
+      std::find(v.site_unit_ids.begin(), v.site_unit_ids.end(), ask.unit) != v.site_unit_ids.end();
+  const size_t held = v.site_units - (in_site ? 1 : 0);
+  if (!ask.all_units && site_runner && held >= 2) {
+    out.action = RoundAction::kJoinRound;
+    out.projecting = {ask.unit};
+    out.why = "the operator asked to recalibrate " + what + "; calibrating it against the " +
+              std::to_string(held) + " other units of the site (held)";
+    return out;
+  }
+  out.action = RoundAction::kRound;
+  out.projecting = ids;
+  out.why = ask.all_units ? "the operator asked to recalibrate the site; calibrating every member"
+                          : "the operator asked to recalibrate " + what +
+                                "; no site with two other units is held here to place it "
+                                "against, calibrating every member";
+  return out;
+}
+
 }  // namespace
 
 Status RoundPolicyOptions::Check() const {
   if (settle.count() < 0 || join_wait.count() < 0 || expect_wait.count() < 0 ||
-      expected_units < 0) {
+      retry_wait.count() < 0 || expected_units < 0 || max_retries < 0) {
     return InvalidArgumentError(
-        "round policy: settle, join_wait, expect_wait and expected_units must be >= 0");
+        "round policy: settle, join_wait, expect_wait, retry_wait, expected_units and "
+        "max_retries must be >= 0");
   }
   return OkStatus();
 }
@@ -82,7 +151,10 @@ RoundDecision DecideRound(const RoundView& v, const RoundPolicyOptions& options)
   const bool runner_gone =
       v.calibrated && !v.ran_round && v.calibrated_by != v.self && !Contains(ids, v.calibrated_by);
   if (!lowest && !site_runner) {
-    return Decide(RoundAction::kNone, Unit(ids.front()) + " runs the rounds (the lowest id)");
+    RoundDecision d =
+        Decide(RoundAction::kNone, Unit(ids.front()) + " runs the rounds (the lowest id)");
+    d.ask_done = v.asked.has_value();
+    return d;
   }
   if (v.member_list_age < options.settle) {
     return Decide(RoundAction::kWait, "the member list changed less than settle ago", true);
@@ -100,6 +172,7 @@ RoundDecision DecideRound(const RoundView& v, const RoundPolicyOptions& options)
     }
   }
   if (checking) return Decide(RoundAction::kWait, "a member is checking its saved calibration");
+  if (v.asked) return DecideAsked(v, ids, site_runner, runner_gone);
   RoundDecision out;
   out.saw_calibrated_peer = peer_calibrated;
   out.saw_uncalibrated_member = !uncalibrated.empty();
@@ -130,6 +203,30 @@ RoundDecision DecideRound(const RoundView& v, const RoundPolicyOptions& options)
                 ") left and units joined; calibrating all again";
     } else {
       joining = JoiningMembers(v, ids);
+      std::string retry;
+      if (joining.empty() && v.failed_rounds > 0) {
+        const std::vector<NodeId> failed = FailedMembers(v);
+        if (!failed.empty()) {
+          if (v.failed_rounds > options.max_retries) {
+            out.action = RoundAction::kNone;
+            out.why = std::to_string(v.failed_rounds) + " rounds in a row left " + Units(failed) +
+                      " without a calibration; not trying again (recalibrate from the console)";
+            return out;
+          }
+          const RoundClock::duration wait =
+              options.retry_wait * (1 << std::min(v.failed_rounds - 1, 10));
+          const long wait_s = std::chrono::duration_cast<std::chrono::seconds>(wait).count();
+          if (v.last_round_ended && v.now - *v.last_round_ended < wait) {
+            out.action = RoundAction::kWait;
+            out.why = "the last round left " + Units(failed) + " without a calibration; trying " +
+                      "again " + std::to_string(wait_s) + " s after it";
+            return out;
+          }
+          joining = failed;
+          retry = "trying again (" + std::to_string(v.failed_rounds) + " of " +
+                  std::to_string(options.max_retries) + ") for " + Units(failed) + ": ";
+        }
+      }
       if (joining.empty()) {
         out.action = RoundAction::kNone;
         out.why = "every member was in the last round";
@@ -148,11 +245,12 @@ RoundDecision DecideRound(const RoundView& v, const RoundPolicyOptions& options)
         out.why = std::to_string(joining.size()) +
                   " unit(s) joined the calibrated site; calibrating them against it";
       } else {
-        out.why =
-            "units joined after the last round, whose site was not solved; calibrating "
-            "all again";
+        out.why = retry.empty() ? "units joined after the last round, whose site was not "
+                                  "solved; calibrating all again"
+                                : "the last round solved no site; calibrating all again";
         joining.clear();
       }
+      out.why = retry + out.why;
     }
   } else if (peer_calibrated) {
     const RoundClock::time_point first = v.first_seen_calibrated_peer.value_or(v.now);

@@ -13,6 +13,11 @@
 //     runner for units that join later, whatever its id.
 //   - Nothing until the member list has not changed for `settle`, nor while a member checks a
 //     saved calibration.
+//   - An operator's ask to calibrate again (RoundView::asked) comes before the rules below:
+//     the whole site, or one unit against the others held (a join round) when this unit holds
+//     the site's solution with at least two other units in it, else the whole site. It waits
+//     for the unit's own round and for every member to be linked; a unit that is not the
+//     runner (or calibrated by a runner still present) drops it as not its own.
 //   - After a round: a new one only for members that joined since (not in it, or left it and
 //     came back without a calibration) and hold no checked calibration. The site's runner
 //     calibrates them against the held site (a join round) unless the site is weak (solved
@@ -26,6 +31,10 @@
 //     runner's join round before it runs one itself (that runner may have left), and goes on
 //     waiting while that round sends it steps (a join round can take longer than join_wait;
 //     a second round started beside it would clobber both).
+//   - A round that left members it was to calibrate without a calibration (its solve failed, or
+//     it left them out) is tried again for them, retry_wait after it ended, the wait doubling
+//     with each round in a row that failed, at most max_retries times; then the runner gives
+//     up and says so (an operator's ask starts it again).
 //   - Every saved calibration held its check: no round.
 //   - Every member must be linked (a heartbeat came), and with expected_units, that many must
 //     be members or expect_wait must have passed since the unit started.
@@ -45,6 +54,13 @@ namespace sandtable::node {
 
 using RoundClock = std::chrono::steady_clock;
 
+// An operator's ask to calibrate again (the coordinator's recalibrate_ask), not carried out yet.
+struct RecalibrationAsk {
+  uint64_t id = 0;
+  bool all_units = true;
+  NodeId unit = kInvalidNodeId;  // when !all_units
+};
+
 struct RoundMember {
   NodeId id = kInvalidNodeId;
   wire::CalibrationState state = wire::CALIBRATION_STATE_UNSPECIFIED;
@@ -61,12 +77,17 @@ struct RoundView {
   RoundClock::time_point now{};
   RoundClock::duration member_list_age{};
   // This unit's last round as runner.
-  bool round_running = false;        // started and not finished
-  bool ran_round = false;            // one finished
-  bool holds_site_solution = false;  // that round solved the site
-  size_t site_units = 0;             // units in the site's solution (joined ones included)
+  bool round_running = false;         // started and not finished
+  bool ran_round = false;             // one finished
+  bool holds_site_solution = false;   // that round solved the site
+  size_t site_units = 0;              // units in the site's solution (joined ones included)
+  std::vector<NodeId> site_unit_ids;  // ... which
   std::vector<NodeId> last_round_members;
   std::set<NodeId> departed;  // units the last round left out because they left
+  // Rounds in a row that left a unit they were to calibrate without a calibration (0: the last
+  // one placed every unit it was to), and when the last round ended.
+  int failed_rounds = 0;
+  std::optional<RoundClock::time_point> last_round_ended;
   // This unit's calibration from another unit's round, and who ran it.
   bool calibrated = false;
   NodeId calibrated_by = kInvalidNodeId;
@@ -75,6 +96,7 @@ struct RoundView {
   std::optional<RoundClock::time_point> last_step_from_other;
   std::optional<RoundClock::time_point> first_seen_uncalibrated_member;
   RoundClock::time_point started{};  // the service's creation
+  std::optional<RecalibrationAsk> asked;
 };
 
 struct RoundPolicyOptions {
@@ -82,7 +104,9 @@ struct RoundPolicyOptions {
   RoundClock::duration join_wait = std::chrono::seconds(15);
   int expected_units = 0;  // 0: any number
   RoundClock::duration expect_wait = std::chrono::seconds(180);
-  // INVALID_ARGUMENT: a negative duration or expected_units.
+  RoundClock::duration retry_wait = std::chrono::seconds(30);
+  int max_retries = 3;
+  // INVALID_ARGUMENT: a negative duration, expected_units or max_retries.
   Status Check() const;
 };
 
@@ -106,6 +130,9 @@ struct RoundDecision {
   // calibration, was seen.
   bool saw_calibrated_peer = false;
   bool saw_uncalibrated_member = false;
+  // The operator's ask is answered: a round for it starts, or it is not this unit's to carry
+  // out. The runner forgets it; otherwise it asks again with it next step.
+  bool ask_done = false;
 };
 
 RoundDecision DecideRound(const RoundView& view, const RoundPolicyOptions& options);

@@ -143,6 +143,17 @@ bool SelfCalibrationService::ServesPeer(wire::Envelope::BodyCase body) const {
   }
 }
 
+bool SelfCalibrationService::ServesCoordinator(wire::Envelope::BodyCase body) const {
+  return body == wire::Envelope::kRecalibrateAsk;
+}
+
+void SelfCalibrationService::OnCoordinatorMessage(const wire::Envelope& message,
+                                                  NodeRuntime& /*node*/) {
+  if (message.body_case() == wire::Envelope::kRecalibrateAsk) {
+    runner_->OnAsk(message.recalibrate_ask());
+  }
+}
+
 bool SelfCalibrationService::Send(NodeId to, wire::Envelope envelope, NodeRuntime& node) {
   if (to == node.id()) {  // the runner talking to itself: no socket
     Deliver(to, envelope, node);

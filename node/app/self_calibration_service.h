@@ -164,6 +164,9 @@ class SelfCalibrationService : public NodeService, private CalibrationLink {
   const char* name() const override { return "self-calibration"; }
   bool ServesPeer(wire::Envelope::BodyCase body) const override;
   void OnPeerMessage(net::Incoming request, NodeRuntime& node) override;
+  // The coordinator's recalibrate_ask (an operator's "calibrate again"): for the runner.
+  bool ServesCoordinator(wire::Envelope::BodyCase body) const override;
+  void OnCoordinatorMessage(const wire::Envelope& message, NodeRuntime& node) override;
   Status OnStep(NodeRuntime& node) override;
 
   bool calibrated() const;

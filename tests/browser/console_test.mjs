@@ -2,9 +2,11 @@
 // against a lab site on localhost (sandtable-lab run --hold-s, which kills one unit during the
 // hold): the page loads read-only, the operator signs in, the units' footprints appear, a test
 // pattern chosen on the page reaches every node (each node reports the pattern its renderer
-// shows), the timeline pauses, annotations clear, actions without the token are refused, and
-// the unit the lab kills turns "lost" on the page within kLostWithinMs of its process ending.
-// Screenshots go to OUT (console.png, console_lost.png).
+// shows), the timeline pauses, annotations clear, a recalibration of one unit asked on the page
+// completes (the unit placed by a new round and blending again), actions without the token are
+// refused, and the unit the lab kills turns "lost" on the page within kLostWithinMs of its
+// process ending. Screenshots go to OUT (console.png, console_pattern.png,
+// console_recalibrated.png, console_lost.png).
 //
 //   node tests/browser/console_test.mjs --lab build/sim/lab/sandtable-lab --out DIR
 // Exit 0: passed; 1: failed (the reason on stderr); 77: skipped, Chromium cannot start here.
@@ -17,7 +19,10 @@ const kLostWithinMs = 2000;      // issue 38: a killed unit turns "lost" within 
 const kConsoleWaitMs = 60000;    // the lab's coordinator up and its console.json written
 const kFootprintWaitMs = 240000; // the site calibrated (a loaded 2-core machine: minutes)
 const kPatternWaitMs = 15000;    // a test pattern shown by every node
+const kRecalibrateWaitMs = 180000;  // one unit calibrated again (a join round, loaded machine)
+const kKillAtS = 120;            // the lab kills kKillUnit this long into its hold
 const kKillUnit = 2;
+const kRecalibrateUnit = 1;
 const kUnits = 3;                // sandtable-3
 
 function arg(name, fallback) {
@@ -82,7 +87,7 @@ fs.mkdirSync(outDir, {recursive: true});
 const labOut = path.join(outDir, "lab");
 const lab = spawn(labPath, ["run", "--site", "sandtable-3", "--out", labOut, "--hold-s", "600",
                             "--kill-unit", String(kKillUnit), "--kill-after-calibration",
-                            "--kill-at-s", "45", "--samples", "500"],
+                            "--kill-at-s", String(kKillAtS), "--samples", "500"],
                   {stdio: ["ignore", "pipe", "pipe"]});
 const labLog = fs.createWriteStream(path.join(outDir, "lab.log"));
 let labStdout = "";  // its JSON phase lines: the hold phase is when the lab stops switching patterns
@@ -160,10 +165,34 @@ try {
   await until("annotations cleared", kPatternWaitMs,
               async () => (await page.textContent("#result")).startsWith("done"));
 
+  // One unit calibrated again from the page: a new round places it and it blends again.
+  const unitOf = (status, id) => status.units.find((u) => u.node_id === id);
+  const before = unitOf(await (await fetch(site.status)).json(), kRecalibrateUnit);
+  if (!before || !before.round) fail(`unit ${kRecalibrateUnit} reports no round before`);
+  const recalibrateStart = Date.now();
+  await page.selectOption("#recalibrate-target", String(kRecalibrateUnit));
+  await page.click("#recalibrate-apply");
+  await until("the recalibration accepted", kPatternWaitMs,
+              async () => (await page.textContent("#result")).startsWith("done"));
+  await until("the ask shown", kPatternWaitMs, async () =>
+      (await page.textContent("#recalibration-state")).includes(`unit ${kRecalibrateUnit}`));
+  await until(`unit ${kRecalibrateUnit} placed by a new round and blending`, kRecalibrateWaitMs,
+              async () => {
+                if (labExited) fail("the lab ended during the recalibration (see lab.log)");
+                const u = unitOf(await (await fetch(site.status)).json(), kRecalibrateUnit);
+                return u && u.round && u.round !== before.round && u.blended &&
+                       u.phase === "calibrated";
+              }, 500);
+  const recalibratedMs = Date.now() - recalibrateStart;
+  await until("every unit blending after the recalibration", kRecalibrateWaitMs, async () =>
+      (await page.locator('#units tbody tr[data-state="blending"]').count()) === kUnits, 500);
+  await page.screenshot({path: path.join(outDir, "console_recalibrated.png")});
+  console.log(`unit ${kRecalibrateUnit} calibrated again in ${recalibratedMs} ms`);
+
   // The lab kills a unit during its hold: the page shows it lost.
   const labPid = lab.pid;
   const pid = await until("the node's process", 5000, () => nodePid(labPid, kKillUnit));
-  await until("the kill (the lab's --kill-at-s)", 120000, () => !alive(pid), 10);
+  await until("the kill (the lab's --kill-at-s)", kKillAtS * 1000 + 60000, () => !alive(pid), 10);
   const killedAt = Date.now();
   const lost = `#top polygon[data-unit-id="${kKillUnit}"][data-state="lost"]`;
   await until("the killed unit shown lost", 10000,
@@ -175,7 +204,8 @@ try {
     fail(`unit ${kKillUnit} shown lost after ${lostAfterMs} ms (bar ${kLostWithinMs} ms)`);
   }
   fs.writeFileSync(path.join(outDir, "result.json"),
-                   JSON.stringify({lost_after_ms: lostAfterMs, bar_ms: kLostWithinMs}) + "\n");
+                   JSON.stringify({lost_after_ms: lostAfterMs, bar_ms: kLostWithinMs,
+                                   recalibrated_ms: recalibratedMs}) + "\n");
 } catch (e) {
   failed = e;
 } finally {

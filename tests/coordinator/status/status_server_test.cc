@@ -167,6 +167,22 @@ TEST(StatusServerTest, ConsoleShowsUnitsAndItsActionsReachTheCoordinator) {
       },
       kDeadline))
       << doc.dump();
+  // Recalibration: of the member, published as the site's ask; of a stranger, refused.
+  r = HttpExchange(port, Post(R"({"action":"recalibrate","node_id":7})", token));
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 200 OK") << r;
+  EXPECT_TRUE(net::testing::WaitFor(
+      [&] {
+        doc = GetStatus(port);
+        return !doc.is_discarded() && doc["recalibration"].value("ask_id", 0) == 1 &&
+               doc["recalibration"]["node_id"] == 7;
+      },
+      kDeadline))
+      << doc.dump();
+  r = HttpExchange(port, Post(R"({"action":"recalibrate","node_id":8})", token));
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 409 Conflict") << r;
+  EXPECT_NE(Body(r).find("unit 8 is not a member"), std::string::npos) << r;
+  r = HttpExchange(port, Post(R"({"action":"recalibrate","node_id":-1})", token));
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 400 Bad Request") << r;
   r = HttpExchange(port, Post(R"({"action":"test_pattern","pattern":"plaid"})", token));
   EXPECT_EQ(StatusLine(r), "HTTP/1.1 409 Conflict") << r;
   EXPECT_NE(Body(r).find("plaid"), std::string::npos) << r;

@@ -1,13 +1,19 @@
 // A whole self-calibration round in one process: a real CoordinatorServer, a real WorldServer
 // (the simulated site's projectors and cameras) and three NodeApps, each on its own thread over
 // real loopback sockets; no child processes. The same with one unit's links dropping a share of
-// what it sends. sandtable-3 at half resolution, so that it fits every CI run.
+// what it sends. An operator's ask to calibrate one unit again, then the site (the coordinator's
+// recalibrate_request). sandtable-3 at half resolution, so that it fits every CI run.
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
+#include <functional>
+#include <iostream>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <variant>
 #include <vector>
@@ -15,11 +21,16 @@
 #include <gtest/gtest.h>
 
 #include "common/scene/gltf_loader.h"
+#include "coordinator/calibration/recalibration_service.h"
 #include "coordinator/membership/coordinator_server.h"
+#include "net/channel.h"
 #include "node/app/node_app.h"
+#include "proto/message_counters.h"
 #include "sim/app/world_server.h"
 #include "sim/lab/lab_inputs.h"
+#include "sim/lab/registration_metric.h"
 #include "sim/transport/world.h"
+#include "tests/net/test_wait.h"
 #include "tests/node/net/node_site_test_util.h"
 
 namespace sandtable::node {
@@ -29,10 +40,16 @@ namespace fs = std::filesystem;
 using std::chrono::milliseconds;
 
 constexpr milliseconds kHeartbeat{100};
+// sandtable-3 at half resolution (a round in ~10 s on two cores).
+constexpr double kScale = 0.5;
 // A round of sandtable-3 at half resolution takes ~10 s on two cores; lossy links add resends.
 constexpr auto kRoundDeadline = std::chrono::seconds(240);
 // The solve's fit of a unit's projector (decoded correspondences, px): the round worked.
 constexpr double kMaxProjectorRms_px = 0.5;
+// A unit calibrated again registers to the model as a first round does (sandtable-3 at half
+// resolution: about 0.5 mm rms against the world's truth); a join that rests on one neighbour
+// camera alone is tens of millimetres off.
+constexpr double kMaxRecalibratedRms_mm = 1.5;
 
 class InProcessSite {
  public:
@@ -45,7 +62,7 @@ class InProcessSite {
     fs::create_directories(dir_);
     Expected<sim::LabInputs> inputs =
         sim::PrepareLabInputs("sandtable-3", "sandtable", /*seed=*/1, dir_.string(), "",
-                              /*resolution_scale=*/0.5);
+                              /*resolution_scale=*/kScale);
     ASSERT_TRUE(inputs.ok()) << inputs.status().ToString();
     inputs_ = std::move(*inputs);
     Expected<Scene> scene = LoadGltfScene(inputs_.scene_path);
@@ -56,6 +73,7 @@ class InProcessSite {
     ASSERT_TRUE(world_->Start().ok());
     coordinator_ = std::make_unique<coordinator::CoordinatorServer>(
         test_site::SiteCoordinatorOptions(kHeartbeat, /*misses_allowed=*/50));
+    coordinator_->AddService(&recalibration_);
     ASSERT_TRUE(coordinator_->Start().ok());
     threads_.emplace_back([this] { (void)world_->Run(stop_); });
     threads_.emplace_back([this] { (void)coordinator_->Run(stop_); });
@@ -110,6 +128,27 @@ class InProcessSite {
     return false;
   }
 
+  // Waits until the units' latest calibrations satisfy `done`.
+  bool WaitForCalibrated(
+      const std::function<bool(const std::map<NodeId, report::Calibrated>&)>& done) {
+    return net::testing::WaitFor([&] { return done(calibrated()); },
+                                 std::chrono::duration_cast<milliseconds>(kRoundDeadline));
+  }
+
+  // An operator's recalibrate_request (the whole site, or `unit`): the coordinator's reply.
+  std::optional<wire::RecalibrateReply> AskRecalibration(bool all_units, NodeId unit) {
+    auto dealer = net::Socket::Create(&context_, net::SocketType::kDealer);
+    if (!dealer.ok() || !(*dealer)->Connect(coordinator_->request_endpoint()).ok()) return {};
+    net::Channel channel(std::move(*dealer), kConsoleSenderId, 1, &operator_counters_);
+    wire::Envelope request;
+    request.mutable_recalibrate_request()->set_all_units(all_units);
+    request.mutable_recalibrate_request()->set_node_id(unit);
+    if (!channel.Send(std::move(request)).ok()) return {};
+    std::optional<net::Incoming> in = net::testing::ReceiveWithin(&channel, milliseconds(5000));
+    if (!in || !in->envelope.has_recalibrate_reply()) return {};
+    return in->envelope.recalibrate_reply();
+  }
+
   void Stop() {
     stop_ = true;
     for (std::thread& t : threads_) {
@@ -138,6 +177,7 @@ class InProcessSite {
     return failed_;
   }
   const sim::LabInputs& inputs() const { return inputs_; }
+  sim::World& world() { return world_->world(); }
 
  private:
   fs::path dir_;
@@ -145,6 +185,9 @@ class InProcessSite {
   std::atomic<bool> stop_{false};
   std::unique_ptr<sim::WorldServer> world_;
   std::unique_ptr<coordinator::CoordinatorServer> coordinator_;
+  coordinator::RecalibrationService recalibration_{milliseconds(200)};
+  zmq::context_t context_;
+  proto::MessageCounters operator_counters_;
   std::vector<std::unique_ptr<NodeApp>> apps_;
   std::vector<std::thread> threads_;
   std::mutex mutex_;
@@ -196,6 +239,93 @@ TEST(InProcessRoundTest, ARoundOverLossyLinksStillCalibratesEveryUnit) {
   ASSERT_TRUE(messages.count(1));
   EXPECT_GT(messages.at(1).faults_dropped, 0u);  // the links did lose messages
   EXPECT_EQ(messages.at(0).faults_dropped, 0u);
+}
+
+}  // namespace
+}  // namespace sandtable::node
+
+namespace sandtable::node {
+namespace {
+
+// The units' calibrations as their files say now.
+std::map<NodeId, UnitCalibration> Calibrations(const std::map<NodeId, report::Calibrated>& lines) {
+  std::map<NodeId, UnitCalibration> out;
+  for (const auto& [id, line] : lines) {
+    Expected<UnitCalibration> unit = LoadUnitCalibration(line.json);
+    EXPECT_TRUE(unit.ok()) << unit.status().ToString();
+    if (unit.ok() && unit->table_from_projector && unit->table_from_model) out[id] = *unit;
+  }
+  return out;
+}
+
+// Unit `id`'s registration error (rms mm over the model's surfaces) against the world's truth.
+double RegistrationRmsMm(sim::World& world, const sim::LabInputs& inputs,
+                         const UnitCalibration& unit, NodeId id) {
+  sim::EstimatedRegistration e;
+  e.unit_id = id;
+  e.projector = unit.projector;
+  e.table_from_projector = *unit.table_from_projector;
+  e.table_from_model = *unit.table_from_model;
+  sim::RegistrationMetricOptions options;
+  options.num_samples = 10000;
+  options.true_table_from_model = inputs.model_from_table.Inverse();
+  Expected<sim::RegistrationReport> r = sim::MeasureRegistration(world, {e}, options);
+  EXPECT_TRUE(r.ok()) << r.status().ToString();
+  return r.ok() ? r->per_unit.at(id).all.rms_mm : 1e9;
+}
+
+TEST(InProcessRoundTest, AnOperatorsAskCalibratesOneUnitAgainThenTheSite) {
+  InProcessSite site(fs::temp_directory_path() /
+                     ("in_process_recalibration_" + std::to_string(getpid())));
+  ASSERT_NO_FATAL_FAILURE(site.Start());
+  ASSERT_NO_FATAL_FAILURE(site.StartNodes());
+  ExpectOneRoundCalibratedAll(site);
+  const std::map<NodeId, report::Calibrated> first = site.calibrated();
+  ASSERT_EQ(first.size(), 3u);
+  const std::map<NodeId, UnitCalibration> first_units = Calibrations(first);
+  ASSERT_EQ(first_units.size(), 3u);
+
+  // Unit 1 again: a join round against units 0 and 2, which keep their round.
+  std::optional<wire::RecalibrateReply> reply = site.AskRecalibration(false, 1);
+  ASSERT_TRUE(reply.has_value());
+  ASSERT_TRUE(reply->accepted()) << reply->reason();
+  ASSERT_TRUE(site.WaitForCalibrated([&](const std::map<NodeId, report::Calibrated>& c) {
+    return c.at(1).round != first.at(1).round;
+  })) << "unit 1 was not calibrated again";
+  const std::map<NodeId, report::Calibrated> second = site.calibrated();
+  EXPECT_EQ(second.at(0).round, first.at(0).round);
+  EXPECT_EQ(second.at(2).round, first.at(2).round);
+  EXPECT_TRUE(site.failed().empty()) << site.failed().begin()->second;
+  const std::map<NodeId, UnitCalibration> second_units = Calibrations(second);
+  ASSERT_EQ(second_units.count(1), 1u);
+  EXPECT_LT(second_units.at(1).projector_rms_px, kMaxProjectorRms_px);
+
+  // The whole site again: one new round places every unit.
+  reply = site.AskRecalibration(true, 0);
+  ASSERT_TRUE(reply.has_value());
+  ASSERT_TRUE(reply->accepted()) << reply->reason();
+  ASSERT_TRUE(site.WaitForCalibrated([&](const std::map<NodeId, report::Calibrated>& c) {
+    const uint64_t round = c.at(0).round;
+    return round != second.at(0).round && c.at(1).round == round && c.at(2).round == round;
+  })) << "the site was not calibrated again by one round";
+  EXPECT_TRUE(site.failed().empty()) << site.failed().begin()->second;
+  const std::map<NodeId, UnitCalibration> third_units = Calibrations(site.calibrated());
+  ASSERT_EQ(third_units.size(), 3u);
+  for (const auto& [id, unit] : third_units) {
+    SCOPED_TRACE("unit " + std::to_string(id));
+    EXPECT_LT(unit.projector_rms_px, kMaxProjectorRms_px);
+  }
+  site.Stop();
+  EXPECT_EQ(site.exits(), std::vector<int>(site.inputs().site.units.size(), 0));
+
+  // Against the world's truth (the world idle now): unit 1 registered by each round.
+  const double by_first = RegistrationRmsMm(site.world(), site.inputs(), first_units.at(1), 1);
+  const double by_join = RegistrationRmsMm(site.world(), site.inputs(), second_units.at(1), 1);
+  const double by_site = RegistrationRmsMm(site.world(), site.inputs(), third_units.at(1), 1);
+  std::cout << "unit 1 registration rms: first round " << by_first << " mm, its own join round "
+            << by_join << " mm, the site's second round " << by_site << " mm\n";
+  EXPECT_LT(by_join, kMaxRecalibratedRms_mm);
+  EXPECT_LT(by_site, kMaxRecalibratedRms_mm);
 }
 
 }  // namespace

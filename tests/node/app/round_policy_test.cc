@@ -1,7 +1,8 @@
 // The round policy (node/app/round_policy.h), table-driven: one row per situation a unit can be
 // in (a first round, a join while a round runs, a runner that dies mid-round or after it, a
 // newcomer whose messages are dropped, two newcomers at once, a unit that leaves during its
-// join, saved calibrations, an expected site size), each with the action and units expected.
+// join, saved calibrations, an expected site size, an operator's ask to calibrate again, a
+// failed round tried again), each with the action and units expected.
 #include <chrono>
 #include <functional>
 #include <string>
@@ -48,6 +49,7 @@ RoundView SiteRunner(NodeId self, std::vector<NodeId> round, std::vector<NodeId>
   v.ran_round = v.holds_site_solution = true;
   v.last_round_members = round;
   v.site_units = round.size();
+  v.site_unit_ids = round;
   v.calibrated = true;
   v.calibrated_by = self;
   for (NodeId id : round) SetState(&v, id, kCalibrated);
@@ -377,6 +379,259 @@ TEST(RoundPolicyTest, EveryBranch) {
   EXPECT_EQ(DecideRound(full, expecting).action, RoundAction::kRound);
 }
 
+RecalibrationAsk AskSite() { return {7, true, kInvalidNodeId}; }
+RecalibrationAsk AskUnit(NodeId unit) { return {7, false, unit}; }
+
+// An operator's ask to calibrate again: who carries it out, and how.
+TEST(RoundPolicyTest, OperatorAsks) {
+  struct AskRow {
+    Row row;
+    bool ask_done;
+  };
+  const std::vector<AskRow> rows = {
+      {{"the site's runner, asked for the site: every member again",
+        [] {
+          RoundView v = SiteRunner(1, {1, 2, 3}, {1, 2, 3});
+          v.asked = AskSite();
+          return v;
+        },
+        RoundAction::kRound,
+        {1, 2, 3},
+        {1, 2, 3},
+        "the operator asked to recalibrate the site"},
+       true},
+      {{"the site's runner, asked for one unit: a join round for it, the others held",
+        [] {
+          RoundView v = SiteRunner(1, {1, 2, 3}, {1, 2, 3});
+          v.asked = AskUnit(2);
+          return v;
+        },
+        RoundAction::kJoinRound,
+        {1, 2, 3},
+        {2},
+        "against the 2 other units"},
+       true},
+      {{"... itself included",
+        [] {
+          RoundView v = SiteRunner(1, {1, 2, 3}, {1, 2, 3});
+          v.asked = AskUnit(1);
+          return v;
+        },
+        RoundAction::kJoinRound,
+        {1, 2, 3},
+        {1},
+        "recalibrate unit 1"},
+       true},
+      {{"one unit of a two-unit site: one other unit is too few to hold, every member again",
+        [] {
+          RoundView v = SiteRunner(1, {1, 2}, {1, 2});
+          v.asked = AskUnit(2);
+          return v;
+        },
+        RoundAction::kRound,
+        {1, 2},
+        {1, 2},
+        "calibrating every member"},
+       true},
+      {{"the lowest id without the site's solution, asked for one unit: every member again",
+        [] {
+          RoundView v = Fresh(1, {1, 2, 3});
+          v.asked = AskUnit(3);
+          return v;
+        },
+        RoundAction::kRound,
+        {1, 2, 3},
+        {1, 2, 3},
+        "no site with two other units"},
+       true},
+      {{"an ask overrides saved calibrations that held their check",
+        [] {
+          RoundView v = Fresh(1, {1, 2});
+          SetState(&v, 1, kVerified);
+          SetState(&v, 2, kVerified);
+          v.asked = AskSite();
+          return v;
+        },
+        RoundAction::kRound,
+        {1, 2},
+        {1, 2},
+        "recalibrate the site"},
+       true},
+      {{"not the runner: not its ask",
+        [] {
+          RoundView v = Fresh(2, {1, 2, 3});
+          v.asked = AskSite();
+          return v;
+        },
+        RoundAction::kNone,
+        {},
+        {},
+        "unit 1 runs the rounds"},
+       true},
+      {{"the lowest id calibrated by a runner still present: that runner carries it out",
+        [] {
+          RoundView v = Fresh(1, {1, 2, 3});
+          v.calibrated = true;
+          v.calibrated_by = 2;
+          v.asked = AskSite();
+          return v;
+        },
+        RoundAction::kNone,
+        {},
+        {},
+        "calibrated by unit 2, which carries out"},
+       true},
+      {{"a unit that is not a member (or has no camera)",
+        [] {
+          RoundView v = SiteRunner(1, {1, 2, 3}, {1, 2, 3});
+          v.asked = AskUnit(9);
+          return v;
+        },
+        RoundAction::kNone,
+        {},
+        {},
+        "not a member with a projector and a camera"},
+       true},
+      {{"its own round still runs: the ask waits for it",
+        [] {
+          RoundView v = SiteRunner(1, {1, 2, 3}, {1, 2, 3});
+          v.round_running = true;
+          v.asked = AskSite();
+          return v;
+        },
+        RoundAction::kWait,
+        {},
+        {},
+        "its round is running"},
+       false},
+      {{"a member not linked: the ask waits",
+        [] {
+          RoundView v = SiteRunner(1, {1, 2, 3}, {1, 2, 3});
+          v.members[2].linked = false;
+          v.asked = AskSite();
+          return v;
+        },
+        RoundAction::kWait,
+        {},
+        {},
+        "unit 3 is not linked"},
+       false},
+      {{"the member list settling: the ask waits",
+        [] {
+          RoundView v = SiteRunner(1, {1, 2, 3}, {1, 2, 3});
+          v.member_list_age = milliseconds(100);
+          v.asked = AskSite();
+          return v;
+        },
+        RoundAction::kWait,
+        {},
+        {},
+        "changed less than settle ago"},
+       false},
+  };
+  for (const AskRow& ask_row : rows) {
+    const Row& row = ask_row.row;
+    SCOPED_TRACE(row.name);
+    const RoundDecision d = DecideRound(row.view(), RoundPolicyOptions{});
+    EXPECT_EQ(d.action, row.action) << RoundActionName(d.action) << ": " << d.why;
+    EXPECT_NE(d.why.find(row.why), std::string::npos) << d.why;
+    EXPECT_EQ(d.ask_done, ask_row.ask_done);
+    if (row.action == RoundAction::kRound || row.action == RoundAction::kJoinRound) {
+      EXPECT_EQ(d.members, row.members);
+      EXPECT_EQ(d.projecting, row.projecting);
+    }
+  }
+  // Without an ask, the same site's runner does nothing, and nothing is answered.
+  const RoundDecision idle = DecideRound(SiteRunner(1, {1, 2, 3}, {1, 2, 3}), {});
+  EXPECT_EQ(idle.action, RoundAction::kNone);
+  EXPECT_FALSE(idle.ask_done);
+}
+
+// The site's runner after a round that placed units 1 and 2 and left unit 3 without a
+// calibration, `failed` rounds in a row, the last one ended `ago`.
+RoundView AfterFailedRound(int failed, RoundClock::duration ago) {
+  RoundView v = SiteRunner(1, {1, 2, 3}, {1, 2, 3});
+  SetState(&v, 3, kNone);
+  v.site_units = 2;
+  v.site_unit_ids = {1, 2};
+  v.failed_rounds = failed;
+  v.last_round_ended = kNow - ago;
+  return v;
+}
+
+// A round that left units without a calibration is tried again, waiting longer each time.
+TEST(RoundPolicyTest, FailedRoundsAreTriedAgainWithAGrowingWait) {
+  const std::vector<Row> rows = {
+      {"one failed round, 5 s ago: wait retry_wait (30 s)",
+       [] { return AfterFailedRound(1, seconds(5)); },
+       RoundAction::kWait,
+       {},
+       {},
+       "the last round left unit 3 without a calibration; trying again 30 s after it"},
+      {"... 31 s ago: a join round for the unit it left out",
+       [] { return AfterFailedRound(1, seconds(31)); },
+       RoundAction::kJoinRound,
+       {1, 2, 3},
+       {3},
+       "trying again (1 of 3) for unit 3"},
+      {"two in a row, 45 s ago: the wait doubled (60 s)",
+       [] { return AfterFailedRound(2, seconds(45)); },
+       RoundAction::kWait,
+       {},
+       {},
+       "trying again 60 s after it"},
+      {"three in a row, 121 s ago: the third try",
+       [] { return AfterFailedRound(3, seconds(121)); },
+       RoundAction::kJoinRound,
+       {1, 2, 3},
+       {3},
+       "trying again (3 of 3)"},
+      {"four in a row: it gives up and says so",
+       [] { return AfterFailedRound(4, seconds(1000)); },
+       RoundAction::kNone,
+       {},
+       {},
+       "4 rounds in a row left unit 3 without a calibration; not trying again"},
+      {"a round whose solve failed: every member again",
+       [] {
+         RoundView v = Fresh(1, {1, 2});
+         v.ran_round = true;
+         v.last_round_members = {1, 2};
+         v.failed_rounds = 1;
+         v.last_round_ended = kNow - seconds(40);
+         return v;
+       },
+       RoundAction::kRound,
+       {1, 2},
+       {1, 2},
+       "the last round solved no site; calibrating all again"},
+      {"a unit that failed and left is not waited for",
+       [] {
+         RoundView v = AfterFailedRound(1, seconds(31));
+         v.members.pop_back();
+         return v;
+       },
+       RoundAction::kNone,
+       {},
+       {},
+       "every member was in the last round"},
+  };
+  for (const Row& row : rows) {
+    SCOPED_TRACE(row.name);
+    const RoundDecision d = DecideRound(row.view(), RoundPolicyOptions{});
+    EXPECT_EQ(d.action, row.action) << RoundActionName(d.action) << ": " << d.why;
+    EXPECT_NE(d.why.find(row.why), std::string::npos) << d.why;
+    if (row.action == RoundAction::kRound || row.action == RoundAction::kJoinRound) {
+      EXPECT_EQ(d.members, row.members);
+      EXPECT_EQ(d.projecting, row.projecting);
+    }
+  }
+  // A round that placed every unit it was to: nothing to try again.
+  RoundView placed = AfterFailedRound(0, seconds(1000));
+  SetState(&placed, 3, kCalibrated);
+  EXPECT_EQ(DecideRound(placed, {}).action, RoundAction::kNone);
+}
+
 TEST(RoundPolicyTest, ReportsWhatItSawForTheNextAsk) {
   RoundView v = Fresh(0, {0, 1, 2});
   SetState(&v, 1, kCalibrated);
@@ -397,6 +652,9 @@ TEST(RoundPolicyTest, OptionsCheck) {
   EXPECT_EQ(bad.Check().code(), StatusCode::kInvalidArgument);
   bad = RoundPolicyOptions{};
   bad.expected_units = -1;
+  EXPECT_EQ(bad.Check().code(), StatusCode::kInvalidArgument);
+  bad = RoundPolicyOptions{};
+  bad.max_retries = -1;
   EXPECT_EQ(bad.Check().code(), StatusCode::kInvalidArgument);
 }
 
