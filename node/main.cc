@@ -20,6 +20,8 @@
 //   (--world E is short for --projector world:E --camera world:E; node/devices/device_factory.h)
 //   sandtable-node calibrate-unit --poses DIR -o unit.json ...   (the unit's factory calibration)
 //   sandtable-node render-frame --calibration unit.json -o frame.png ...  (one frame of the show)
+//   sandtable-node doctor [the unit's flags]   (checks the unit's set-up:
+//   node/app/doctor_command.h)
 //
 // On start it prints one JSON line on stdout (cluster/report_lines.h):
 //   {"ready":"sandtable-node","id":3,"peer":"tcp://127.0.0.1:40123"}
@@ -50,6 +52,7 @@
 #include "common/base/main_guard.h"
 #include "common/cli/command_line.h"
 #include "common/cli/config_file.h"
+#include "node/app/doctor_command.h"
 #include "node/app/node_app.h"
 #include "node/app/node_config.h"
 #include "node/app/node_discovery.h"
@@ -78,6 +81,10 @@ static int Run(int argc, char** argv) {
       "render-frame", "one frame of the unit's show to a PNG (sandtable-node render-frame --help)");
   render_frame->prefix_command();  // its own parser (node/render/render_frame_command.h)
   render_frame->set_help_flag();
+  CLI::App* doctor = app.add_subcommand(
+      "doctor", "checks this unit's set-up and says what to fix (sandtable-node doctor --help)");
+  doctor->prefix_command();  // the node's own flags (node/app/doctor_command.h)
+  doctor->set_help_flag();
   node::NodeConfig config;
   node::AddNodeFlags(app, config);
   cli::AddConfigFileFlags(app, cli::ConfigProgram::kNode);
@@ -88,6 +95,7 @@ static int Run(int argc, char** argv) {
   if (std::optional<int> exit = cli::Parse(app, *args)) return *exit;
   if (calibrate->parsed()) return node::RunCalibrateUnit(calibrate->remaining());
   if (render_frame->parsed()) return node::RunRenderFrame(render_frame->remaining());
+  if (doctor->parsed()) return node::RunDoctor(doctor->remaining());
   if (config.id != kInvalidNodeId) SetLogTag("node-" + std::to_string(config.id));
   if (config.test_clock_offset_s != 0.0) {
     SetHostClockOffsetForTest(static_cast<int64_t>(config.test_clock_offset_s * 1e9));
