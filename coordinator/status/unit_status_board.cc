@@ -101,6 +101,8 @@ std::string UnitStatusBoard::ConsoleState(NodeId id, const MembershipTable& memb
   }
   if (it == units_.end() || !it->second.has_status) return "discovered";
   const wire::UnitStatus& s = it->second.status;
+  // A unit calibrated again says so while its new round runs.
+  if (s.phase() == "calibrating") return "calibrating";
   // A unit without self-calibration (a held calibration) says only its phase.
   const bool unspecified = s.calibration_state() == wire::CALIBRATION_STATE_UNSPECIFIED;
   if (s.calibration_state() == wire::CALIBRATION_STATE_CALIBRATED ||

@@ -34,9 +34,16 @@ const std::vector<cv::Mat>* CalibrationUnit::PatternFrames(const wire::PatternPl
   return &(pattern_cache_[key] = std::move(*frames));
 }
 
+bool CalibrationUnit::being_calibrated() const {
+  constexpr std::chrono::seconds kRoundSilence{60};
+  return projecting_ && std::chrono::steady_clock::now() - last_step_ < kRoundSilence;
+}
+
 void CalibrationUnit::HandleStep(const wire::CalibrationStep& step, NodeId from,
                                  NodeRuntime& node) {
   if (from != node.id()) last_step_from_other_ = std::chrono::steady_clock::now();
+  last_step_ = std::chrono::steady_clock::now();
+  if (step.action() == wire::CALIBRATION_ACTION_RESPONSE) projecting_ = true;
   if (step.round() != round_) {
     // A new round: forget the last one's captures and correspondences.
     round_ = step.round();

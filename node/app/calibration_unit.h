@@ -53,6 +53,9 @@ class CalibrationUnit {
   std::optional<std::chrono::steady_clock::time_point> last_step_from_other() const {
     return last_step_from_other_;
   }
+  // A round is calibrating this unit's projector (it measured its response, its result has not
+  // come), and a step of it came within kRoundSilence.
+  bool being_calibrated() const;
 
  private:
   // One function per action (HandleStep's switch); each answers `done` when the step is done.
@@ -118,6 +121,8 @@ class CalibrationUnit {
   bool verify_started_ = false;
   NodeId calibrated_by_ = kInvalidNodeId;
   std::optional<std::chrono::steady_clock::time_point> last_step_from_other_;
+  bool projecting_ = false;  // see being_calibrated()
+  std::chrono::steady_clock::time_point last_step_{};
 };
 
 }  // namespace sandtable::node

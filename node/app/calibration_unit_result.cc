@@ -193,6 +193,7 @@ void CalibrationUnit::HandleResult(const wire::CalibrationResult& result, NodeId
                                    NodeRuntime& node) {
   if (result.projector_id() != node.id()) return;
   calibrated_by_ = from;
+  projecting_ = false;
   if (!result.ok()) {
     ST_LOG(kError) << "self-calibration failed: " << result.message();
     if (on_failed_) on_failed_(result.message());

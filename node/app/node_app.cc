@@ -302,6 +302,8 @@ void NodeApp::MakeSelfCalibration() {
                                          : wire::CALIBRATION_STATE_NONE);
   if (saved_) self_calibration_->SetSavedCalibration(*saved_, out_);
   if (render_loop_) self_calibration_->SetRenderLoop(render_loop_.get());
+  unit_status_->SetCalibratingProbe(
+      [service = self_calibration_.get()] { return service->being_calibrated(); });
   runtime_->AddService(self_calibration_.get());
 }
 

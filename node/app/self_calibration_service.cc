@@ -130,6 +130,8 @@ void SelfCalibrationService::SetSavedCalibration(UnitCalibration saved,
 
 bool SelfCalibrationService::calibrated() const { return unit_->calibrated(); }
 
+bool SelfCalibrationService::being_calibrated() const { return unit_->being_calibrated(); }
+
 bool SelfCalibrationService::ServesPeer(wire::Envelope::BodyCase body) const {
   switch (body) {
     case wire::Envelope::kCalibrationStep:

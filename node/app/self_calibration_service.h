@@ -170,6 +170,8 @@ class SelfCalibrationService : public NodeService, private CalibrationLink {
   Status OnStep(NodeRuntime& node) override;
 
   bool calibrated() const;
+  // A round is calibrating this unit's projector now (CalibrationUnit::being_calibrated).
+  bool being_calibrated() const;
 
  private:
   bool Send(NodeId to, wire::Envelope envelope, NodeRuntime& node) override;

@@ -25,10 +25,12 @@ void UnitStatusService::OnLine(const report::ReportLine& line) {
   const wire::UnitStatus before = status_;
   std::visit(report::Overloaded{
                  [&](const report::Calibrated& c) {
+                   phase_before_round_.clear();
                    status_.set_phase(c.verified ? "verified" : "calibrated");
                    status_.set_round(c.round);
                  },
                  [&](const report::CalibrationFailed& f) {
+                   phase_before_round_.clear();
                    status_.set_phase("failed");
                    status_.set_last_error(Clip("calibration failed: " + f.reason));
                  },
@@ -82,6 +84,11 @@ void UnitStatusService::SetCalibration(const UnitCalibration& calibration,
   dirty_ = true;
 }
 
+void UnitStatusService::SetCalibratingProbe(std::function<bool()> probe) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  calibrating_ = std::move(probe);
+}
+
 void UnitStatusService::SetProblem(const std::string& phase, const std::string& why) {
   std::lock_guard<std::mutex> lock(mutex_);
   status_.set_phase(Clip(phase));
@@ -100,6 +107,17 @@ Status UnitStatusService::OnStep(NodeRuntime& node) {
   wire::Envelope envelope;
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    const bool round = calibrating_ && calibrating_();
+    const std::string& phase = status_.phase();
+    if (round && (phase == "calibrated" || phase == "verified")) {
+      phase_before_round_ = phase;
+      status_.set_phase("calibrating");
+      dirty_ = true;
+    } else if (!round && phase == "calibrating" && !phase_before_round_.empty()) {
+      status_.set_phase(phase_before_round_);  // the round ended without a result for it
+      phase_before_round_.clear();
+      dirty_ = true;
+    }
     if (status_.calibration_state() != node.calibration_state()) {
       status_.set_calibration_state(node.calibration_state());
       if (node.calibration_state() == wire::CALIBRATION_STATE_NONE &&

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <chrono>
+#include <functional>
 #include <mutex>
 #include <optional>
 #include <set>
@@ -33,6 +34,9 @@ class UnitStatusService : public NodeService {
                       const std::optional<std::set<NodeId>>& overlapping);
   // Something that keeps the unit from doing its job: its phase in words and why.
   void SetProblem(const std::string& phase, const std::string& why);
+  // Asked on the network thread at every step: true while a round calibrates this unit again
+  // (its phase says "calibrating" until the round's result, then what it was).
+  void SetCalibratingProbe(std::function<bool()> probe);
 
   void OnRegistered(NodeRuntime& node) override;
   Status OnStep(NodeRuntime& node) override;
@@ -43,6 +47,8 @@ class UnitStatusService : public NodeService {
   mutable std::mutex mutex_;
   wire::UnitStatus status_;
   bool dirty_ = true;
+  std::function<bool()> calibrating_;  // network thread only
+  std::string phase_before_round_;     // the phase a round's "calibrating" stands in for
   std::chrono::steady_clock::time_point last_sent_{};
 };
 

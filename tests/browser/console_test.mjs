@@ -3,7 +3,7 @@
 // hold): the page loads read-only, the operator signs in, the units' footprints appear, a test
 // pattern chosen on the page reaches every node (each node reports the pattern its renderer
 // shows), the timeline pauses, annotations clear, a recalibration of one unit asked on the page
-// completes (the unit placed by a new round and blending again), actions without the token are
+// completes (the unit shown calibrating, then placed by a new round and blending again), actions without the token are
 // refused, and the unit the lab kills turns "lost" on the page within kLostWithinMs of its
 // process ending. Screenshots go to OUT (console.png, console_pattern.png,
 // console_recalibrated.png, console_lost.png).
@@ -176,6 +176,10 @@ try {
               async () => (await page.textContent("#result")).startsWith("done"));
   await until("the ask shown", kPatternWaitMs, async () =>
       (await page.textContent("#recalibration-state")).includes(`unit ${kRecalibrateUnit}`));
+  await until(`unit ${kRecalibrateUnit} shown calibrating`, kRecalibrateWaitMs, async () =>
+      (await page.locator(`#units tbody tr[data-unit-id="${kRecalibrateUnit}"]` +
+                          '[data-state="calibrating"]').count()) === 1, 100);
+  await page.screenshot({path: path.join(outDir, "console_recalibrating.png")});
   await until(`unit ${kRecalibrateUnit} placed by a new round and blending`, kRecalibrateWaitMs,
               async () => {
                 if (labExited) fail("the lab ended during the recalibration (see lab.log)");

@@ -66,6 +66,12 @@ TEST(UnitStatusBoardTest, KeepsAMembersOwnStatusAndSaysItsState) {
   EXPECT_DOUBLE_EQ(units[0]["predicted_rms_mm"].get<double>(), 0.4);
   EXPECT_NEAR(units[0]["heartbeat_age_s"].get<double>(), 0.05, 1e-9);
 
+  // Calibrated, and calibrated again by a round now: calibrating until the round's result.
+  wire::UnitStatus again = Calibrated(true);
+  again.set_phase("calibrating");
+  ASSERT_TRUE(site.board.Update(3, "conn-3", again, site.members, site.t0).ok());
+  EXPECT_EQ(site.board.ConsoleState(3, site.members, site.t0), "calibrating");
+
   wire::UnitStatus failed;
   failed.set_calibration_state(wire::CALIBRATION_STATE_NONE);
   failed.set_phase("failed");
