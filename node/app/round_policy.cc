@@ -1,6 +1,7 @@
 #include "node/app/round_policy.h"
 
 #include <algorithm>
+#include <optional>
 
 namespace sandtable::node {
 namespace {
@@ -60,6 +61,33 @@ std::string Units(const std::vector<NodeId>& ids) {
   std::string out;
   for (NodeId id : ids) out += (out.empty() ? "unit " : ", ") + std::to_string(id);
   return out;
+}
+
+// After a round that left members without a calibration (RoundView::failed_rounds): a decision
+// to wait or give up, or nullopt with `joining` set to the members to try again for and
+// `retry` the words that say so (nothing to retry: both untouched).
+std::optional<RoundDecision> Retry(const RoundView& v, const RoundPolicyOptions& options,
+                                   std::vector<NodeId>* joining, std::string* retry) {
+  if (v.failed_rounds <= 0) return std::nullopt;
+  const std::vector<NodeId> failed = FailedMembers(v);
+  if (failed.empty()) return std::nullopt;
+  if (v.failed_rounds > options.max_retries) {
+    return Decide(RoundAction::kNone, std::to_string(v.failed_rounds) + " rounds in a row left " +
+                                          Units(failed) +
+                                          " without a calibration; not trying again (recalibrate "
+                                          "from the console)");
+  }
+  const RoundClock::duration wait = options.retry_wait * (1 << std::min(v.failed_rounds - 1, 10));
+  const long wait_s = std::chrono::duration_cast<std::chrono::seconds>(wait).count();
+  if (v.last_round_ended && v.now - *v.last_round_ended < wait) {
+    return Decide(RoundAction::kWait, "the last round left " + Units(failed) +
+                                          " without a calibration; trying again " +
+                                          std::to_string(wait_s) + " s after it");
+  }
+  *joining = failed;
+  *retry = "trying again (" + std::to_string(v.failed_rounds) + " of " +
+           std::to_string(options.max_retries) + ") for " + Units(failed) + ": ";
+  return std::nullopt;
 }
 
 // The operator asked to calibrate again (RoundView::asked): this unit is the one that decides.
@@ -204,27 +232,11 @@ RoundDecision DecideRound(const RoundView& v, const RoundPolicyOptions& options)
     } else {
       joining = JoiningMembers(v, ids);
       std::string retry;
-      if (joining.empty() && v.failed_rounds > 0) {
-        const std::vector<NodeId> failed = FailedMembers(v);
-        if (!failed.empty()) {
-          if (v.failed_rounds > options.max_retries) {
-            out.action = RoundAction::kNone;
-            out.why = std::to_string(v.failed_rounds) + " rounds in a row left " + Units(failed) +
-                      " without a calibration; not trying again (recalibrate from the console)";
-            return out;
-          }
-          const RoundClock::duration wait =
-              options.retry_wait * (1 << std::min(v.failed_rounds - 1, 10));
-          const long wait_s = std::chrono::duration_cast<std::chrono::seconds>(wait).count();
-          if (v.last_round_ended && v.now - *v.last_round_ended < wait) {
-            out.action = RoundAction::kWait;
-            out.why = "the last round left " + Units(failed) + " without a calibration; trying " +
-                      "again " + std::to_string(wait_s) + " s after it";
-            return out;
-          }
-          joining = failed;
-          retry = "trying again (" + std::to_string(v.failed_rounds) + " of " +
-                  std::to_string(options.max_retries) + ") for " + Units(failed) + ": ";
+      if (joining.empty()) {
+        if (std::optional<RoundDecision> wait = Retry(v, options, &joining, &retry)) {
+          wait->saw_calibrated_peer = out.saw_calibrated_peer;
+          wait->saw_uncalibrated_member = out.saw_uncalibrated_member;
+          return *wait;
         }
       }
       if (joining.empty()) {
