@@ -234,6 +234,7 @@ DoctorCheck CheckLight(Bench& bench, const DoctorOptions& o) {
   std::string detail =
       "white against black lights " + Fixed(100.0 * share, 1) + " % of the camera image";
   if (share < o.min_lit_share) {
+    bench.lit = cv::Mat();  // nothing to time a flash or an exposure on
     return Check(name, CheckVerdict::kFail,
                  detail + " (at least " + Fixed(100.0 * o.min_lit_share, 1) + " % needed)",
                  "the camera does not see this projector's light: aim the camera at the table "

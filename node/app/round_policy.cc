@@ -92,7 +92,7 @@ std::optional<RoundDecision> Retry(const RoundView& v, const RoundPolicyOptions&
 
 // The operator asked to calibrate again (RoundView::asked): this unit is the one that decides.
 RoundDecision DecideAsked(const RoundView& v, const std::vector<NodeId>& ids, bool site_runner,
-                          bool runner_gone) {
+                          bool runner_gone, bool peer_calibrated) {
   const RecalibrationAsk& ask = *v.asked;
   const std::string what = ask.all_units ? std::string("the site") : Unit(ask.unit);
   RoundDecision out;
@@ -101,6 +101,16 @@ RoundDecision DecideAsked(const RoundView& v, const std::vector<NodeId>& ids, bo
     out.action = RoundAction::kNone;
     out.why = "calibrated by " + Unit(v.calibrated_by) +
               ", which carries out the operator's recalibration of " + what;
+    return out;
+  }
+  if (!site_runner && !v.calibrated && peer_calibrated) {
+    // Not placed itself while others are: their runner holds the site and carries it out (a
+    // second round beside its own would clobber both).
+    out.action = RoundAction::kNone;
+    out.why =
+        "other units are calibrated; their runner carries out the operator's "
+        "recalibration of " +
+        what;
     return out;
   }
   if (!ask.all_units && !Contains(ids, ask.unit)) {
@@ -200,7 +210,7 @@ RoundDecision DecideRound(const RoundView& v, const RoundPolicyOptions& options)
     }
   }
   if (checking) return Decide(RoundAction::kWait, "a member is checking its saved calibration");
-  if (v.asked) return DecideAsked(v, ids, site_runner, runner_gone);
+  if (v.asked) return DecideAsked(v, ids, site_runner, runner_gone, peer_calibrated);
   RoundDecision out;
   out.saw_calibrated_peer = peer_calibrated;
   out.saw_uncalibrated_member = !uncalibrated.empty();

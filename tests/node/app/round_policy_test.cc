@@ -481,6 +481,19 @@ TEST(RoundPolicyTest, OperatorAsks) {
         {},
         "calibrated by unit 2, which carries out"},
        true},
+      {{"the lowest id, not placed itself while others are: their runner carries it out",
+        [] {
+          RoundView v = Fresh(1, {1, 2, 3});
+          SetState(&v, 2, kCalibrated);
+          SetState(&v, 3, kCalibrated);
+          v.asked = AskSite();
+          return v;
+        },
+        RoundAction::kNone,
+        {},
+        {},
+        "their runner carries out the operator's recalibration of the site"},
+       true},
       {{"a unit that is not a member (or has no camera)",
         [] {
           RoundView v = SiteRunner(1, {1, 2, 3}, {1, 2, 3});
