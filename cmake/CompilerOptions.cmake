@@ -20,7 +20,10 @@ endif()
 # into every static library and every test executable that links it: with it inline the build
 # folder grew past 12 GB (98 % of each executable was .debug_*) and filled CI's disk. gdb reads
 # the .dwo files from the build folder.
+# What split DWARF leaves in an executable (GCC 12 always adds its name index, .debug_gnu_pub*,
+# ~140 MB in sandtable-node) is compressed when linking (zlib; gdb reads it).
 option(SANDTABLE_SPLIT_DWARF "Keep debug information in .dwo files beside the objects" ON)
 if(SANDTABLE_SPLIT_DWARF AND CMAKE_CXX_COMPILER_ID MATCHES "GNU|Clang")
   add_compile_options($<$<AND:$<CONFIG:RelWithDebInfo,Debug>,$<COMPILE_LANGUAGE:C,CXX>>:-gsplit-dwarf>)
+  add_link_options($<$<CONFIG:RelWithDebInfo,Debug>:LINKER:--compress-debug-sections=zlib>)
 endif()
