@@ -211,20 +211,21 @@ function renderTable(units) {
   }));
 }
 
+// A unit picker: `all` (labelled `allLabel`) and every unit not lost; keeps the choice while
+// it is still offered (or takes `preferred` when it is), else `all`.
+function fillUnitSelect(select, allLabel, units, preferred = null) {
+  const keep = select.value;
+  select.replaceChildren(new Option(allLabel, "all"),
+      ...units.filter((u) => u.state !== "lost").map((u) => new Option("unit " + u.node_id,
+                                                                       String(u.node_id))));
+  const offered = (value) => [...select.options].some((o) => o.value === value);
+  select.value = preferred !== null && offered(String(preferred)) ? String(preferred)
+      : (offered(keep) ? keep : "all");
+}
+
 function renderActions(units) {
-  const target = $("pattern-target");
-  const keep = target.value;
-  target.replaceChildren(new Option("every unit", "all"),
-      ...units.filter((u) => u.state !== "lost").map((u) => new Option("unit " + u.node_id,
-                                                                       String(u.node_id))));
-  target.value = selected !== null && units.some((u) => u.node_id === selected)
-      ? String(selected) : ([...target.options].some((o) => o.value === keep) ? keep : "all");
-  const again = $("recalibrate-target");
-  const keepAgain = again.value;
-  again.replaceChildren(new Option("the whole site", "all"),
-      ...units.filter((u) => u.state !== "lost").map((u) => new Option("unit " + u.node_id,
-                                                                       String(u.node_id))));
-  again.value = [...again.options].some((o) => o.value === keepAgain) ? keepAgain : "all";
+  fillUnitSelect($("pattern-target"), "every unit", units, selected);
+  fillUnitSelect($("recalibrate-target"), "the whole site", units);
   const r = doc.recalibration;
   $("recalibration-state").textContent = !r ? "-"
       : r.ask_id === 0 ? "not asked since the coordinator started"
