@@ -358,10 +358,17 @@ MaskFrameTimes RenderLoop::LastMaskFrame() const {
 
 Status RenderLoop::WaitForShown(uint64_t generation, std::chrono::milliseconds timeout) {
   std::unique_lock<std::mutex> lock(mutex_);
+  // Suspended (calibration has the projector), nothing is shown until it resumes: a caller on
+  // the node's worker must not hold it for the timeout meanwhile (the round's own steps wait
+  // behind it). What was posted is shown once the loop resumes.
   if (!shown_cv_.wait_for(lock, timeout,
-                          [&] { return shown_generation_ >= generation || stop_; })) {
+                          [&] { return shown_generation_ >= generation || stop_ || suspended_; })) {
     return UnavailableError("render: no frame shown within " + std::to_string(timeout.count()) +
                             " ms");
+  }
+  if (shown_generation_ < generation && suspended_) {
+    return UnavailableError(
+        "render: suspended while the projector calibrates; shown once it resumes");
   }
   return OkStatus();
 }
@@ -371,6 +378,7 @@ void RenderLoop::Suspend() {
     std::lock_guard<std::mutex> lock(mutex_);
     suspended_ = true;
   }
+  shown_cv_.notify_all();  // a wait for a frame ends: none comes while suspended
   std::lock_guard<std::mutex> showing(show_mutex_);  // a frame being shown finishes first
 }
 

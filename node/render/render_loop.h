@@ -139,7 +139,8 @@ class RenderLoop {
   // (renderer.h SetMask), blanked with it.
   // A factor and lift equal to the blend already shown change nothing: it waits for the frame
   // that showed them and returns that frame's time. `generation` (may be null): the blend's, for
-  // PrepareBlends.
+  // PrepareBlends. ShowMask and ShowBlend answer UNAVAILABLE at once while the loop is
+  // suspended (Suspend: calibration has the projector), and the mask is shown once it resumes.
   Expected<int64_t> ShowBlend(const cv::Mat& factor, const cv::Mat& lift = cv::Mat(),
                               std::chrono::milliseconds timeout = std::chrono::seconds(10),
                               uint64_t* generation = nullptr);
