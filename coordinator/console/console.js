@@ -155,7 +155,9 @@ function renderTop(units) {
       fill: `var(--${u.state})`, stroke: `var(--${u.state})`,
       "data-unit-id": u.node_id, "data-state": u.state,
     }, svg);
-    poly.addEventListener("click", () => select(u.node_id));
+    poly.addEventListener("click", () => {
+      if ($("annotation-tool").value === "view") select(u.node_id);
+    });
     const title = el("title", {}, poly);
     title.textContent = "unit " + u.node_id + ": " + u.state;
     const cx = fp.reduce((a, p) => a + p[0], 0) / fp.length;
@@ -164,6 +166,7 @@ function renderTop(units) {
                              "stroke-width": font * 0.15}, svg);
     text.textContent = u.node_id;
   }
+  drawPending(svg);
   const legend = $("legend");
   legend.replaceChildren(...STATES.map((s) => {
     const li = document.createElement("li");
@@ -236,7 +239,7 @@ function renderActions(units) {
         `${t.duration_s.toFixed(0)} s, rate ${t.rate}`
       : "no timeline loaded";
   const a = doc.annotations;
-  $("annotations-state").textContent = a ? a.strokes + " strokes" : "-";
+  $("annotations-state").textContent = a ? a.strokes + (a.strokes === 1 ? " stroke" : " strokes") : "-";
   const list = $("enrollment");
   const asking = (doc.enrollment && doc.enrollment.units) || [];
   $("enrollment-row").hidden = !(doc.enrollment && doc.enrollment.on);
@@ -265,6 +268,69 @@ function select(id) {
   if (doc) render();
 }
 
+// The stroke being drawn on the top view (table metres), shown until it is sent.
+let pending = null;
+
+function drawPending(svg) {
+  if (!pending || pending.points.length < 1) return;
+  el("polyline", {class: "pending", id: "pending",
+                  points: pending.points.map((p) => p[0] + "," + (-p[1])).join(" "),
+                  stroke: pending.colour, "stroke-width": pending.width_m}, svg);
+}
+
+// A pointer event's place on the table (metres, table frame; the table top is z = 0).
+function tablePoint(e) {
+  const svg = $("top");
+  const pt = svg.createSVGPoint();
+  pt.x = e.clientX;
+  pt.y = e.clientY;
+  const p = pt.matrixTransform(svg.getScreenCTM().inverse());
+  return [p.x, -p.y, 0];
+}
+
+function rgb01(hex) {
+  return [1, 3, 5].map((i) => Number.parseInt(hex.slice(i, i + 2), 16) / 255);
+}
+
+function wireDrawing() {
+  const svg = $("top");
+  const tool = () => (token ? $("annotation-tool").value : "view");
+  $("annotation-tool").addEventListener("change", () => { svg.classList.value = tool(); });
+  svg.addEventListener("pointerdown", (e) => {
+    if (tool() === "erase") {
+      act({action: "annotation_erase", center_in_table_m: tablePoint(e),
+           radius_m: Number($("erase-radius").value) / 1000});
+      return;
+    }
+    if (tool() !== "draw") return;
+    e.preventDefault();
+    svg.setPointerCapture(e.pointerId);
+    pending = {points: [tablePoint(e)], colour: $("annotation-colour").value,
+               width_m: Number($("annotation-width").value) / 1000};
+    drawPending(svg);
+  });
+  svg.addEventListener("pointermove", (e) => {
+    if (!pending) return;
+    const p = tablePoint(e), last = pending.points[pending.points.length - 1];
+    if (Math.hypot(p[0] - last[0], p[1] - last[1]) < 0.002) return;  // 2 mm apart at least
+    pending.points.push(p);
+    const old = $("pending");
+    if (old) old.remove();
+    drawPending(svg);
+  });
+  const finish = async () => {
+    if (!pending) return;
+    const stroke = pending;
+    await act({action: "annotation_stroke", color_rgb: rgb01(stroke.colour),
+               width_m: stroke.width_m, points_in_table_m: stroke.points});
+    if (pending === stroke) pending = null;
+    const old = $("pending");
+    if (old) old.remove();
+  };
+  svg.addEventListener("pointerup", finish);
+  svg.addEventListener("pointercancel", finish);
+}
+
 async function act(body) {
   const result = $("result");
   result.className = "result";
@@ -278,9 +344,11 @@ async function act(body) {
     result.className = response.ok ? "result" : "result bad";
     result.textContent = (response.ok ? "done: " : "refused (" + response.status + "): ") +
                          (answer.message || "");
+    return response.ok ? answer : null;
   } catch (e) {
     result.className = "result bad";
     result.textContent = "not sent: " + e.message;
+    return null;
   }
 }
 
@@ -323,6 +391,25 @@ function wire() {
       () => act({action: "timeline", op: "seek", value: Number($("seek").value)}));
   $("rate-apply").addEventListener("click",
       () => act({action: "timeline", op: "rate", value: Number($("rate").value)}));
+  $("export").addEventListener("click", async () => {
+    const answer = await act({action: "annotations_export"});
+    if (!answer || typeof answer.session !== "string") return;
+    const stamp = new Date().toISOString().replace(/[:.]/g, "-").slice(0, 19);
+    const a = document.createElement("a");
+    a.href = URL.createObjectURL(new Blob([answer.session], {type: "application/x-ndjson"}));
+    a.download = "annotations-" + stamp + ".jsonl";
+    document.body.appendChild(a);
+    a.click();
+    a.remove();
+  });
+  $("import").addEventListener("change", async () => {
+    const file = $("import").files[0];
+    if (!file) return;
+    const text = await file.text();
+    $("import").value = "";
+    if (!confirm(`Replace every stroke on the table with those of ${file.name}?`)) return;
+    act({action: "annotations_import", session: text});
+  });
   $("clear").addEventListener("click", () => {
     if (confirm("Clear every annotation stroke on the table? This cannot be undone.")) {
       act({action: "annotations_clear"});
@@ -331,4 +418,5 @@ function wire() {
 }
 
 wire();
+wireDrawing();
 stream();

@@ -22,7 +22,8 @@
 namespace sandtable::coordinator {
 namespace {
 
-constexpr size_t kMaxPayloadBytes = 64 * 1024;  // actions are small JSON; refuse big ones early
+// Actions are small JSON but for an imported annotation session; refuse bigger bodies early.
+constexpr size_t kMaxPayloadBytes = 8 * 1024 * 1024;
 constexpr auto kStartDeadline = std::chrono::seconds(5);
 const char* const kText = "text/plain; charset=utf-8";
 

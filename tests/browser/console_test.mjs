@@ -2,7 +2,8 @@
 // against a lab site on localhost (sandtable-lab run --hold-s, which kills one unit during the
 // hold): the page loads read-only, the operator signs in, the units' footprints appear, a test
 // pattern chosen on the page reaches every node (each node reports the pattern its renderer
-// shows), the timeline pauses, annotations clear, a recalibration of one unit asked on the page
+// shows), the timeline pauses, annotations clear, a stroke drawn on the top view is held,
+// exported, erased and imported back, a recalibration of one unit asked on the page
 // completes (the unit shown calibrating, then placed by a new round and blending again), actions without the token are
 // refused, and the unit the lab kills turns "lost" on the page within kLostWithinMs of its
 // process ending. Screenshots go to OUT (console.png, console_pattern.png,
@@ -164,6 +165,41 @@ try {
   await page.click("#clear");
   await until("annotations cleared", kPatternWaitMs,
               async () => (await page.textContent("#result")).startsWith("done"));
+
+  // Annotations from the page: a stroke drawn on the top view, the session exported, the
+  // stroke erased, the exported session imported back.
+  const strokes = async () =>
+      ((await (await fetch(site.status)).json()).annotations || {}).strokes;
+  await until("no strokes after the clear", kPatternWaitMs, async () => (await strokes()) === 0);
+  await page.selectOption("#annotation-tool", "draw");
+  const box = await page.locator("#top").boundingBox();
+  const cx = box.x + box.width / 2, cy = box.y + box.height / 2;
+  await page.mouse.move(cx - 60, cy);
+  await page.mouse.down();
+  for (let i = 1; i <= 12; ++i) await page.mouse.move(cx - 60 + 10 * i, cy + 6 * (i % 2));
+  await page.mouse.up();
+  await until("the stroke drawn on the page held by the coordinator", kPatternWaitMs,
+              async () => (await strokes()) === 1);
+  const download = page.waitForEvent("download");
+  await page.click("#export");
+  const sessionPath = path.join(outDir, "annotations.jsonl");
+  await (await download).saveAs(sessionPath);
+  const session = fs.readFileSync(sessionPath, "utf8").trim().split("\n");
+  if (!session[0].includes("sandtable-annotation-session") ||
+      !session.some((l) => l.includes("stroke_begin")) ||
+      !session.some((l) => l.includes("stroke_end"))) {
+    fail("the exported session holds no whole stroke: " + session.slice(0, 3).join(" / "));
+  }
+  await page.selectOption("#annotation-tool", "erase");
+  await page.fill("#erase-radius", "500");  // 0.5 m around the stroke's middle: all of it
+  await page.mouse.click(cx, cy);
+  await until("the stroke erased from the page", kPatternWaitMs,
+              async () => (await strokes()) === 0);
+  await page.setInputFiles("#import", sessionPath);
+  await until("the exported session imported back", kPatternWaitMs,
+              async () => (await strokes()) === 1);
+  await page.selectOption("#annotation-tool", "view");
+  await page.screenshot({path: path.join(outDir, "console_annotations.png")});
 
   // One unit calibrated again from the page: a new round places it and it blends again.
   const unitOf = (status, id) => status.units.find((u) => u.node_id === id);

@@ -212,5 +212,80 @@ TEST(StatusServerTest, ConsoleShowsUnitsAndItsActionsReachTheCoordinator) {
   EXPECT_EQ(child.Wait(), 0);
 }
 
+// Annotations from the console: a stroke drawn, the session exported, the stroke erased with
+// the spot eraser, the exported session imported back, and bad bodies refused whole.
+TEST(StatusServerTest, ConsoleDrawsErasesExportsAndImportsAnnotations) {
+  namespace fs = std::filesystem;
+  const fs::path token_file =
+      fs::temp_directory_path() / ("sandtable_console_notes_token_" + std::to_string(::getpid()));
+  const std::string token = "console-test-token-0123456789";
+  {
+    std::ofstream out(token_file);
+    out << token << "\n";
+  }
+  fs::permissions(token_file, fs::perms::owner_read | fs::perms::owner_write);
+  testing::ChildProcess child({SANDTABLE_COORDINATOR_BIN, "--status", "127.0.0.1:0",
+                               "--status-token-file", token_file.string()});
+  std::string error;
+  const std::optional<nlohmann::json> ready =
+      testing::ReadReadyLine(child, "sandtable-coordinator", kDeadline, &error);
+  ASSERT_TRUE(ready.has_value()) << error;
+  fs::remove(token_file);
+  const std::string url = testing::ReadyString(*ready, "status");
+  const uint16_t port =
+      static_cast<uint16_t>(std::stoi(url.substr(std::string("http://127.0.0.1:").size())));
+  auto strokes = [&] {
+    const nlohmann::json d = GetStatus(port);
+    return d.is_discarded() ? -1 : d["annotations"].value("strokes", -1);
+  };
+  auto act = [&](const nlohmann::json& body) {
+    return HttpExchange(port, Post(body.dump(), token));
+  };
+
+  const nlohmann::json stroke = {
+      {"action", "annotation_stroke"},
+      {"color_rgb", {0.9, 0.2, 0.1}},
+      {"width_m", 0.006},
+      {"points_in_table_m", {{0.10, 0.20, 0.0}, {0.12, 0.20, 0.0}, {0.14, 0.21, 0.0}}}};
+  std::string r = act(stroke);
+  ASSERT_EQ(StatusLine(r), "HTTP/1.1 200 OK") << r;
+  EXPECT_TRUE(net::testing::WaitFor([&] { return strokes() == 1; }, kDeadline));
+
+  r = act({{"action", "annotations_export"}});
+  ASSERT_EQ(StatusLine(r), "HTTP/1.1 200 OK") << r;
+  const nlohmann::json exported = nlohmann::json::parse(Body(r), nullptr, false);
+  ASSERT_FALSE(exported.is_discarded()) << r;
+  EXPECT_EQ(exported["strokes"], 1);
+  const std::string session = exported.value("session", "");
+  EXPECT_NE(session.find("\"kind\":\"stroke_begin\""), std::string::npos) << session;
+  EXPECT_NE(session.find("\"point_count\":3"), std::string::npos) << session;
+
+  r = act({{"action", "annotation_erase"},
+           {"center_in_table_m", {0.12, 0.20, 0.0}},
+           {"radius_m", 0.1}});
+  ASSERT_EQ(StatusLine(r), "HTTP/1.1 200 OK") << r;
+  EXPECT_TRUE(net::testing::WaitFor([&] { return strokes() == 0; }, kDeadline));
+
+  r = act({{"action", "annotations_import"}, {"session", session}});
+  ASSERT_EQ(StatusLine(r), "HTTP/1.1 200 OK") << r;
+  EXPECT_NE(Body(r).find("1 stroke imported"), std::string::npos) << r;
+  EXPECT_TRUE(net::testing::WaitFor([&] { return strokes() == 1; }, kDeadline));
+
+  // Refused whole, nothing changed: a cut session, a colour out of range, no points.
+  r = act({{"action", "annotations_import"}, {"session", session.substr(0, session.size() / 2)}});
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 400 Bad Request") << r;
+  nlohmann::json bad = stroke;
+  bad["color_rgb"] = {2, 0, 0};
+  EXPECT_EQ(StatusLine(act(bad)), "HTTP/1.1 400 Bad Request");
+  bad = stroke;
+  bad["points_in_table_m"] = nlohmann::json::array();
+  EXPECT_EQ(StatusLine(act(bad)), "HTTP/1.1 400 Bad Request");
+  r = act({{"action", "annotation_erase"}, {"center_in_table_m", {0, 0, 0}}, {"radius_m", 9}});
+  EXPECT_EQ(StatusLine(r), "HTTP/1.1 400 Bad Request") << r;
+  EXPECT_EQ(strokes(), 1);
+  child.Signal(SIGTERM);
+  EXPECT_EQ(child.Wait(), 0);
+}
+
 }  // namespace
 }  // namespace sandtable::coordinator
