@@ -159,6 +159,11 @@ Expected<ReportLine> ParseCalibrated(const json& j) {
   r.Optional("messages_received", &line.messages_received);
   r.Optional("bytes_sent", &line.bytes_sent);
   r.Optional("bytes_received", &line.bytes_received);
+  r.Optional("capture_latency_ms", &line.capture_latency_ms);
+  r.Optional("capture_settle_ms", &line.capture_settle_ms);
+  r.Optional("captures", &line.captures);
+  r.Optional("captures_stale", &line.captures_stale);
+  r.Optional("captures_repeated", &line.captures_repeated);
   return Done(r, line);
 }
 
@@ -328,7 +333,12 @@ json ToJson(const ReportLine& line) {
                     {"messages_sent", l.messages_sent},
                     {"messages_received", l.messages_received},
                     {"bytes_sent", l.bytes_sent},
-                    {"bytes_received", l.bytes_received}};
+                    {"bytes_received", l.bytes_received},
+                    {"capture_latency_ms", l.capture_latency_ms},
+                    {"capture_settle_ms", l.capture_settle_ms},
+                    {"captures", l.captures},
+                    {"captures_stale", l.captures_stale},
+                    {"captures_repeated", l.captures_repeated}};
           },
           [](const CalibrationFailed& l) -> json {
             return {{"calibration_failed", l.id}, {"reason", l.reason}};

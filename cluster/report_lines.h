@@ -55,6 +55,10 @@ struct Calibrated {
   bool verified = false;                   // a saved calibration checked, no round
   double compute_s = 0.0;
   uint64_t messages_sent = 0, messages_received = 0, bytes_sent = 0, bytes_received = 0;
+  // Its camera's timing (node/devices/paced_camera.h): the flash latency measured (< 0: none),
+  // what captures waited, pictures kept, and reads thrown away as stale or repeated.
+  double capture_latency_ms = -1.0, capture_settle_ms = 0.0;
+  uint64_t captures = 0, captures_stale = 0, captures_repeated = 0;
 };
 
 // {"calibration_failed":3,"reason":".."}

@@ -190,6 +190,7 @@ void CalibrationRunner::PlanPrepass(Round& r) {
     wire::CalibrationStep show = MakeStep(r.round, wire::CALIBRATION_ACTION_SHOW);
     show.set_show(wire::SHOW_WHAT_WHITE);
     white.commands.push_back({p, show});
+    white.light_of = {p};
     capture.label = "pre-pass capture " + std::to_string(p);
     for (NodeId c : members) {
       wire::CalibrationStep s = MakeStep(r.round, wire::CALIBRATION_ACTION_CAPTURE);
@@ -199,6 +200,7 @@ void CalibrationRunner::PlanPrepass(Round& r) {
       s.set_has_about_projector(true);
       capture.commands.push_back({c, s, p});
     }
+    capture.light_of = {p};
     r.stages.push_back(white);
     r.stages.push_back(capture);
     // The projector's response, by its own camera (projector_response.h).
@@ -221,6 +223,7 @@ void CalibrationRunner::PlanPrepass(Round& r) {
         wire::CalibrationStep s = MakeStep(r.round, wire::CALIBRATION_ACTION_CAPTURE);
         s.set_slot(slot);
         capture_stage.commands.push_back({p, s});
+        show_stage.light_of = capture_stage.light_of = {p};
         r.stages.push_back(show_stage);
         r.stages.push_back(capture_stage);
       }
@@ -375,6 +378,7 @@ void CalibrationRunner::PlanColour(int colour, int colour_count,
       s.set_slot(base + static_cast<uint32_t>(f));
       capture.commands.push_back({cam, s});
     }
+    show.light_of = capture.light_of = projectors;
     rr.stages.push_back(show);
     rr.stages.push_back(capture);
   }
@@ -409,6 +413,13 @@ void CalibrationRunner::PlanColour(int colour, int colour_count,
 bool CalibrationRunner::EndStage(NodeRuntime& node) {
   Round& r = *round_;
   r.stage_active = false;
+  if (!r.current_light_of.empty()) {
+    const double s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - r.stage_started).count();
+    for (NodeId p : r.current_light_of) r.measured_device_s[p] += s;
+    r.measured_site_device_s += s;
+    r.current_light_of.clear();
+  }
   if (r.current_after) {
     auto after = std::move(r.current_after);
     r.current_after = nullptr;
@@ -474,6 +485,7 @@ void CalibrationRunner::RunnerStep(NodeRuntime& node) {
     Round::Stage stage = std::move(r.stages.front());
     r.stages.pop_front();
     r.current_after = stage.after;
+    r.current_light_of = stage.light_of;
     r.stage_active = true;
     r.stage_started = now;
     std::vector<Round::Command> to_send;

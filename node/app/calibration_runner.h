@@ -62,6 +62,9 @@ class CalibrationRunner {
       std::vector<Command> commands;
       std::function<void(NodeRuntime&)> after;  // runs when every command is answered
       std::string label;
+      // The projectors whose light this stage shows or captures (its time is theirs on the
+      // devices: measured_device_s).
+      std::vector<NodeId> light_of;
     };
 
     uint64_t round = 0;
@@ -86,6 +89,11 @@ class CalibrationRunner {
     std::deque<Stage> stages;
     std::map<uint32_t, Command> awaiting;  // by step number
     std::function<void(NodeRuntime&)> current_after;
+    std::vector<NodeId> current_light_of;
+    // Wall time of the stages that showed or captured each projector's light, and of all of
+    // them (projectors of one colour share theirs).
+    std::map<NodeId, double> measured_device_s;
+    double measured_site_device_s = 0.0;
     std::chrono::steady_clock::time_point stage_started{};
     // The stage's last answer (or its start): units are late only when the whole stage has
     // made no progress for step_timeout (a 64-unit stage queues at one world; docs/lab.md).

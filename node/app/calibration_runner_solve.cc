@@ -366,6 +366,7 @@ void CalibrationRunner::FinishRound(const ClusterSolution* solution, const Statu
       {"prepass_frames", r.prepass_frames},
       {"site_frames", r.prepass_frames + r.site_frames},
       {"device_time_s", (r.prepass_frames + r.site_frames) * period},
+      {"measured_device_time_s", r.measured_site_device_s},
       {"colours", ColourCount(r.colours)},
       {"path", r.path},
       {"path_reason", r.path_reason},
@@ -382,6 +383,7 @@ void CalibrationRunner::FinishRound(const ClusterSolution* solution, const Statu
         {"frames", frames},
         // its sequence, its pre-pass white and its response frames
         {"device_time_s", (frames + 1 + r.response_frames) * period},
+        {"measured_device_time_s", r.measured_device_s.count(p) ? r.measured_device_s.at(p) : 0.0},
         {"gray_lsb_skip", plan.gray_lsb_skip},
         {"phase_steps", plan.phase_steps},
         {"phase_period_px", plan.phase_period_px},

@@ -61,7 +61,10 @@ void CalibrationUnit::HandleStep(const wire::CalibrationStep& step, NodeId from,
     for (const wire::Envelope& e : answered->second) link_->Send(from, e, node);
     return;
   }
-  if (!working_.insert(step.step()).second) return;
+  if (!working_.insert(step.step()).second) {
+    ST_LOG(kInfo) << "self-calibration: step " << step.step() << " again; still working on it";
+    return;
+  }
   wire::CalibrationStepDone done;
   done.set_round(step.round());
   done.set_step(step.step());
@@ -197,11 +200,29 @@ void CalibrationUnit::StepCapture(const wire::CalibrationStep& step, NodeId from
     working_.erase(step.step());         // handled afresh when it has
     return;
   }
-  CameraInput* camera = camera_.get();
+  PacedCamera* camera = camera_.get();
   const int bits = camera->bit_depth();
+  // The pattern was asked for before this step came (the runner sends it once the projectors
+  // showed theirs). This unit's own projector turning white against the black reference is a
+  // flash: the camera measures its latency there (paced_camera.h).
+  const DeviceClock::time_point since = DeviceClock::now();
+  cv::Mat flash_reference;
+  if (step.has_about_projector() && step.about_projector() == node.id() &&
+      step.reference_slot() != 0) {
+    if (auto ref = slots_.find(step.reference_slot()); ref != slots_.end()) {
+      flash_reference = ref->second;
+    }
+  }
+  const int lit_threshold = options_.lit_threshold, min_lit = options_.min_lit_pixels;
   node.workers().Run<Expected<cv::Mat>>(
-      [camera, bits]() -> Expected<cv::Mat> {
-        Expected<CapturedFrame> frame = camera->Capture(Seconds(0));
+      [camera, bits, since, flash_reference, lit_threshold, min_lit]() -> Expected<cv::Mat> {
+        auto lit = [&](const cv::Mat& image) {
+          const cv::Mat eight = To8Bit(image, bits);
+          return eight.size() == flash_reference.size() &&
+                 cv::countNonZero(LitMask(eight, flash_reference, lit_threshold)) >= min_lit;
+        };
+        Expected<CapturedFrame> frame = flash_reference.empty() ? camera->CaptureAfter(since)
+                                                                : camera->CaptureFlash(since, lit);
         if (!frame.ok()) return frame.status();
         return To8Bit(frame->image, bits).clone();
       },

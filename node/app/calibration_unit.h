@@ -32,7 +32,9 @@ class CalibrationUnit {
                   SelfCalibrationService::OnCalibrated on_calibrated,
                   SelfCalibrationService::OnFailed on_failed);
 
-  void SetCamera(std::unique_ptr<CameraInput> camera) { camera_ = std::move(camera); }
+  void SetCamera(std::unique_ptr<CameraInput> camera) {
+    camera_ = std::make_unique<PacedCamera>(std::move(camera));
+  }
   void SetRenderLoop(RenderLoop* loop) { render_loop_ = loop; }
   void SetSavedCalibration(UnitCalibration saved,
                            SelfCalibrationService::OnVerification on_verification);
@@ -88,7 +90,7 @@ class CalibrationUnit {
   UnitCalibration factory_;
   ProjectorOutput* projector_;
   RenderLoop* render_loop_ = nullptr;
-  std::unique_ptr<CameraInput> camera_;
+  std::unique_ptr<PacedCamera> camera_;  // captures paced to the devices' timing
   std::shared_ptr<const Scene> model_;
   const SelfCalibrationOptions& options_;
   CalibrationLink* link_;

@@ -45,6 +45,7 @@ SelfCalibrationOutcome CalibrationUnit::Outcome(const UnitCalibration& calibrati
   outcome.messages_received = ledger_->messages_received;
   outcome.bytes_sent = ledger_->bytes_sent;
   outcome.bytes_received = ledger_->bytes_received;
+  if (camera_) outcome.capture = camera_->stats();
   return outcome;
 }
 
@@ -80,7 +81,7 @@ void CalibrationUnit::MaybeVerify(NodeRuntime& node) {
   };
   const UnitCalibration saved = *saved_;
   ProjectorOutput* projector = projector_;
-  CameraInput* camera = camera_.get();
+  PacedCamera* camera = camera_.get();
   std::shared_ptr<const Scene> model = model_;
   const CalibrationCheckOptions check = options_.check;
   node.workers().Run<Checked>(
@@ -102,7 +103,7 @@ void CalibrationUnit::MaybeVerify(NodeRuntime& node) {
         for (int i = 0; i < 2; ++i) {
           Expected<ShownFrame> shown = projector->Show(i == 0 ? black : plan->dots_frame);
           if (!shown.ok()) return fail(shown.status());
-          Expected<CapturedFrame> frame = camera->Capture(Seconds(0));
+          Expected<CapturedFrame> frame = camera->CaptureAfter(shown->shown_time);
           if (!frame.ok()) return fail(frame.status());
           images[i] = To8Bit(frame->image, bits).clone();
         }

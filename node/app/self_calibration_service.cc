@@ -101,6 +101,11 @@ Expected<report::Calibrated> ExportSelfCalibration(const SelfCalibrationOutcome&
   line.messages_received = outcome.messages_received;
   line.bytes_sent = outcome.bytes_sent;
   line.bytes_received = outcome.bytes_received;
+  line.capture_latency_ms = outcome.capture.latency_s < 0 ? -1.0 : outcome.capture.latency_s * 1e3;
+  line.capture_settle_ms = outcome.capture.settle_s * 1e3;
+  line.captures = outcome.capture.captures;
+  line.captures_stale = outcome.capture.stale;
+  line.captures_repeated = outcome.capture.repeated;
   return line;
 }
 

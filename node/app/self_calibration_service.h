@@ -50,6 +50,7 @@
 #include "node/calibration/planar_solver.h"
 #include "node/calibration/structured_light_plan.h"
 #include "node/devices/camera_input.h"
+#include "node/devices/paced_camera.h"
 #include "node/devices/projector_output.h"
 #include "node/net/node_runtime.h"
 #include "node/render/render_loop.h"
@@ -112,6 +113,7 @@ struct SelfCalibrationOutcome {
   double compute_s = 0.0;  // this node's thread CPU time in the round
   uint64_t messages_sent = 0, messages_received = 0;
   uint64_t bytes_sent = 0, bytes_received = 0;
+  CaptureTimingStats capture;  // its camera's timing so far
   // The runner only: the site as MPCDI (common/io/mpcdi_builder.h; the warp cast on the found
   // model, or on the table plane when there is none), ready for WriteMpcdi.
   std::shared_ptr<const MpcdiSite> site_mpcdi;

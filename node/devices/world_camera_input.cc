@@ -111,8 +111,12 @@ Expected<CapturedFrame> WorldCameraInput::Request(Seconds exposure, int* bit_dep
   // GRAY16 is little endian on the wire, as on every machine this runs on (x86-64, arm64).
   std::memcpy(frame.image.data, answer.pixels().data(), expected_bytes);
   const DeviceClock::time_point stamped = FromNs(answer.capture_time_ns());
-  frame.capture_time =
-      (stamped >= sent && stamped <= received) ? stamped : sent + (received - sent) / 2;
+  // A camera with a driver queue delivers exposures older than the request (up to its queue's
+  // length of frames); the world's stamp is taken back to kQueuedStampWindow before it.
+  constexpr auto kQueuedStampWindow = std::chrono::seconds(2);
+  frame.capture_time = (stamped >= sent - kQueuedStampWindow && stamped <= received)
+                           ? stamped
+                           : sent + (received - sent) / 2;
   *bit_depth = depth;
   return frame;
 }

@@ -7,8 +7,9 @@
 // for this camera, the slow part of a first capture). Every capture is checked against them:
 // a reply of another size, depth or camera is INTERNAL naming both. A capture the world
 // refuses is INVALID_ARGUMENT with the world's message; a dead world is UNAVAILABLE.
-// Capture time: the world stamps its capture on its steady clock; on one host (the lab) that is
-// this process's clock too, and it is used when it lies within the request's round trip.
+// Capture time: the world stamps its capture with the exposure's start on its steady clock; on
+// one host (the lab) that is this process's clock too, and it is used when it lies within the
+// request's round trip or up to 2 s before it (a queued exposure, sim/site/device_timing.h).
 // Otherwise (another host) the middle of the round trip stands in for it.
 #pragma once
 

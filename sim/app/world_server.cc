@@ -1,5 +1,6 @@
 #include "sim/app/world_server.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -19,6 +20,16 @@ int64_t NowNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::steady_clock::now().time_since_epoch())
       .count();
+}
+
+double NowS() { return static_cast<double>(NowNs()) * 1e-9; }
+
+// A unit's fixed phase in [0, period): where its refreshes or exposures start.
+double UnitPhase(NodeId id, double period_s, uint64_t salt) {
+  const double golden = 0.6180339887498949;
+  const double f =
+      std::fmod(golden * static_cast<double>(id + 1) + 0.37 * static_cast<double>(salt), 1.0);
+  return f * period_s;
 }
 
 uint64_t Mix(uint64_t z) {  // splitmix64 finaliser
@@ -41,6 +52,19 @@ Status WorldServerOptions::Check() const {
 WorldServer::WorldServer(std::unique_ptr<World> world, WorldServerOptions options)
     : world_(std::move(world)), options_(std::move(options)) {
   ST_CHECK(world_ != nullptr) << "WorldServer needs a World";
+  for (const UnitSpec& unit : world_->site().units) {
+    const DeviceTiming& t = unit.timing;
+    if (t.lag_frames > 0) {
+      timelines_.emplace(unit.id, ProjectorTimeline(t, UnitPhase(unit.id, 1.0 / t.refresh_hz, 0)));
+      history_s_ = std::max(history_s_, 0.1);
+    }
+    if (unit.camera && t.camera_fps > 0) {
+      clocks_.emplace(unit.id, CameraClock(t, UnitPhase(unit.id, 1.0 / t.camera_fps, 1),
+                                           CaptureSeed(options_.noise_seed, unit.id, 0)));
+      history_s_ =
+          std::max(history_s_, (t.queue_frames + 1) / t.camera_fps + t.camera_latency_s + 0.1);
+    }
+  }
 }
 
 WorldServer::~WorldServer() {
@@ -88,7 +112,17 @@ Status WorldServer::Start() {
 
 Status WorldServer::Step(std::chrono::milliseconds max_wait) {
   ST_CHECK(channel_ != nullptr) << "WorldServer::Step before a successful Start()";
-  return loop_.RunOnce(max_wait);
+  std::chrono::milliseconds wait = max_wait;
+  if (!pending_.empty()) {
+    double next = pending_.front().ready_s;
+    for (const PendingCapture& p : pending_) next = std::min(next, p.ready_s);
+    const auto until = std::chrono::milliseconds(
+        static_cast<int64_t>(std::ceil(std::max(0.0, next - NowS()) * 1000.0)));
+    wait = std::min(wait, until);
+  }
+  ST_RETURN_IF_ERROR(loop_.RunOnce(wait));
+  ServeDueCaptures();
+  return OkStatus();
 }
 
 Status WorldServer::Run(const std::atomic<bool>& stop) {
@@ -106,12 +140,16 @@ void WorldServer::HandleMessage(net::Incoming message) {
       Reply(routing_id, SetFrame(in.set_frame_request()));
       break;
     case wire::Envelope::kCaptureRequest:
-      Reply(routing_id, Capture(in.capture_request()));
+      if (std::optional<wire::Envelope> reply = Capture(routing_id, in.capture_request())) {
+        Reply(routing_id, std::move(*reply));
+      }
       break;
     case wire::Envelope::kGroundTruthRequest:
+      SyncProjectors(NowS());
       Reply(routing_id, GroundTruth(in.ground_truth_request()));
       break;
     case wire::Envelope::kTopViewRequest:
+      SyncProjectors(NowS());
       Reply(routing_id, TopView(in.top_view_request()));
       break;
     default:
@@ -161,7 +199,16 @@ wire::Envelope WorldServer::SetFrame(const wire::SetFrameRequest& request) {
   }
   const UnitSpec* unit = world_->site().FindUnit(request.projector_id());
   if (!unit) return fail("no such projector in site '" + world_->site().name + "'");
+  auto timeline = timelines_.find(request.projector_id());
   if (request.muted()) {  // the light cut; the frame it showed is kept for the next unmute
+    if (timeline != timelines_.end()) {
+      const double now = NowS();
+      timeline->second.Send(now, cv::Mat(), false);
+      timeline->second.ForgetBefore(now - history_s_);
+      ++stats_.frames_set;
+      reply->set_ok(true);
+      return envelope;
+    }
     const Status off = world_->SetProjectorOn(request.projector_id(), false);
     if (!off.ok()) return fail(off.message());
     ++stats_.frames_set;
@@ -188,10 +235,17 @@ wire::Envelope WorldServer::SetFrame(const wire::SetFrameRequest& request) {
                 channels == 1 ? CV_8UC1 : CV_8UC3, const_cast<char*>(request.pixels().data()));
   cv::Mat bgr;
   if (channels == 3) cv::cvtColor(frame, bgr, cv::COLOR_RGB2BGR);
-  const Status set = world_->SetProjectorFrame(request.projector_id(), channels == 3 ? bgr : frame);
-  if (!set.ok()) return fail(set.message());
-  if (Status on = world_->SetProjectorOn(request.projector_id(), true); !on.ok()) {
-    return fail(on.message());
+  if (timeline != timelines_.end()) {  // on the table after the projector's lag
+    const double now = NowS();
+    timeline->second.Send(now, channels == 3 ? bgr : frame.clone(), true);
+    timeline->second.ForgetBefore(now - history_s_);
+  } else {
+    const Status set =
+        world_->SetProjectorFrame(request.projector_id(), channels == 3 ? bgr : frame);
+    if (!set.ok()) return fail(set.message());
+    if (Status on = world_->SetProjectorOn(request.projector_id(), true); !on.ok()) {
+      return fail(on.message());
+    }
   }
   ++stats_.frames_set;
   if (frame_log_.is_open()) {
@@ -210,7 +264,8 @@ wire::Envelope WorldServer::SetFrame(const wire::SetFrameRequest& request) {
   return envelope;
 }
 
-wire::Envelope WorldServer::Capture(const wire::CaptureRequest& request) {
+std::optional<wire::Envelope> WorldServer::Capture(const std::string& routing_id,
+                                                   const wire::CaptureRequest& request) {
   wire::Envelope envelope;
   wire::CaptureReply* reply = envelope.mutable_capture_reply();
   reply->set_camera_id(request.camera_id());
@@ -227,11 +282,77 @@ wire::Envelope WorldServer::Capture(const wire::CaptureRequest& request) {
       request.exposure_s() > 60.0) {
     return fail("exposure_s must be in [0, 60] (0 = the camera's own)");
   }
+  const double now = NowS();
+  auto clock = clocks_.find(request.camera_id());
+  if (clock == clocks_.end()) return CaptureAt(request, now, false);
+  const CameraClock::Read read = clock->second.Next(now);
+  if (read.ready_s <= now) return CaptureAt(request, read.exposure_start_s, read.repeat);
+  pending_.push_back({read.ready_s, routing_id, request, read.exposure_start_s, read.repeat});
+  return std::nullopt;
+}
+
+void WorldServer::ServeDueCaptures() {
+  while (!pending_.empty()) {
+    const double now = NowS();
+    auto due = std::min_element(
+        pending_.begin(), pending_.end(),
+        [](const PendingCapture& a, const PendingCapture& b) { return a.ready_s < b.ready_s; });
+    if (due->ready_s > now) return;
+    PendingCapture p = std::move(*due);
+    pending_.erase(due);
+    Reply(p.routing_id, CaptureAt(p.request, p.exposed_s, p.repeat));
+  }
+}
+
+void WorldServer::SyncProjectors(double t_s) {
+  for (auto& [id, timeline] : timelines_) {
+    const ProjectorTimeline::Entry* e = timeline.At(t_s);
+    const uint64_t version = e ? e->version : 0;
+    uint64_t& loaded = loaded_version_[id];
+    if (loaded == version) continue;
+    // (Errors cannot come: the unit exists and the frame was checked when it was sent.)
+    if (!e) {
+      (void)world_->SetProjectorUniform(id, 0);
+      (void)world_->SetProjectorOn(id, true);
+    } else {
+      if (!e->frame.empty()) (void)world_->SetProjectorFrame(id, e->frame);
+      (void)world_->SetProjectorOn(id, e->on);
+    }
+    loaded = version;
+  }
+}
+
+wire::Envelope WorldServer::CaptureAt(const wire::CaptureRequest& request, double exposed_s,
+                                      bool repeat) {
+  wire::Envelope envelope;
+  wire::CaptureReply* reply = envelope.mutable_capture_reply();
+  reply->set_camera_id(request.camera_id());
+  auto fail = [&](const std::string& message) {
+    ++stats_.bad_requests;
+    counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kInvalidContent);
+    reply->set_ok(false);
+    reply->set_message("capture camera " + std::to_string(request.camera_id()) + ": " + message);
+    return envelope;
+  };
+  const UnitSpec* unit = world_->site().FindUnit(request.camera_id());
+  const bool timed = !unit->timing.Ideal();
+  SyncProjectors(exposed_s);
+  double exposure_s = request.exposure_s();
+  if (exposure_s == 0.0 && unit->timing.auto_exposure_drift > 0) {  // auto exposure, unlocked
+    const double kTwoPi = 6.283185307179586;
+    exposure_s = unit->camera->exposure_s *
+                 (1.0 + unit->timing.auto_exposure_drift *
+                            std::sin(kTwoPi * exposed_s / unit->timing.auto_exposure_period_s));
+  }
   uint64_t& index = captures_per_camera_[request.camera_id()];
   const CaptureNoise noise{.enabled = options_.noise,
                            .seed = CaptureSeed(options_.noise_seed, request.camera_id(), index)};
-  Expected<cv::Mat> image = world_->Capture(request.camera_id(), noise, request.exposure_s());
+  auto last = last_pictures_.find(request.camera_id());
+  Expected<cv::Mat> image = repeat && last != last_pictures_.end()
+                                ? Expected<cv::Mat>(last->second)
+                                : world_->Capture(request.camera_id(), noise, exposure_s);
   if (!image.ok()) return fail(image.status().message());
+  if (timed) last_pictures_[request.camera_id()] = *image;
   ++index;
   ++stats_.captures;
   const bool eight_bit = image->depth() == CV_8U;
@@ -240,7 +361,7 @@ wire::Envelope WorldServer::Capture(const wire::CaptureRequest& request) {
   reply->set_height_px(static_cast<uint32_t>(image->rows));
   reply->set_bit_depth(static_cast<uint32_t>(unit->camera->bit_depth));
   reply->set_encoding(eight_bit ? wire::PIXEL_ENCODING_GRAY8 : wire::PIXEL_ENCODING_GRAY16);
-  reply->set_capture_time_ns(NowNs());
+  reply->set_capture_time_ns(static_cast<int64_t>(std::llround(exposed_s * 1e9)));
   std::string* pixels = reply->mutable_pixels();
   const size_t row_bytes = image->cols * image->elemSize();
   pixels->resize(row_bytes * image->rows);

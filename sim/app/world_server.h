@@ -32,6 +32,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <zmq.hpp>
 
@@ -44,6 +45,7 @@
 #include "proto/envelope.pb.h"
 #include "proto/message_counters.h"
 #include "proto/sequence_tracker.h"
+#include "sim/transport/device_clock.h"
 #include "sim/transport/world.h"
 
 namespace sandtable::sim {
@@ -99,7 +101,15 @@ class WorldServer {
   void Reply(const std::string& routing_id, wire::Envelope reply);
   void Reject(const std::string& routing_id, uint64_t sequence, const std::string& reason);
   wire::Envelope SetFrame(const wire::SetFrameRequest& request);
-  wire::Envelope Capture(const wire::CaptureRequest& request);
+  // The reply, or nothing when the camera's next frame is not readable yet (a streaming
+  // camera, sim/site/device_timing.h): it is then answered by Step() when it is.
+  std::optional<wire::Envelope> Capture(const std::string& routing_id,
+                                        const wire::CaptureRequest& request);
+  // The picture exposed at `exposed_s` (the previous picture again when `repeat`).
+  wire::Envelope CaptureAt(const wire::CaptureRequest& request, double exposed_s, bool repeat);
+  // Loads into the world what each lagged projector has on the table at `t_s`.
+  void SyncProjectors(double t_s);
+  void ServeDueCaptures();
   wire::Envelope GroundTruth(const wire::GroundTruthRequest& request);
   wire::Envelope TopView(const wire::TopViewRequest& request);
 
@@ -114,6 +124,21 @@ class WorldServer {
   net::ServerLoop loop_;
   std::string endpoint_;
   std::map<uint32_t, uint64_t> captures_per_camera_;
+  // Device timing: the timelines of projectors with a lag, the clocks of streaming cameras,
+  // the pictures they last delivered (for repeats) and the reads waiting for a frame.
+  struct PendingCapture {
+    double ready_s = 0;
+    std::string routing_id;
+    wire::CaptureRequest request;
+    double exposed_s = 0;
+    bool repeat = false;
+  };
+  std::map<NodeId, ProjectorTimeline> timelines_;
+  std::map<NodeId, uint64_t> loaded_version_;
+  std::map<NodeId, CameraClock> clocks_;
+  std::map<NodeId, cv::Mat> last_pictures_;
+  std::vector<PendingCapture> pending_;
+  double history_s_ = 0.0;  // how far back a read can look
   WorldServerStats stats_;
 };
 

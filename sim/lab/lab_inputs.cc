@@ -38,7 +38,8 @@ bool IsFile(const std::string& text) {
 
 Expected<LabInputs> PrepareLabInputs(const std::string& site_arg, const std::string& scene_arg,
                                      uint64_t seed, const std::string& out_dir,
-                                     const std::string& model_arg, double resolution_scale) {
+                                     const std::string& model_arg, double resolution_scale,
+                                     const std::string& device_timing) {
   const std::filesystem::path dir(out_dir);
   LabInputs inputs;
   inputs.site_label = site_arg;
@@ -50,6 +51,11 @@ Expected<LabInputs> PrepareLabInputs(const std::string& site_arg, const std::str
   inputs.site = std::move(*site);
   if (Status scaled = ScaleSiteResolution(resolution_scale, &inputs.site); !scaled.ok()) {
     return InvalidArgumentError("--resolution-scale: " + scaled.message());
+  }
+  if (!device_timing.empty()) {
+    Expected<DeviceTiming> timing = DeviceTimingPreset(device_timing);
+    if (!timing.ok()) return InvalidArgumentError("--device-timing: " + timing.status().message());
+    for (UnitSpec& unit : inputs.site.units) unit.timing = *timing;
   }
   std::optional<Scene> scene;  // the scene shown, when the lab makes it
   if (IsFile(scene_arg)) {

@@ -52,9 +52,12 @@ struct LabInputs {
 inline constexpr double kMaxModelOffset_m = 0.05;
 inline constexpr double kMaxModelYaw_deg = 10.0;
 // `resolution_scale` < 1: every projector and camera at that fraction of its resolution
-// (ScaleSiteResolution), before site.json and the factory files are written.
+// (ScaleSiteResolution), before site.json and the factory files are written. `device_timing`
+// "ideal" or "real" (sim/site/device_timing.h) replaces every unit's timing; "" keeps the
+// site's.
 Expected<LabInputs> PrepareLabInputs(const std::string& site, const std::string& scene,
                                      uint64_t seed, const std::string& out_dir,
-                                     const std::string& model = "", double resolution_scale = 1.0);
+                                     const std::string& model = "", double resolution_scale = 1.0,
+                                     const std::string& device_timing = "");
 
 }  // namespace sandtable::sim

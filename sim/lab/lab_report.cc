@@ -190,6 +190,12 @@ json LabReportJson(const LabResult& r) {
     }
     out["registration"] = registration;
   }
+  if (r.baseline_rms_mm) {
+    out["registration_baseline"] = {
+        {"what", "factory intrinsics at the true pose, the model at its true placement"},
+        {"rms_mm", *r.baseline_rms_mm},
+        {"p99_mm", r.baseline_p99_mm.value_or(0.0)}};
+  }
   if (!r.console_url.empty()) out["console"] = r.console_url;
   out["images"] = {{"top_white", r.top_white_png},
                    {"registration_error", r.heatmap_png},

@@ -82,6 +82,9 @@ struct LabResult {
   std::string calibration_source;  // the units' common source, or "mixed"
   std::map<NodeId, LabUnitResult> units;
   std::optional<RegistrationReport> registration;
+  // The baseline the self-calibration is compared with: each calibrated unit's factory
+  // intrinsics at its true pose, the model at its true placement (site rms and p99, mm).
+  std::optional<double> baseline_rms_mm, baseline_p99_mm;
   RegistrationMetricOptions metric_options;
   std::string top_white_png, heatmap_png;  // relative; empty when not made
   std::string console_url;                 // the site's console while the run lasted

@@ -94,6 +94,10 @@ std::vector<SummaryRow> SummaryRows(const LabResult& r) {
     add("registration rms (site)", reg.site.all.rms_mm, 3, " mm", r.max_rms_mm, true);
     add("registration max (site)", reg.site.all.max_mm, 2, " mm", 0, true);
   }
+  if (r.baseline_rms_mm) {
+    add("baseline: factory intrinsics at the true pose, rms", *r.baseline_rms_mm, 3, " mm", 0,
+        true);
+  }
   if (r.self_calibration.contains("runner_report")) {
     const json& rr = r.self_calibration["runner_report"];
     add("modeled projection, whole site", rr.value("device_time_s", 0.0), 2, " s", 0, true);
@@ -103,8 +107,38 @@ std::vector<SummaryRow> SummaryRows(const LabResult& r) {
         per_projector = std::max(per_projector, p.value("device_time_s", 0.0));
       }
       add("modeled projection per projector (most)", per_projector, 3, " s", 1.0, true);
+      // The same stages timed on the devices (show, settle, capture and the steps' messages).
+      double measured = 0.0;
+      for (const auto& [id, p] : rr["projectors"].items()) {
+        measured = std::max(measured, p.value("measured_device_time_s", 0.0));
+      }
+      if (measured > 0) {
+        add("measured projection per projector (most)", measured, 3, " s", 1.5, true,
+            /*timing=*/true);
+      }
     }
     add("calibration round, wall time", rr.value("wall_s", 0.0), 1, " s", 0, true);
+  }
+  if (r.self_calibration.contains("per_unit") && r.self_calibration["per_unit"].is_object()) {
+    // The cameras' timing (docs/devices.md, "Timing"): the worst flash latency, and the reads
+    // thrown away as stale or repeated among all reads.
+    double latency = -1.0;
+    double kept = 0, stale = 0, repeated = 0;
+    for (const auto& [id, u] : r.self_calibration["per_unit"].items()) {
+      latency = std::max(latency, u.value("capture_latency_ms", -1.0));
+      kept += u.value("captures", 0.0);
+      stale += u.value("captures_stale", 0.0);
+      repeated += u.value("captures_repeated", 0.0);
+    }
+    if (latency >= 0) {
+      add("camera flash latency (worst unit)", latency, 1, " ms", 0, true, /*timing=*/true);
+    }
+    if (kept > 0) {
+      add("captures read again, stale", 100.0 * stale / (kept + stale + repeated), 1, " %", 0,
+          true);
+      add("captures read again, repeated", 100.0 * repeated / (kept + stale + repeated), 1, " %", 0,
+          true);
+    }
   }
   if (r.render.contains("frame_ms_p50")) {
     const bool software =

@@ -57,7 +57,7 @@ int LabRun::Prepare() {
   Phase("prepare", 0);
   Expected<LabInputs> inputs =
       PrepareLabInputs(options_.site, options_.scene, options_.seed, options_.out_dir,
-                       options_.model, options_.resolution_scale);
+                       options_.model, options_.resolution_scale, options_.device_timing);
   if (!inputs.ok()) {
     progress_.End("failed");
     err_ << "sandtable-lab run: " << inputs.status().message() << "\n";

@@ -89,6 +89,10 @@ struct LabRunOptions {
   // Every projector and camera of the site at this fraction of its resolution (scale runs of
   // many nodes on a small machine); 1 = as the site file or preset says.
   double resolution_scale = 1.0;
+  // The units' device timing (sim/site/device_timing.h): "ideal", "real" (a 60 Hz projector
+  // with two frames of lag, a 30 fps camera with a two-frame queue, repeated and lost frames),
+  // or "" (as the site file says; presets are ideal).
+  std::string device_timing;
   // Membership heartbeat of the coordinator and the nodes, ms (a member is dead after 5 missed):
   // 0 = 100 ms up to 16 units, 100 ms x units / 16 beyond (64 processes on two cores: a
   // starved coordinator declared 56 of 64 nodes dead at once after a stall).

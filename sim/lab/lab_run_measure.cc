@@ -17,9 +17,22 @@ bool LabRun::Measure() {
   result_.metric_options.true_table_from_model =
       TruePoseMode() ? Rigid3d::Identity() : inputs_.model_from_table.Inverse();
   CollectSelfCalibration();
+  // The baseline: the same units with their factory intrinsics at their true poses.
+  std::vector<EstimatedRegistration> baseline;
+  for (const EstimatedRegistration& e : estimates) {
+    const UnitSpec* unit = inputs_.site.FindUnit(e.unit_id);
+    auto factory = inputs_.factory_paths.find(e.unit_id);
+    if (!unit || factory == inputs_.factory_paths.end()) continue;
+    Expected<UnitCalibration> held = LoadUnitCalibration(factory->second);
+    if (!held.ok()) continue;  // the node read it at start; a later failure leaves no baseline
+    baseline.push_back({e.unit_id, held->projector, unit->projector.table_from_projector,
+                        result_.metric_options.true_table_from_model});
+  }
+  if (baseline.size() != estimates.size()) baseline.clear();
   // The metric and the pictures run on a worker while the children stay watched.
   struct Work {
     std::optional<RegistrationReport> report;
+    std::optional<RegistrationReport> baseline;
     cv::Mat top, heatmap;
     double scale_mm = 0;
     std::string error;
@@ -33,7 +46,7 @@ bool LabRun::Measure() {
   const int width = options_.image_width_px;
   std::future<Work> future =
       std::async(std::launch::async,
-                 [this, estimates, metric_options, width, model_placement, model_centre,
+                 [this, estimates, baseline, metric_options, width, model_placement, model_centre,
                   no_placement = !TruePoseMode() && !units_have_model_]() mutable -> Work {
                    Work work;
                    Expected<std::unique_ptr<World>> world = World::Create(inputs_.site, scene_);
@@ -63,6 +76,12 @@ bool LabRun::Measure() {
                      return work;
                    }
                    work.report = std::move(*report);
+                   if (!baseline.empty()) {
+                     RegistrationMetricOptions o = metric_options;
+                     o.keep_samples = false;
+                     Expected<RegistrationReport> b = MeasureRegistration(**world, baseline, o);
+                     if (b.ok()) work.baseline = std::move(*b);
+                   }
                    if (model_placement) {
                      Expected<ModelPlacementError> placement = MeasureModelPlacement(
                          **world, estimates, metric_options.true_table_from_model, model_centre);
@@ -91,6 +110,10 @@ bool LabRun::Measure() {
   Work work = future.get();
   if (!work.error.empty()) return FailedWith("metrics", "registration metric: " + work.error);
   result_.registration = std::move(work.report);
+  if (work.baseline) {
+    result_.baseline_rms_mm = work.baseline->site.all.rms_mm;
+    result_.baseline_p99_mm = work.baseline->site.all.p99_mm;
+  }
   result_.measured_with_true_placement = work.true_placement;
   if (work.placement) {
     result_.model_offset_measured = true;
@@ -164,7 +187,12 @@ void LabRun::CollectSelfCalibration() {
               {"messages_sent", line.messages_sent},
               {"messages_received", line.messages_received},
               {"bytes_sent", line.bytes_sent},
-              {"bytes_received", line.bytes_received}};
+              {"bytes_received", line.bytes_received},
+              {"capture_latency_ms", line.capture_latency_ms},
+              {"capture_settle_ms", line.capture_settle_ms},
+              {"captures", line.captures},
+              {"captures_stale", line.captures_stale},
+              {"captures_repeated", line.captures_repeated}};
     slowest = std::max(slowest, line.compute_s);
     messages += static_cast<double>(line.messages_sent + line.messages_received);
     bytes += static_cast<double>(line.bytes_sent + line.bytes_received);

@@ -2,6 +2,8 @@
 // views, the grid coincidence and the photometric measure.
 #include "sim/lab/lab_run_internal.h"
 
+#include <thread>
+
 #include "common/estimation/footprint.h"
 #include "sim/lab/lab_pictures.h"
 
@@ -22,6 +24,15 @@ Status LabRun::SetPattern(const std::string& pattern) {
 }
 
 Expected<TopView> LabRun::TopViewOf(const std::vector<NodeId>& lit) {
+  // The nodes said they show their frames; a projector with an input lag puts them on the
+  // table that much later (sim/site/device_timing.h).
+  double lag_s = 0.0;
+  for (const UnitSpec& unit : inputs_.site.units) {
+    if (unit.timing.lag_frames > 0) {
+      lag_s = std::max(lag_s, (unit.timing.lag_frames + 1) / unit.timing.refresh_hz);
+    }
+  }
+  if (lag_s > 0) std::this_thread::sleep_for(std::chrono::duration<double>(lag_s));
   wire::Envelope request;
   for (NodeId id : lit) request.mutable_top_view_request()->add_projector_ids(id);
   request.mutable_top_view_request()->set_width_px(

@@ -205,6 +205,12 @@ void AddRunShowFlags(CLI::App* run, sim::LabRunOptions& options, std::string& pr
                   "Every projector and camera at this fraction of its resolution (large sites on "
                   "a small machine)")
       ->check(cli::Real(0.05, 1.0));
+  cli::NoDefaultShown(
+      run->add_option("--device-timing", options.device_timing,
+                      "every unit's device timing: ideal (a capture shows the frame last sent) or "
+                      "real (60 Hz projector two frames late, 30 fps camera with a two-frame "
+                      "queue, 5 % repeated and 2 % lost frames); default: the site file's")
+          ->check(CLI::IsMember({"ideal", "real"})));
   run->add_option("--heartbeat-ms", options.heartbeat_ms,
                   "Membership heartbeat of coordinator and nodes, ms (0: 100, or 100 x units / 16 "
                   "past 16 units)")

@@ -146,6 +146,9 @@ Status Site::Check() const {
                                   std::to_string(p.model.height_px) +
                                   " image); check projector.table_from_projector");
     }
+    if (Status s = unit.timing.Check(); !s.ok()) {
+      return InvalidArgumentError(label + ": " + s.message());
+    }
     if (unit.camera) {
       const CameraSpec& c = *unit.camera;
       if (Status s = c.model.Check(); !s.ok()) {

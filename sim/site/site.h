@@ -25,6 +25,7 @@
 #include "common/base/status.h"
 #include "common/camera/camera_model.h"
 #include "common/geometry/rigid3.h"
+#include "sim/site/device_timing.h"
 
 namespace sandtable::sim {
 
@@ -69,6 +70,7 @@ struct UnitSpec {
   std::string name;
   ProjectorSpec projector;
   std::optional<CameraSpec> camera;
+  DeviceTiming timing;  // "timing" in the file; absent: the ideal devices
 };
 
 struct TableSpec {

@@ -45,6 +45,35 @@ Status ReadCamera(ObjectReader* unit, CameraSpec* spec) {
   return c->End();
 }
 
+Status ReadTiming(ObjectReader* unit, DeviceTiming* t) {
+  Expected<ObjectReader> r = unit->Object("timing");
+  if (!r.ok()) return r.status();
+  ST_RETURN_IF_ERROR(r->Number("refresh_hz", &t->refresh_hz, Presence::kOptional));
+  ST_RETURN_IF_ERROR(r->Int("lag_frames", 0, 10, &t->lag_frames, Presence::kOptional));
+  ST_RETURN_IF_ERROR(r->Number("camera_fps", &t->camera_fps, Presence::kOptional));
+  ST_RETURN_IF_ERROR(r->Number("camera_latency_s", &t->camera_latency_s, Presence::kOptional));
+  ST_RETURN_IF_ERROR(r->Int("queue_frames", 1, 16, &t->queue_frames, Presence::kOptional));
+  ST_RETURN_IF_ERROR(r->Number("drop_rate", &t->drop_rate, Presence::kOptional));
+  ST_RETURN_IF_ERROR(r->Number("repeat_rate", &t->repeat_rate, Presence::kOptional));
+  ST_RETURN_IF_ERROR(
+      r->Number("auto_exposure_drift", &t->auto_exposure_drift, Presence::kOptional));
+  ST_RETURN_IF_ERROR(
+      r->Number("auto_exposure_period_s", &t->auto_exposure_period_s, Presence::kOptional));
+  return r->End();
+}
+
+json TimingToJson(const DeviceTiming& t) {
+  return {{"refresh_hz", t.refresh_hz},
+          {"lag_frames", t.lag_frames},
+          {"camera_fps", t.camera_fps},
+          {"camera_latency_s", t.camera_latency_s},
+          {"queue_frames", t.queue_frames},
+          {"drop_rate", t.drop_rate},
+          {"repeat_rate", t.repeat_rate},
+          {"auto_exposure_drift", t.auto_exposure_drift},
+          {"auto_exposure_period_s", t.auto_exposure_period_s}};
+}
+
 Status ReadUnit(const json& j, const std::string& where, UnitSpec* unit) {
   ObjectReader r(j, where);
   ST_RETURN_IF_ERROR(r.Begin());
@@ -58,6 +87,7 @@ Status ReadUnit(const json& j, const std::string& where, UnitSpec* unit) {
     ST_RETURN_IF_ERROR(ReadCamera(&r, &spec));
     unit->camera = spec;
   }
+  if (r.Has("timing")) ST_RETURN_IF_ERROR(ReadTiming(&r, &unit->timing));
   return r.End();
 }
 
@@ -135,6 +165,7 @@ json SiteToJson(const Site& site) {
       camera["bit_depth"] = c.bit_depth;
       unit["camera"] = camera;
     }
+    if (u.timing != DeviceTiming{}) unit["timing"] = TimingToJson(u.timing);
     units.push_back(unit);
   }
   json table = site.table.is_disc

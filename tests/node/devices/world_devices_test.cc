@@ -11,6 +11,7 @@
 #include "common/scene/procedural_scene.h"
 #include "net/socket.h"
 #include "node/devices/device_factory.h"
+#include "node/devices/paced_camera.h"
 #include "node/devices/world_link.h"
 #include "node/devices/world_projector_output.h"
 #include "sim/app/world_server.h"
@@ -37,6 +38,7 @@ class WorldDevicesTest : public ::testing::Test {
     Expected<sim::Site> site = sim::MakeSitePreset("flat-4");
     ASSERT_TRUE(site.ok()) << site.status().ToString();
     for (sim::UnitSpec& unit : site->units) {
+      unit.timing = timing_;
       const CameraModel& m = unit.camera->model;
       const double s = static_cast<double>(kCameraSize_px.width) / m.width_px;
       unit.camera->model =
@@ -74,6 +76,7 @@ class WorldDevicesTest : public ::testing::Test {
     return options;
   }
 
+  sim::DeviceTiming timing_;  // every unit's (set by a derived fixture's constructor)
   std::unique_ptr<sim::WorldServer> server_;
   std::string spec_;
   std::atomic<bool> stop_{false};
@@ -366,6 +369,105 @@ TEST(WorldLinkTest, AWorldThatDiesMidRequestIsUnavailableWithinTheConnectTimeout
       << shown.status().ToString();
   EXPECT_LT(std::chrono::steady_clock::now() - start, kDeadWorldBound)
       << "not the 60 s reply timeout";
+}
+
+// Real devices' timing (sim/site/device_timing.h): a frame is on the table two 60 Hz refreshes
+// after it is sent, the 30 fps camera delivers an exposure 10 ms after it began and its driver
+// keeps two unread frames.
+class TimedWorldDevicesTest : public WorldDevicesTest {
+ protected:
+  TimedWorldDevicesTest() {
+    timing_ = sim::RealHardwareTiming();
+    timing_.drop_rate = 0.0;
+    timing_.repeat_rate = 0.0;
+  }
+};
+
+// The projector's lag: 2 refreshes of 60 Hz.
+constexpr double kLagS = 2.0 / 60.0;
+// shown_time is stamped by the node after the world took the frame: up to this much later.
+constexpr double kStampSlackS = 0.005;
+// The most a flash can take to be seen: the lag, a refresh's phase, a camera frame's phase,
+// the camera's latency, and the loaded machine's scheduling.
+constexpr double kMaxFlashLatencyS = kLagS + 1.0 / 60 + 1.0 / 30 + 0.010 + 0.150;
+
+TEST_F(TimedWorldDevicesTest, AReadRightAfterAFrameShowsTheOldOneAndPacedCapturesWait) {
+  Expected<std::unique_ptr<ProjectorOutput>> projector = MakeProjectorOutput(spec_, Unit(0));
+  ASSERT_TRUE(projector.ok()) << projector.status().ToString();
+  Expected<std::unique_ptr<CameraInput>> opened = MakeCameraInput(spec_, Unit(0));
+  ASSERT_TRUE(opened.ok()) << opened.status().ToString();
+  const cv::Mat black(kProjectorSize_px, CV_8UC1, cv::Scalar(0));
+  const cv::Mat white(kProjectorSize_px, CV_8UC1, cv::Scalar(255));
+  ASSERT_TRUE((*projector)->Show(black).ok());
+  std::this_thread::sleep_for(milliseconds(300));  // black on the table, the queue full of it
+  Expected<CapturedFrame> dark = (*opened)->Capture(Seconds(0));
+  ASSERT_TRUE(dark.ok()) << dark.status().ToString();
+  const double black_dn = cv::mean(dark->image)[0];
+
+  // A read right after white was sent: a queued exposure from before it.
+  Expected<ShownFrame> flash = (*projector)->Show(white);
+  ASSERT_TRUE(flash.ok());
+  Expected<CapturedFrame> stale = (*opened)->Capture(Seconds(0));
+  ASSERT_TRUE(stale.ok());
+  EXPECT_LT(stale->capture_time, flash->shown_time);
+  EXPECT_LT(cv::mean(stale->image)[0], black_dn + kMinWhiteOverBlack_dn);
+
+  // The paced camera measures the flash and keeps a lit picture.
+  ASSERT_TRUE((*projector)->Show(black).ok());
+  std::this_thread::sleep_for(milliseconds(300));
+  PacedCamera paced(std::move(*opened));
+  flash = (*projector)->Show(white);
+  ASSERT_TRUE(flash.ok());
+  auto lit = [&](const cv::Mat& image) {
+    return cv::mean(image)[0] > black_dn + kMinWhiteOverBlack_dn;
+  };
+  Expected<CapturedFrame> seen = paced.CaptureFlash(flash->shown_time, lit);
+  ASSERT_TRUE(seen.ok()) << seen.status().ToString();
+  EXPECT_TRUE(lit(seen->image));
+  const CaptureTimingStats stats = paced.stats();
+  EXPECT_EQ(stats.flashes, 1);
+  EXPECT_GE(stats.latency_s, kLagS - kStampSlackS);
+  EXPECT_LE(stats.latency_s, kMaxFlashLatencyS);
+  EXPECT_GT(stats.settle_s, stats.latency_s);  // plus a camera frame
+  EXPECT_GT(stats.reads, 1u);                  // the queued dark frames came first
+
+  // Back to black: the paced capture waits out the lag and the queue.
+  Expected<ShownFrame> off = (*projector)->Show(black);
+  ASSERT_TRUE(off.ok());
+  Expected<CapturedFrame> after = paced.CaptureAfter(off->shown_time);
+  ASSERT_TRUE(after.ok());
+  EXPECT_LT(cv::mean(after->image)[0], black_dn + kMinWhiteOverBlack_dn);
+  EXPECT_GE(after->capture_time - off->shown_time,
+            std::chrono::duration_cast<DeviceClock::duration>(Seconds(paced.stats().settle_s)));
+}
+
+// A driver that hands the previous picture again: the paced camera reads again.
+class RepeatingWorldDevicesTest : public WorldDevicesTest {
+ protected:
+  RepeatingWorldDevicesTest() {
+    timing_ = sim::RealHardwareTiming();
+    timing_.repeat_rate = 0.5;
+  }
+};
+
+TEST_F(RepeatingWorldDevicesTest, RepeatedPicturesAreReadAgain) {
+  Expected<std::unique_ptr<CameraInput>> opened = MakeCameraInput(spec_, Unit(0));
+  ASSERT_TRUE(opened.ok()) << opened.status().ToString();
+  PacedCamera paced(std::move(*opened), PacedCameraOptions{.default_settle = Seconds(0)});
+  constexpr int kCaptures = 12;
+  cv::Mat previous;
+  for (int i = 0; i < kCaptures; ++i) {
+    Expected<CapturedFrame> frame = paced.CaptureAfter(DeviceClock::now());
+    ASSERT_TRUE(frame.ok()) << frame.status().ToString();
+    if (!previous.empty()) {
+      EXPECT_GT(cv::norm(frame->image, previous, cv::NORM_INF), 0.0) << "capture " << i;
+    }
+    previous = frame->image.clone();
+  }
+  const CaptureTimingStats stats = paced.stats();
+  EXPECT_EQ(stats.captures, static_cast<uint64_t>(kCaptures));
+  EXPECT_GT(stats.repeated, 0u);
+  EXPECT_EQ(stats.gave_up, 0u);
 }
 
 }  // namespace

@@ -200,6 +200,31 @@ TEST(SiteJson, RoundTripAndErrors) {
   EXPECT_NEAR(e3->units[0].projector.model.fx_px, 1.27 * 1280, 1e-9);
 }
 
+// A unit's device timing (device_timing.h) is written only when it is not the default, read
+// back whole, and refused out of its ranges naming unit and field.
+TEST(SiteJson, DeviceTimingRoundTripAndRanges) {
+  Site site = *MakeSitePreset("flat-4");
+  EXPECT_FALSE(SiteToJson(site)["units"][0].contains("timing"));
+  site.units[1].timing = RealHardwareTiming();
+  const nlohmann::json j = SiteToJson(site);
+  Expected<Site> back = SiteFromJson(j);
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  EXPECT_TRUE(back->units[1].timing == RealHardwareTiming());
+  EXPECT_TRUE(back->units[0].timing == DeviceTiming{});
+  EXPECT_FALSE(back->units[1].timing.Ideal());
+
+  nlohmann::json bad = j;
+  bad["units"][1]["timing"]["repeat_rate"] = 0.9;
+  Expected<Site> refused = SiteFromJson(bad);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("timing.repeat_rate"), std::string::npos)
+      << refused.status().message();
+  EXPECT_NE(refused.status().message().find("unit 1"), std::string::npos)
+      << refused.status().message();
+  EXPECT_FALSE(DeviceTimingPreset("fast").ok());
+  EXPECT_TRUE(DeviceTimingPreset("real").ok());
+}
+
 TEST(FactoryCalibration, SeededErrorsAroundTruth) {
   const Site site = *MakeSitePreset("sandtable-3");
   FactoryCalibrationError error;
