@@ -264,17 +264,21 @@ wire::Envelope WorldServer::SetFrame(const wire::SetFrameRequest& request) {
   return envelope;
 }
 
-std::optional<wire::Envelope> WorldServer::Capture(const std::string& routing_id,
-                                                   const wire::CaptureRequest& request) {
+wire::Envelope WorldServer::CaptureRefused(uint32_t camera_id, const std::string& message) {
+  ++stats_.bad_requests;
+  counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kInvalidContent);
   wire::Envelope envelope;
   wire::CaptureReply* reply = envelope.mutable_capture_reply();
-  reply->set_camera_id(request.camera_id());
+  reply->set_camera_id(camera_id);
+  reply->set_ok(false);
+  reply->set_message("capture camera " + std::to_string(camera_id) + ": " + message);
+  return envelope;
+}
+
+std::optional<wire::Envelope> WorldServer::Capture(const std::string& routing_id,
+                                                   const wire::CaptureRequest& request) {
   auto fail = [&](const std::string& message) {
-    ++stats_.bad_requests;
-    counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kInvalidContent);
-    reply->set_ok(false);
-    reply->set_message("capture camera " + std::to_string(request.camera_id()) + ": " + message);
-    return envelope;
+    return CaptureRefused(request.camera_id(), message);
   };
   const UnitSpec* unit = world_->site().FindUnit(request.camera_id());
   if (!unit || !unit->camera) return fail("no such camera in site '" + world_->site().name + "'");
@@ -324,16 +328,6 @@ void WorldServer::SyncProjectors(double t_s) {
 
 wire::Envelope WorldServer::CaptureAt(const wire::CaptureRequest& request, double exposed_s,
                                       bool repeat) {
-  wire::Envelope envelope;
-  wire::CaptureReply* reply = envelope.mutable_capture_reply();
-  reply->set_camera_id(request.camera_id());
-  auto fail = [&](const std::string& message) {
-    ++stats_.bad_requests;
-    counters_.ReclassifyAcceptedAsRejected(proto::RejectReason::kInvalidContent);
-    reply->set_ok(false);
-    reply->set_message("capture camera " + std::to_string(request.camera_id()) + ": " + message);
-    return envelope;
-  };
   const UnitSpec* unit = world_->site().FindUnit(request.camera_id());
   const bool timed = !unit->timing.Ideal();
   SyncProjectors(exposed_s);
@@ -351,11 +345,14 @@ wire::Envelope WorldServer::CaptureAt(const wire::CaptureRequest& request, doubl
   Expected<cv::Mat> image = repeat && last != last_pictures_.end()
                                 ? Expected<cv::Mat>(last->second)
                                 : world_->Capture(request.camera_id(), noise, exposure_s);
-  if (!image.ok()) return fail(image.status().message());
+  if (!image.ok()) return CaptureRefused(request.camera_id(), image.status().message());
   if (timed) last_pictures_[request.camera_id()] = *image;
   ++index;
   ++stats_.captures;
   const bool eight_bit = image->depth() == CV_8U;
+  wire::Envelope envelope;
+  wire::CaptureReply* reply = envelope.mutable_capture_reply();
+  reply->set_camera_id(request.camera_id());
   reply->set_ok(true);
   reply->set_width_px(static_cast<uint32_t>(image->cols));
   reply->set_height_px(static_cast<uint32_t>(image->rows));

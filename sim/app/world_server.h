@@ -105,6 +105,8 @@ class WorldServer {
   // camera, sim/site/device_timing.h): it is then answered by Step() when it is.
   std::optional<wire::Envelope> Capture(const std::string& routing_id,
                                         const wire::CaptureRequest& request);
+  // A capture refused (counted), its message naming the camera.
+  wire::Envelope CaptureRefused(uint32_t camera_id, const std::string& message);
   // The picture exposed at `exposed_s` (the previous picture again when `repeat`).
   wire::Envelope CaptureAt(const wire::CaptureRequest& request, double exposed_s, bool repeat);
   // Loads into the world what each lagged projector has on the table at `t_s`.

@@ -5,6 +5,9 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <memory>
+#include <optional>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -89,29 +92,44 @@ nlohmann::json GetStatus(uint16_t port) {
                                false);
 }
 
+// A coordinator with its console on loopback and an operator token (its file removed once the
+// coordinator read it).
+struct TokenCoordinator {
+  static inline const std::string kToken = "console-test-token-0123456789";
+  std::unique_ptr<testing::ChildProcess> child;
+  std::optional<nlohmann::json> ready;
+  uint16_t port = 0;
+
+  void Start(const std::string& name) {
+    namespace fs = std::filesystem;
+    const fs::path token_file = fs::temp_directory_path() / (name + std::to_string(::getpid()));
+    {
+      std::ofstream out(token_file);
+      out << kToken << "\n";
+    }
+    fs::permissions(token_file, fs::perms::owner_read | fs::perms::owner_write);
+    child = std::make_unique<testing::ChildProcess>(
+        std::vector<std::string>{SANDTABLE_COORDINATOR_BIN, "--status", "127.0.0.1:0",
+                                 "--status-token-file", token_file.string()});
+    std::string error;
+    ready = testing::ReadReadyLine(*child, "sandtable-coordinator", kDeadline, &error);
+    ASSERT_TRUE(ready.has_value()) << error;
+    fs::remove(token_file);
+    const std::string url = testing::ReadyString(*ready, "status");
+    port = static_cast<uint16_t>(std::stoi(url.substr(std::string("http://127.0.0.1:").size())));
+  }
+};
+
 // The console through the program: a member's unit_status shows in the document with its state,
 // the page's actions (with the operator token) become the coordinator's own requests and are
 // answered with its verdict, and a member that leaves is shown lost.
 TEST(StatusServerTest, ConsoleShowsUnitsAndItsActionsReachTheCoordinator) {
-  namespace fs = std::filesystem;
-  const fs::path token_file =
-      fs::temp_directory_path() / ("sandtable_console_token_" + std::to_string(::getpid()));
-  const std::string token = "console-test-token-0123456789";
-  {
-    std::ofstream out(token_file);
-    out << token << "\n";
-  }
-  fs::permissions(token_file, fs::perms::owner_read | fs::perms::owner_write);
-  testing::ChildProcess child({SANDTABLE_COORDINATOR_BIN, "--status", "127.0.0.1:0",
-                               "--status-token-file", token_file.string()});
-  std::string error;
-  const std::optional<nlohmann::json> ready =
-      testing::ReadReadyLine(child, "sandtable-coordinator", kDeadline, &error);
-  ASSERT_TRUE(ready.has_value()) << error;
-  fs::remove(token_file);
-  const std::string url = testing::ReadyString(*ready, "status");
-  const uint16_t port =
-      static_cast<uint16_t>(std::stoi(url.substr(std::string("http://127.0.0.1:").size())));
+  TokenCoordinator site;
+  ASSERT_NO_FATAL_FAILURE(site.Start("sandtable_console_token_"));
+  const std::string& token = TokenCoordinator::kToken;
+  const uint16_t port = site.port;
+  const std::optional<nlohmann::json>& ready = site.ready;
+  testing::ChildProcess& child = *site.child;
 
   // Node 7 joins and reports a footprint.
   zmq::context_t context;
@@ -215,25 +233,11 @@ TEST(StatusServerTest, ConsoleShowsUnitsAndItsActionsReachTheCoordinator) {
 // Annotations from the console: a stroke drawn, the session exported, the stroke erased with
 // the spot eraser, the exported session imported back, and bad bodies refused whole.
 TEST(StatusServerTest, ConsoleDrawsErasesExportsAndImportsAnnotations) {
-  namespace fs = std::filesystem;
-  const fs::path token_file =
-      fs::temp_directory_path() / ("sandtable_console_notes_token_" + std::to_string(::getpid()));
-  const std::string token = "console-test-token-0123456789";
-  {
-    std::ofstream out(token_file);
-    out << token << "\n";
-  }
-  fs::permissions(token_file, fs::perms::owner_read | fs::perms::owner_write);
-  testing::ChildProcess child({SANDTABLE_COORDINATOR_BIN, "--status", "127.0.0.1:0",
-                               "--status-token-file", token_file.string()});
-  std::string error;
-  const std::optional<nlohmann::json> ready =
-      testing::ReadReadyLine(child, "sandtable-coordinator", kDeadline, &error);
-  ASSERT_TRUE(ready.has_value()) << error;
-  fs::remove(token_file);
-  const std::string url = testing::ReadyString(*ready, "status");
-  const uint16_t port =
-      static_cast<uint16_t>(std::stoi(url.substr(std::string("http://127.0.0.1:").size())));
+  TokenCoordinator site;
+  ASSERT_NO_FATAL_FAILURE(site.Start("sandtable_console_notes_token_"));
+  const std::string& token = TokenCoordinator::kToken;
+  const uint16_t port = site.port;
+  testing::ChildProcess& child = *site.child;
   auto strokes = [&] {
     const nlohmann::json d = GetStatus(port);
     return d.is_discarded() ? -1 : d["annotations"].value("strokes", -1);

@@ -120,6 +120,16 @@ Expected<std::unique_ptr<RenderLoop>> StartTestLoop(KeptFrames* projector, int f
   return RenderLoop::Start(projector, model, options);
 }
 
+// The brightest green code of a frame (-1 for none).
+double Brightest(const cv::Mat& frame) {
+  if (frame.empty()) return -1.0;
+  cv::Mat grey;
+  cv::extractChannel(frame, grey, 1);
+  double lo = 0, hi = 0;
+  cv::minMaxLoc(grey, &lo, &hi);
+  return hi;
+}
+
 TEST(RenderLoopTest, DrawsOnChangeOnlyAndStepsAsideForCalibration) {
   KeptFrames projector(cv::Size(320, 200));
   Expected<std::unique_ptr<RenderLoop>> loop = StartTestLoop(&projector, 3);
@@ -182,21 +192,30 @@ TEST(RenderLoopTest, DrawsOnChangeOnlyAndStepsAsideForCalibration) {
   EXPECT_GT(summary.first_frame_ms, 0.0);  // kept apart from the percentiles
 }
 
+// A blend factor of 0.5 on white, on a 2.2 display.
+constexpr int kHalfCode = 186;     // 255 x 0.5^(1 / 2.2)
+constexpr int kCodeTolerance = 2;  // 8-bit rounding, the mask's 16-bit texture
+
+// A loop showing white through the pipeline with the test calibration.
+Expected<std::unique_ptr<RenderLoop>> StartWhiteLoop(KeptFrames* projector) {
+  Expected<std::unique_ptr<RenderLoop>> loop = StartTestLoop(projector, 0);
+  if (!loop.ok()) return loop;
+  ST_RETURN_IF_ERROR((*loop)->ShowCalibration(TestCalibration()));
+  ShowInputs inputs;
+  inputs.pattern = TestPattern::kWhite;
+  (*loop)->SetInputs(inputs);
+  return loop;
+}
+
 // A blend posted while calibration holds the projector (the loop suspended) is not waited for:
 // the caller, on the node's one worker, gets UNAVAILABLE at once instead of holding the worker
 // for the timeout while the round's steps queue behind it; the blend shows once the loop resumes.
 TEST(RenderLoopTest, ABlendPostedWhileSuspendedAnswersAtOnceAndShowsOnResume) {
   // Far under the 10 s the wait would last; far over a loaded machine's scheduling.
   constexpr auto kAtOnce = std::chrono::milliseconds(2000);
-  constexpr int kHalfCode = 186;     // 255 x 0.5^(1 / 2.2)
-  constexpr int kCodeTolerance = 2;  // 8-bit rounding, the mask's 16-bit texture
   KeptFrames projector(cv::Size(320, 200));
-  Expected<std::unique_ptr<RenderLoop>> loop = StartTestLoop(&projector, 0);
+  Expected<std::unique_ptr<RenderLoop>> loop = StartWhiteLoop(&projector);
   ASSERT_TRUE(loop.ok()) << loop.status().ToString();
-  ASSERT_TRUE((*loop)->ShowCalibration(TestCalibration()).ok());
-  ShowInputs inputs;
-  inputs.pattern = TestPattern::kWhite;
-  (*loop)->SetInputs(inputs);
   (*loop)->Suspend();
   const auto start = std::chrono::steady_clock::now();
   const cv::Mat half(200, 320, CV_32FC1, cv::Scalar(0.5));
@@ -205,56 +224,35 @@ TEST(RenderLoopTest, ABlendPostedWhileSuspendedAnswersAtOnceAndShowsOnResume) {
   EXPECT_EQ(shown.status().code(), StatusCode::kUnavailable);
   EXPECT_LT(std::chrono::steady_clock::now() - start, kAtOnce);
   (*loop)->Resume();
-  auto brightest = [](const cv::Mat& frame) {
-    if (frame.empty()) return -1.0;
-    cv::Mat grey;
-    cv::extractChannel(frame, grey, 1);
-    double lo = 0, hi = 0;
-    cv::minMaxLoc(grey, &lo, &hi);
-    return hi;
-  };
   for (int i = 0; i < 200; ++i) {
-    if (std::abs(brightest(projector.last()) - kHalfCode) <= kCodeTolerance) break;
+    if (std::abs(Brightest(projector.last()) - kHalfCode) <= kCodeTolerance) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
-  EXPECT_NEAR(brightest(projector.last()), kHalfCode, kCodeTolerance);
+  EXPECT_NEAR(Brightest(projector.last()), kHalfCode, kCodeTolerance);
 }
 
 // The blend's factor multiplies white in linear light (a 2.2 display: 0.5 shows as 186), the
 // join's blanking multiplies it, and a new calibration drops the blend (it was computed for the
 // old one) but keeps the blanking.
 TEST(RenderLoopTest, BlendMaskComposesWithTheBlankingAndDropsWithANewCalibration) {
-  constexpr int kHalfCode = 186;     // 255 x 0.5^(1 / 2.2)
-  constexpr int kCodeTolerance = 2;  // 8-bit rounding, the mask's 16-bit texture
   KeptFrames projector(cv::Size(320, 200));
-  Expected<std::unique_ptr<RenderLoop>> loop = StartTestLoop(&projector, 0);
+  Expected<std::unique_ptr<RenderLoop>> loop = StartWhiteLoop(&projector);
   ASSERT_TRUE(loop.ok()) << loop.status().ToString();
-  ASSERT_TRUE((*loop)->ShowCalibration(TestCalibration()).ok());
-  ShowInputs inputs;
-  inputs.pattern = TestPattern::kWhite;
-  (*loop)->SetInputs(inputs);
   const cv::Mat half(200, 320, CV_32FC1, cv::Scalar(0.5));
   Expected<int64_t> shown = (*loop)->ShowBlend(half);
   ASSERT_TRUE(shown.ok()) << shown.status().ToString();
   EXPECT_GT(*shown, 0);
-  auto brightest = [](const cv::Mat& frame) {
-    cv::Mat grey;
-    cv::extractChannel(frame, grey, 1);
-    double lo = 0, hi = 0;
-    cv::minMaxLoc(grey, &lo, &hi);
-    return hi;
-  };
-  EXPECT_NEAR(brightest(projector.last()), kHalfCode, kCodeTolerance);
+  EXPECT_NEAR(Brightest(projector.last()), kHalfCode, kCodeTolerance);
   cv::Mat blank(200, 320, CV_8UC1, cv::Scalar(255));
   blank.colRange(0, 160).setTo(0);
   ASSERT_TRUE((*loop)->ShowMask(blank).ok());
   cv::Mat both = projector.last();
   EXPECT_EQ(cv::countNonZero(both.colRange(0, 160).reshape(1)), 0);
-  EXPECT_NEAR(brightest(both.colRange(160, 320)), kHalfCode, kCodeTolerance);
+  EXPECT_NEAR(Brightest(both.colRange(160, 320)), kHalfCode, kCodeTolerance);
   ASSERT_TRUE((*loop)->ShowCalibration(TestCalibration()).ok());
   const cv::Mat recalibrated = projector.last();
   EXPECT_EQ(cv::countNonZero(recalibrated.colRange(0, 160).reshape(1)), 0);
-  EXPECT_EQ(brightest(recalibrated.colRange(160, 320)), 255);
+  EXPECT_EQ(Brightest(recalibrated.colRange(160, 320)), 255);
   EXPECT_FALSE((*loop)->ShowBlend(cv::Mat(200, 320, CV_8UC1)).ok());  // not a factor
 }
 
