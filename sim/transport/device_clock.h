@@ -58,7 +58,6 @@ class CameraClock {
   // A read at `now_s`: the oldest of the newest queue_frames unread exposures that are
   // readable by then, or else the next one to become readable.
   Read Next(double now_s);
-  uint64_t reads() const { return reads_; }
   uint64_t repeats() const { return repeats_; }
 
  private:
