@@ -167,17 +167,30 @@ Expected<std::unique_ptr<WindowProjectorOutput>> WindowProjectorOutput::Open(
   ST_LOG(kInfo) << who << ": " << SizeText(width, height) << " OpenGL "
                 << reinterpret_cast<const char*>(glGetString(GL_VERSION)) << " on '"
                 << reinterpret_cast<const char*>(glGetString(GL_RENDERER)) << "'";
+  // Current on no thread between calls: the next may come from any thread.
+  glfwMakeContextCurrent(nullptr);
   return output;
 }
 
 WindowProjectorOutput::~WindowProjectorOutput() {
   if (window_) {
-    MakeCurrent();
-    blitter_.reset();  // GL objects go while their context is current
-    glfwMakeContextCurrent(nullptr);
+    {
+      ContextHold hold(this);
+      blitter_.reset();  // GL objects go while their context is current
+    }
     glfwDestroyWindow(window_);
   }
   if (glfw_acquired_) ReleaseGlfw();
+}
+
+WindowProjectorOutput::ContextHold::ContextHold(WindowProjectorOutput* window) : window_(window) {
+  window_->context_mutex_.lock();
+  if (window_->hold_depth_++ == 0) glfwMakeContextCurrent(window_->window_);
+}
+
+WindowProjectorOutput::ContextHold::~ContextHold() {
+  if (--window_->hold_depth_ == 0) glfwMakeContextCurrent(nullptr);
+  window_->context_mutex_.unlock();
 }
 
 void WindowProjectorOutput::MakeCurrent() {
@@ -186,7 +199,7 @@ void WindowProjectorOutput::MakeCurrent() {
 
 Expected<ShownFrame> WindowProjectorOutput::Show(const cv::Mat& frame) {
   ST_RETURN_IF_ERROR(CheckProjectorFrame(frame, size_px_, description_));
-  MakeCurrent();
+  ContextHold hold(this);
   glfwPollEvents();  // keeps the window responsive to its window system
   ST_RETURN_IF_ERROR(blitter_->Draw(frame).WithContext(description_));
   if (keep_read_back_) {
@@ -198,7 +211,7 @@ Expected<ShownFrame> WindowProjectorOutput::Show(const cv::Mat& frame) {
 }
 
 Expected<ShownFrame> WindowProjectorOutput::PresentBackBuffer() {
-  MakeCurrent();
+  ContextHold hold(this);
   glfwSwapBuffers(window_);
   glFinish();  // the swap has happened (with vsync: at the vertical blank)
   glfwPollEvents();

@@ -13,12 +13,17 @@
 //   no monitor N: UNAVAILABLE naming the monitors there are;
 //   no OpenGL 3.3 core context, or a framebuffer under 8 bits per channel (frames could not be
 //   shown exactly): UNAVAILABLE saying so.
-// Threading: GLFW wants windows created, used and destroyed on the process's main thread; the
-// GL context is made current on the calling thread by every call. Several windows may be open
-// at once (GLFW is initialised with the first and terminated with the last).
+// Threading: GLFW wants windows created and destroyed on the process's main thread. Show() may
+// be called from any thread (a node's render thread, its calibration's workers): each call holds
+// the window's GL context current on the calling thread and releases it when it returns (a GLX
+// context current on one thread cannot be made current on another), so calls from different
+// threads take turns. A renderer drawing into the window holds it the same way (ContextHold).
+// Several windows may be open at once (GLFW is initialised with the first and terminated with
+// the last).
 #pragma once
 
 #include <memory>
+#include <mutex>
 #include <string>
 
 #include "node/devices/gl_frame_blitter.h"
@@ -59,9 +64,24 @@ class WindowProjectorOutput : public ProjectorOutput {
   // Xvfb, keeps no client-side copy of it.)
   const cv::Mat& last_read_back() const { return last_read_back_; }
 
-  // For a renderer that draws into the window itself (node/render/gl_context.h): makes the
-  // window's context current on the calling thread (framebuffer 0 is the window's back buffer),
-  // and swaps what was drawn there like Show() does (poll, swap, wait for the swap).
+  // The window's GL context current on the calling thread from construction to destruction;
+  // other threads' Show() and holds wait meanwhile. Holds nest on one thread; the outermost
+  // releases the context.
+  class ContextHold {
+   public:
+    explicit ContextHold(WindowProjectorOutput* window);
+    ~ContextHold();
+    ContextHold(const ContextHold&) = delete;
+    ContextHold& operator=(const ContextHold&) = delete;
+
+   private:
+    WindowProjectorOutput* window_;
+  };
+
+  // For a renderer that draws into the window itself (node/render/gl_context.h), within a
+  // ContextHold: makes the window's context current on the calling thread (framebuffer 0 is the
+  // window's back buffer), and swaps what was drawn there like Show() does (poll, swap, wait for
+  // the swap).
   void MakeCurrent();
   Expected<ShownFrame> PresentBackBuffer();
 
@@ -69,6 +89,9 @@ class WindowProjectorOutput : public ProjectorOutput {
   WindowProjectorOutput() = default;
 
   GLFWwindow* window_ = nullptr;
+  // ContextHold: who holds the context, and how deep (guarded by the mutex itself).
+  std::recursive_mutex context_mutex_;
+  int hold_depth_ = 0;
   bool glfw_acquired_ = false;
   std::unique_ptr<GlFrameBlitter> blitter_;
   cv::Size size_px_;

@@ -2,8 +2,10 @@
 // label "window"): what a frame puts in the framebuffer, read back with glReadPixels after
 // drawing, equals the frame exactly, and so do the window's pixels on the X server after the
 // swap; windowed and fullscreen. A missing display or monitor is one clear line.
+#include <atomic>
 #include <chrono>
 #include <cstdlib>
+#include <functional>
 #include <optional>
 #include <string>
 #include <thread>
@@ -120,6 +122,41 @@ TEST(WindowProjectorTest, WindowedFramesReadBackExactly) {
         << "bit " << bit;
     EXPECT_EQ(ScreenDifference(area, AsRgb(stripes)), kExact_dn) << "bit " << bit;
   }
+}
+
+// A node opens the window on its main thread and shows from others (the render thread, the
+// calibration's workers), in turns and at once: every frame reads back exactly.
+TEST(WindowProjectorTest, FramesShownFromOtherThreadsThanTheOpenersReadBackExactly) {
+  REQUIRE_DISPLAY();
+  Expected<std::unique_ptr<WindowProjectorOutput>> output =
+      WindowProjectorOutput::Open(Windowed(kWindowSize_px));
+  ASSERT_TRUE(output.ok()) << output.status().ToString();
+  const cv::Rect area(cv::Point(0, 0), kWindowSize_px);
+  std::thread([&] {
+    ExpectShownExactly(output->get(), RandomFrame(kWindowSize_px, CV_8UC3, 11), area);
+  }).join();
+  ASSERT_NO_FATAL_FAILURE(
+      ExpectShownExactly(output->get(), RandomFrame(kWindowSize_px, CV_8UC3, 12), area));
+  // Two threads showing at once take turns: every call succeeds and the window ends up showing
+  // one of the two frames exactly.
+  const cv::Mat a = RandomFrame(kWindowSize_px, CV_8UC3, 13);
+  const cv::Mat b = RandomFrame(kWindowSize_px, CV_8UC3, 14);
+  constexpr int kShowsPerThread = 20;
+  std::atomic<int> failed{0};
+  auto show_many = [&](const cv::Mat& frame) {
+    for (int i = 0; i < kShowsPerThread; ++i) {
+      if (!(*output)->Show(frame).ok()) ++failed;
+    }
+  };
+  std::thread first(show_many, std::cref(a)), second(show_many, std::cref(b));
+  first.join();
+  second.join();
+  EXPECT_EQ(failed.load(), 0);
+  const cv::Mat& last = (*output)->last_read_back();
+  const bool is_a = cv::norm(last, a, cv::NORM_INF) == kExact_dn;
+  const bool is_b = cv::norm(last, b, cv::NORM_INF) == kExact_dn;
+  EXPECT_TRUE(is_a || is_b) << "the last frame read back is one of the two shown";
+  EXPECT_EQ(ScreenDifference(area, is_a ? a : b), kExact_dn) << "X server";
 }
 
 TEST(WindowProjectorTest, FullscreenOnMonitorZeroTakesItsModeAndReadsBackExactly) {
