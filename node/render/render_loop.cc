@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <optional>
 #include <set>
 #include <vector>
 
@@ -9,6 +10,7 @@
 #include "common/base/host_clock.h"
 #include "common/base/log.h"
 #include "common/scene/procedural_scene.h"
+#include "node/devices/window_projector_output.h"
 #include "node/render/gl_context.h"
 
 namespace sandtable::node {
@@ -409,6 +411,7 @@ std::pair<uint64_t, std::string> RenderLoop::ShownPattern() const {
 // What only the render thread touches: the renderer, what it drew last, the masks it holds.
 struct RenderLoop::ThreadState {
   GlContext* context = nullptr;
+  WindowProjectorOutput* window = nullptr;  // drawing into this window's back buffer
   std::unique_ptr<Renderer> renderer;
   uint64_t drawn_version = ~uint64_t{0}, drawn_frame_version = ~uint64_t{0};
   double drawn_media_time_s = 0.0;  // of the frame last drawn
@@ -633,7 +636,42 @@ Expected<FrameStats> RenderLoop::Draw(ThreadState& t, FrameWork& work) {
   return stats;
 }
 
+// The frame in the window's back buffer swapped in (no read back), unless calibration has the
+// projector: it then draws its own frames over it.
+void RenderLoop::PresentFrame(ThreadState& t, FrameWork& work, const Expected<FrameStats>& stats) {
+  if (!work.rewarp) {
+    t.last_frame = Clock::now();
+    t.drawn_version = work.version;
+    t.drawn_frame_version = work.frame_version;
+  }
+  if (!stats.ok()) {
+    work.status = stats.status();
+    return;
+  }
+  const Clock::time_point show_start = Clock::now();
+  std::lock_guard<std::mutex> showing(show_mutex_);
+  bool suspended = false;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    suspended = suspended_;
+  }
+  last_shown_hash_.reset();
+  if (!suspended) {
+    Expected<ShownFrame> done = t.context->Present();
+    if (done.ok()) {
+      work.shown = true;
+    } else {
+      work.status = done.status();
+    }
+  }
+  work.show_ms = MsBetween(show_start, Clock::now());
+}
+
 void RenderLoop::ShowFrame(ThreadState& t, FrameWork& work, const Expected<FrameStats>& stats) {
+  if (t.window) {
+    PresentFrame(t, work, stats);
+    return;
+  }
   const Clock::time_point read_start = Clock::now();
   Expected<cv::Mat> frame =
       stats.ok() ? t.context->ReadOutput() : Expected<cv::Mat>(stats.status());
@@ -726,7 +764,17 @@ void RenderLoop::LogFrame(ThreadState& t, const FrameWork& work, const FrameStat
 // The render thread: takes what changed, draws it (a whole frame, or the last one again under a
 // new mask), reads it back and shows it, and records the frame.
 void RenderLoop::Run(std::promise<Status>* started) {
-  Expected<std::unique_ptr<GlContext>> context = CreateEglContext(projector_->size());
+  // A window (a real projector): the frames are drawn into its back buffer and swapped, no read
+  // back; anything else: a headless context, read back and shown.
+  WindowProjectorOutput* window =
+      options_.draw_into_window ? dynamic_cast<WindowProjectorOutput*>(projector_) : nullptr;
+  Expected<std::unique_ptr<GlContext>> context = std::unique_ptr<GlContext>();
+  if (window) {
+    WindowProjectorOutput::ContextHold hold(window);
+    context = CreateWindowContext(window);
+  } else {
+    context = CreateEglContext(projector_->size());
+  }
   if (!context.ok()) {
     started->set_value(context.status().WithContext("render"));
     return;
@@ -738,6 +786,7 @@ void RenderLoop::Run(std::promise<Status>* started) {
   started->set_value(OkStatus());
   ThreadState t;
   t.context = context->get();
+  t.window = window;
   if (!options_.frame_log_path.empty()) {
     t.log.open(options_.frame_log_path);
     t.log << "node_steady_ns,media_time_s,playing,frame_ms,rate\n";
@@ -746,6 +795,10 @@ void RenderLoop::Run(std::promise<Status>* started) {
     FrameWork work;
     const Taken taken = TakeWork(t, &work);
     if (taken == Taken::kStop) break;
+    if (taken == Taken::kNothing) continue;
+    // The window's context is this thread's while it draws; calibration's Show() waits.
+    std::optional<WindowProjectorOutput::ContextHold> hold;
+    if (window) hold.emplace(window);
     if (taken == Taken::kIdle) PrepareStandby(t);
     if (taken != Taken::kFrame) continue;
     if (work.scene) {
@@ -766,6 +819,8 @@ void RenderLoop::Run(std::promise<Status>* started) {
     PrepareStandby(t);  // while the timeline plays the loop is never idle
     if (work.shown && !work.unchanged) LogFrame(t, work, *stats);
   }
+  std::optional<WindowProjectorOutput::ContextHold> hold;
+  if (window) hold.emplace(window);
   t.renderer.reset();  // GL objects go while the context is current
 }
 

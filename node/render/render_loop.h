@@ -54,6 +54,10 @@ struct RenderLoopOptions {
   std::function<void()> after_render_for_test;
   // Prepared masks kept in the renderer (PrepareBlends): one texture of the output's size each.
   int max_prepared_masks = 8;
+  // When the projector is a window (node/devices/window_projector_output.h), the renderer draws
+  // into its back buffer and swaps it: no read back, no second upload. False: a headless
+  // context whose frames are read back and shown like any projector's (for comparison).
+  bool draw_into_window = true;
   Status Check() const;
 };
 
@@ -185,6 +189,7 @@ class RenderLoop {
   void SetMask(ThreadState& t, FrameWork& work, const cv::Mat& mask);
   Expected<FrameStats> Draw(ThreadState& t, FrameWork& work);
   void ShowFrame(ThreadState& t, FrameWork& work, const Expected<FrameStats>& stats);
+  void PresentFrame(ThreadState& t, FrameWork& work, const Expected<FrameStats>& stats);
   void RecordFrame(FrameWork& work, const Expected<FrameStats>& stats);
   void LogFrame(ThreadState& t, const FrameWork& work, const FrameStats& stats);
   void PrepareStandby(ThreadState& t);

@@ -13,7 +13,10 @@
 // context's description (llvmpipe, or a GPU's driver), for the shipped (deferred) renderer and
 // for the forward passes with a separate warp pass and folded; and a re-blend's frame: a new mask
 // over the last frame, set (`rewarp_ms_p50`) or prepared ahead (`prepared_rewarp_ms_*`; with
-// --idle-s, also after the GPU sat idle). docs/render.md.
+// --idle-s, also after the GPU sat idle). With --window (a display: xvfb-run), the frame to a
+// GLFW window both ways a node can take: drawn headless, read back and shown (uploaded and drawn
+// again by the window), or drawn straight into the window's back buffer and swapped
+// (`window`). docs/render.md.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -28,6 +31,7 @@
 
 #include "common/cli/command_line.h"
 #include "common/scene/procedural_scene.h"
+#include "node/devices/window_projector_output.h"
 #include "node/render/gl_context.h"
 #include "node/render/renderer.h"
 #include "sim/site/site_presets.h"
@@ -123,6 +127,120 @@ RenderContent Content(int frame, const Eigen::AlignedBox3d& box) {
   return c;
 }
 
+// The frame to a window of the view's size, `frames` each way with the shipped renderer, no
+// vsync (the work, not the display's rate). "read_back" (how a node showed a window's frames
+// before): drawn in a headless context and read back, then given to the window's Show() (an
+// upload and a full-screen draw). GLX refuses the window's context on a thread that holds an
+// EGL context (BadAccess), so the two halves run on two threads here, one after the other, and
+// the frame's time is the sum of their medians. "direct": drawn into the window's back buffer
+// and swapped, timed from the start of Render to the swap done.
+Expected<nlohmann::json> TimeWindowPaths(const Scene& scene, const ProjectorView& view,
+                                         const cv::Mat& mask, int frames) {
+  WindowOptions options;
+  options.windowed = true;
+  options.windowed_size_px = cv::Size(view.projector.width_px, view.projector.height_px);
+  options.vsync = false;
+  Expected<std::unique_ptr<WindowProjectorOutput>> window = WindowProjectorOutput::Open(options);
+  if (!window.ok()) return window.status();
+  if ((*window)->size() != options.windowed_size_px) {
+    return UnavailableError("the window is smaller than asked (the screen is too small)");
+  }
+  const auto ms = [](auto a, auto b) {
+    return std::chrono::duration<double, std::milli>(b - a).count();
+  };
+  auto make_renderer = [&](GlContext* context) -> Expected<std::unique_ptr<Renderer>> {
+    Expected<std::unique_ptr<Renderer>> renderer = Renderer::Create(context, scene, {});
+    if (!renderer.ok()) return renderer.status();
+    ST_RETURN_IF_ERROR((*renderer)->SetView(view));
+    ST_RETURN_IF_ERROR((*renderer)->SetMask(mask));
+    return renderer;
+  };
+  nlohmann::json out;
+  Status status = OkStatus();
+  // Read back: the render thread's half, keeping a few distinct frames for the show's half.
+  std::vector<double> render_ms, read_ms, show_ms;
+  std::vector<cv::Mat> kept;
+  std::string headless_context;
+  std::thread([&] {
+    Expected<std::unique_ptr<GlContext>> headless = CreateEglContext(options.windowed_size_px);
+    if (!headless.ok()) {
+      status = headless.status();
+      return;
+    }
+    headless_context = (*headless)->description();
+    Expected<std::unique_ptr<Renderer>> renderer = make_renderer(headless->get());
+    if (!renderer.ok()) {
+      status = renderer.status();
+      return;
+    }
+    for (int f = -10; f < frames && status.ok(); ++f) {
+      const auto t0 = std::chrono::steady_clock::now();
+      Expected<FrameStats> stats = (*renderer)->Render(Content(f + 10, scene.Bounds()));
+      const auto t1 = std::chrono::steady_clock::now();
+      Expected<cv::Mat> frame =
+          stats.ok() ? (*headless)->ReadOutput() : Expected<cv::Mat>(stats.status());
+      const auto t2 = std::chrono::steady_clock::now();
+      if (!frame.ok()) status = frame.status();
+      if (f < 0 || !status.ok()) continue;
+      render_ms.push_back(ms(t0, t1));
+      read_ms.push_back(ms(t1, t2));
+      if (kept.size() < 8) kept.push_back(*frame);
+    }
+  }).join();
+  if (!status.ok()) return status.WithContext("read back");
+  // ... and the show's: every frame a different picture, as a playing show's.
+  for (int f = 0; f < frames; ++f) {
+    const auto t0 = std::chrono::steady_clock::now();
+    Expected<ShownFrame> shown = (*window)->Show(kept[f % kept.size()]);
+    if (!shown.ok()) return shown.status().WithContext("read back: show");
+    show_ms.push_back(ms(t0, std::chrono::steady_clock::now()));
+  }
+  nlohmann::json& read_back = out["read_back"];
+  read_back["render_ms_p50"] = Percentile(render_ms, 0.5);
+  read_back["read_back_ms_p50"] = Percentile(read_ms, 0.5);
+  read_back["show_ms_p50"] = Percentile(show_ms, 0.5);
+  read_back["frame_to_window_ms_p50"] =
+      Percentile(render_ms, 0.5) + Percentile(read_ms, 0.5) + Percentile(show_ms, 0.5);
+  read_back["context"] = headless_context;
+  // Direct, on a thread of its own as the node's render thread.
+  std::thread([&] {
+    std::unique_ptr<GlContext> in_window;
+    WindowProjectorOutput::ContextHold hold(window->get());
+    in_window = CreateWindowContext(window->get());
+    Expected<std::unique_ptr<Renderer>> renderer = make_renderer(in_window.get());
+    if (!renderer.ok()) {
+      status = renderer.status();
+      return;
+    }
+    std::vector<double> total_ms, draw_ms, swap_ms;
+    for (int f = -10; f < frames; ++f) {
+      const auto t0 = std::chrono::steady_clock::now();
+      Expected<FrameStats> stats = (*renderer)->Render(Content(f + 10, scene.Bounds()));
+      const auto t1 = std::chrono::steady_clock::now();
+      Expected<ShownFrame> shown =
+          stats.ok() ? in_window->Present() : Expected<ShownFrame>(stats.status());
+      const auto t2 = std::chrono::steady_clock::now();
+      if (!shown.ok()) {
+        status = shown.status();
+        return;
+      }
+      if (f < 0) continue;
+      total_ms.push_back(ms(t0, t2));
+      draw_ms.push_back(ms(t0, t1));
+      swap_ms.push_back(ms(t1, t2));
+    }
+    nlohmann::json& direct = out["direct"];
+    direct["render_ms_p50"] = Percentile(draw_ms, 0.5);
+    direct["swap_ms_p50"] = Percentile(swap_ms, 0.5);
+    direct["frame_to_window_ms_p50"] = Percentile(total_ms, 0.5);
+    direct["frame_to_window_ms_p99"] = Percentile(total_ms, 0.99);
+    direct["context"] = in_window->description();
+    renderer->reset();  // while the hold keeps the context current
+  }).join();
+  if (!status.ok()) return status.WithContext("direct");
+  return out;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -138,6 +256,10 @@ int main(int argc, char** argv) {
   double idle_s = 0.0;
   app.add_option("--idle-s", idle_s,
                  "also time three prepared re-blend frames after this many seconds idle each");
+  bool window = false;
+  app.add_flag("--window", window,
+               "also time frames to a GLFW window (needs a display, e.g. xvfb-run -s "
+               "'-screen 0 1920x1080x24'): read back and shown, against drawn into it");
   if (std::optional<int> exit = cli::Parse(app, argc, argv)) return *exit;
 
   Expected<sim::Site> site = sim::MakeSitePreset("sandtable-3");
@@ -153,11 +275,6 @@ int main(int argc, char** argv) {
   projector.height_px = height;
 
   const Scene scene = BenchScene();
-  Expected<std::unique_ptr<GlContext>> context = CreateEglContext(cv::Size(width, height));
-  if (!context.ok()) {
-    std::cerr << context.status().ToString() << "\n";
-    return 1;
-  }
   Expected<ProjectorView> view = PrepareProjectorView(
       projector, unit.projector.table_from_projector.Inverse(), scene.Bounds());
   if (!view.ok()) {
@@ -166,6 +283,21 @@ int main(int argc, char** argv) {
   }
   cv::Mat mask(height, width, CV_32FC1);
   for (int u = 0; u < width; ++u) mask.col(u).setTo(std::min(1.0, 0.5 + u / (1.0 * width)));
+  // The window first: this thread must hold no EGL context when it shows (GLX refuses).
+  nlohmann::json window_report;
+  if (window) {
+    Expected<nlohmann::json> timed = TimeWindowPaths(scene, *view, mask, frames);
+    if (!timed.ok()) {
+      std::cerr << timed.status().ToString() << "\n";
+      return 1;
+    }
+    window_report = *timed;
+  }
+  Expected<std::unique_ptr<GlContext>> context = CreateEglContext(cv::Size(width, height));
+  if (!context.ok()) {
+    std::cerr << context.status().ToString() << "\n";
+    return 1;
+  }
 
   nlohmann::json report;
   report["context"] = (*context)->description();
@@ -312,6 +444,7 @@ int main(int argc, char** argv) {
     report["set_mask_ms_p50"] = Percentile(set_mask_ms, 0.5);
     report["read_output_ms_p50"] = Percentile(read_ms, 0.5);
   }
+  if (window) report["window"] = window_report;
   report["frame_ms_p50"] = report["deferred"]["frame_ms_p50"];
   report["frame_ms_p99"] = report["deferred"]["frame_ms_p99"];
   report["frame_over_floor"] = report["deferred"]["frame_over_floor"];
