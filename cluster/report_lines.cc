@@ -296,10 +296,11 @@ Expected<ReportLine> ParseLab(const json& j) {
 
 const char* KindName(const ReportLine& line) {
   static constexpr const char* kNames[] = {
-      "world ready",        "coordinator ready", "node ready",         "calibrated",
-      "calibration failed", "verification",      "render unavailable", "render pattern",
-      "render summary",     "blend exported",    "blend shown",        "messages",
-      "lab phase",          "lab done"};
+      "world ready",        "coordinator ready",  "node ready",
+      "calibrated",         "calibration failed", "verification",
+      "render unavailable", "render pattern",     "render summary",
+      "blend exported",     "blend shown",        "messages",
+      "round progress",     "lab phase",          "lab done"};
   static_assert(std::size(kNames) == std::variant_size_v<ReportLine>);
   return kNames[line.index()];
 }
@@ -416,6 +417,11 @@ json ToJson(const ReportLine& line) {
                     {"faults_dropped", l.faults_dropped},
                     {"faults_corrupted", l.faults_corrupted}};
           },
+          [](const RoundProgress& l) -> json {
+            return {{"round_progress", l.id},  {"round", l.round},   {"stage", l.stage},
+                    {"step", l.step},          {"detail", l.detail}, {"units", l.units},
+                    {"elapsed_s", l.elapsed_s}};
+          },
           [](const LabPhase& l) -> json {
             json j = {{"lab", "phase"}, {"phase", l.phase}};
             if (l.hold_s) j["hold_s"] = *l.hold_s;
@@ -462,6 +468,18 @@ Expected<ReportLine> ParseReportLine(const json& j) {
     r.Optional("rejected", &line.rejected);
     r.Optional("faults_dropped", &line.faults_dropped);
     r.Optional("faults_corrupted", &line.faults_corrupted);
+    return Done(r, line);
+  }
+  if (j.contains("round_progress")) {
+    RoundProgress line;
+    Reader r(j, "round progress");
+    r.Required("round_progress", &line.id);
+    r.Required("round", &line.round);
+    r.Optional("stage", &line.stage);
+    r.Required("step", &line.step);
+    r.Optional("detail", &line.detail);
+    r.Optional("units", &line.units);
+    r.Optional("elapsed_s", &line.elapsed_s);
     return Done(r, line);
   }
   if (j.contains("lab")) return ParseLab(j);

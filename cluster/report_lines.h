@@ -141,6 +141,21 @@ struct Messages {
   uint64_t accepted = 0, rejected = 0, faults_dropped = 0, faults_corrupted = 0;
 };
 
+// {"round_progress":3,"round":1,"stage":57,"step":"structured light, colour 1","detail":"colour 1
+// frame 12 capture","units":[0,2],"elapsed_s":14.2}: the runner of a calibration round (unit
+// `id`) started a stage: `step` is the part of the round it belongs to (changes a few times a
+// round), `detail` the stage itself, `units` the units whose projectors' light it shows or
+// captures (empty: none, e.g. the solve), `elapsed_s` since the round started. Printed when the
+// step changes, else at most about once a second.
+struct RoundProgress {
+  NodeId id = kInvalidNodeId;
+  uint64_t round = 0;
+  int stage = 0;  // stages started in this round, this one included
+  std::string step, detail;
+  std::vector<NodeId> units;
+  double elapsed_s = 0.0;
+};
+
 // {"lab":"phase","phase":"hold","hold_s":10}
 struct LabPhase {
   std::string phase;
@@ -155,7 +170,7 @@ struct LabDone {
 using ReportLine =
     std::variant<WorldReady, CoordinatorReady, NodeReady, Calibrated, CalibrationFailed,
                  Verification, RenderUnavailable, RenderPattern, RenderSummary, BlendExported,
-                 BlendShown, Messages, LabPhase, LabDone>;
+                 BlendShown, Messages, RoundProgress, LabPhase, LabDone>;
 
 // For std::visit over a ReportLine: one callable per kind.
 template <class... F>

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <memory>
 
+#include "cluster/report_lines.h"
 #include "common/base/ids.h"
 #include "common/io/mpcdi.h"
 #include "node/net/node_runtime.h"
@@ -19,6 +20,8 @@ class CalibrationLink {
   virtual ~CalibrationLink() = default;
   // False when the message could not be queued (the peer is not linked).
   virtual bool Send(NodeId to, wire::Envelope envelope, NodeRuntime& node) = 0;
+  // The runner's progress through a round, for the node's report lines (dropped by default).
+  virtual void Progress(const report::RoundProgress& progress) { (void)progress; }
 };
 
 // This node's figures over both sides, reported with its calibration.

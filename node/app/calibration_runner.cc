@@ -488,6 +488,8 @@ void CalibrationRunner::RunnerStep(NodeRuntime& node) {
     r.current_light_of = stage.light_of;
     r.stage_active = true;
     r.stage_started = now;
+    ++r.stages_started;
+    ReportProgress(r, stage.label, stage.light_of);
     std::vector<Round::Command> to_send;
     for (Round::Command& c : stage.commands) {
       if (!r.Active(c.to)) continue;
@@ -510,6 +512,39 @@ void CalibrationRunner::RunnerStep(NodeRuntime& node) {
     }
     if (r.awaiting.empty() && !EndStage(node)) return;  // nothing to wait for
   }
+}
+
+namespace {
+
+// The part of the round a stage's label belongs to: "pre-pass", "structured light, colour N",
+// else the label itself ("local geometry", "neighbours blank", "solve").
+std::string StepOfLabel(const std::string& label) {
+  if (label.rfind("pre-pass", 0) == 0) return "pre-pass";
+  if (label.rfind("colour ", 0) == 0) {
+    const size_t end = label.find(' ', 7);
+    return "structured light, " + label.substr(0, end);
+  }
+  return label;
+}
+
+}  // namespace
+
+void CalibrationRunner::ReportProgress(Round& r, const std::string& detail,
+                                       const std::vector<NodeId>& units) {
+  const auto now = std::chrono::steady_clock::now();
+  const std::string step = StepOfLabel(detail);
+  if (step == r.progress_step && now - r.progress_at < std::chrono::seconds(1)) return;
+  r.progress_step = step;
+  r.progress_at = now;
+  report::RoundProgress line;
+  line.id = r.self;
+  line.round = r.round;
+  line.stage = r.stages_started;
+  line.step = step;
+  line.detail = detail;
+  line.units = units;
+  line.elapsed_s = std::chrono::duration<double>(now - r.round_started).count();
+  link_->Progress(line);
 }
 
 void CalibrationRunner::HandleDone(NodeId from, const wire::CalibrationStepDone& done,

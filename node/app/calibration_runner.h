@@ -101,6 +101,10 @@ class CalibrationRunner {
     std::chrono::steady_clock::time_point round_started{};
     uint32_t next_step = 1;
     bool stage_active = false;
+    // Progress lines (ReportProgress): stages started, the last line's step and time.
+    int stages_started = 0;
+    std::string progress_step;
+    std::chrono::steady_clock::time_point progress_at{};
 
     // Pre-pass and plan.
     std::map<NodeId, std::map<NodeId, uint32_t>> lit;  // lit[projector][camera]
@@ -136,6 +140,9 @@ class CalibrationRunner {
   void PlanSequences();
   void PlanColour(int colour, int colour_count, const std::function<void()>& restore);
   void RunnerStep(NodeRuntime& node);
+  // A progress line (report::RoundProgress) for a stage or the solve: when its step differs
+  // from the last line's, else at most once a second.
+  void ReportProgress(Round& r, const std::string& detail, const std::vector<NodeId>& units);
   // The current stage is answered: runs its `after`; false when the round moved on to the
   // solve (nothing more to send).
   bool EndStage(NodeRuntime& node);

@@ -211,6 +211,7 @@ void CalibrationRunner::CollectInputs(ClusterObservations* observations_out,
 void CalibrationRunner::StartJoinSolve(NodeRuntime& node) {
   Round& r = *round_;
   r.solving = true;
+  ReportProgress(r, "solve", {});
   r.path = "join";
   r.path_reason = "units joined a calibrated site; the calibrated units are held";
   ClusterObservations observations;
@@ -255,6 +256,7 @@ void CalibrationRunner::StartJoinSolve(NodeRuntime& node) {
 void CalibrationRunner::StartSolve(NodeRuntime& node) {
   Round& r = *round_;
   r.solving = true;
+  ReportProgress(r, "solve", {});
   ClusterObservations observations;
   std::map<NodeId, LocalGeometry> local;
   CollectInputs(&observations, &local);

@@ -301,6 +301,7 @@ void NodeApp::MakeSelfCalibration() {
   runtime_->set_calibration_state(saved_ ? wire::CALIBRATION_STATE_SAVED
                                          : wire::CALIBRATION_STATE_NONE);
   if (saved_) self_calibration_->SetSavedCalibration(*saved_, out_);
+  self_calibration_->SetOnProgress(out_);
   if (render_loop_) self_calibration_->SetRenderLoop(render_loop_.get());
   unit_status_->SetCalibratingProbe(
       [service = self_calibration_.get()] { return service->being_calibrated(); });

@@ -164,6 +164,11 @@ class SelfCalibrationService : public NodeService, private CalibrationLink {
   void SetSavedCalibration(UnitCalibration saved, OnVerification on_verification);
 
   const char* name() const override { return "self-calibration"; }
+  // Where the runner's progress lines go (report::RoundProgress; none until set). Set before
+  // the runtime starts.
+  using OnProgress = std::function<void(const report::RoundProgress&)>;
+  void SetOnProgress(OnProgress on_progress) { on_progress_ = std::move(on_progress); }
+
   bool ServesPeer(wire::Envelope::BodyCase body) const override;
   void OnPeerMessage(net::Incoming request, NodeRuntime& node) override;
   // The coordinator's recalibrate_ask (an operator's "calibrate again"): for the runner.
@@ -177,9 +182,13 @@ class SelfCalibrationService : public NodeService, private CalibrationLink {
 
  private:
   bool Send(NodeId to, wire::Envelope envelope, NodeRuntime& node) override;
+  void Progress(const report::RoundProgress& progress) override {
+    if (on_progress_) on_progress_(progress);
+  }
   void Deliver(NodeId from, const wire::Envelope& envelope, NodeRuntime& node);
 
   SelfCalibrationOptions options_;
+  OnProgress on_progress_;
   CalibrationLedger ledger_;
   std::unique_ptr<CalibrationUnit> unit_;
   std::unique_ptr<CalibrationRunner> runner_;

@@ -1,5 +1,6 @@
 #include "sim/lab/lab_lines.h"
 
+#include <cstdio>
 #include <variant>
 
 namespace sandtable::sim {
@@ -74,12 +75,30 @@ void LabLines::Take(const std::string& role, const report::ReportLine& line,
                        return true;
                      },
                      [&](const report::Messages&) { return node; },
+                     [&](const report::RoundProgress& l) {
+                       if (!node) return false;
+                       round_progress = l;
+                       round_progress_at = now;
+                       return true;
+                     },
                      // The lab's own lines: a child lab (sweep, scale, chaos) prints them.
                      [&](const report::LabPhase&) { return role == "lab"; },
                      [&](const report::LabDone&) { return role == "lab"; },
                  },
                  line);
   if (!taken) ++ignored;
+}
+
+std::string RoundProgressText(const report::RoundProgress& progress) {
+  std::string units;
+  for (NodeId unit : progress.units) units += (units.empty() ? "" : ", ") + std::to_string(unit);
+  char elapsed[32];
+  std::snprintf(elapsed, sizeof(elapsed), "%.1f s in", progress.elapsed_s);
+  const std::string what = progress.detail.empty() ? progress.step : progress.detail;
+  return "round by unit " + std::to_string(progress.id) + ": " + what +
+         (units.empty() ? ""
+                        : (progress.units.size() == 1 ? " (unit " : " (units ") + units + ")") +
+         ", " + elapsed;
 }
 
 }  // namespace sandtable::sim

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -37,7 +38,14 @@ struct LabLines {
   std::vector<report::BlendShown> blended;                 // every blended line
   std::vector<report::BlendShown> reblends;                // every re-blend after a leave
   std::chrono::steady_clock::time_point last_blend_line{};
+  // The last progress line of a calibration round's runner, and when it came.
+  std::optional<report::RoundProgress> round_progress;
+  std::chrono::steady_clock::time_point round_progress_at{};
   uint64_t ignored = 0;
 };
+
+// A round's progress line for a person: "round by unit 0: colour 1 frame 12 capture (units 0,
+// 2), 14.2 s in".
+std::string RoundProgressText(const report::RoundProgress& progress);
 
 }  // namespace sandtable::sim

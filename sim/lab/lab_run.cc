@@ -541,6 +541,10 @@ Supervisor::LineHandler LabRun::Handler() {
     if (std::holds_alternative<report::NodeReady>(line)) {
       progress_.Update(static_cast<int>(lines_.nodes_ready.size()));
     }
+    // A round's steps on the bar, and a plain line when its step changes.
+    if (const auto* round = std::get_if<report::RoundProgress>(&line)) {
+      progress_.Note(std::to_string(round->round) + " " + round->step, RoundProgressText(*round));
+    }
     if ((std::holds_alternative<report::Calibrated>(line) ||
          std::holds_alternative<report::CalibrationFailed>(line)) &&
         progress_phase_ == "calibration held") {

@@ -16,6 +16,8 @@ void Progress::Begin(const std::string& phase, int total) {
   if (active_) End();
   phase_ = phase;
   waiting_for_.clear();
+  note_key_.clear();
+  note_.clear();
   total_ = total;
   done_ = 0;
   active_ = true;
@@ -49,6 +51,21 @@ void Progress::Tick(const std::function<std::string()>& waiting_for) {
        << std::flush;
 }
 
+void Progress::Note(const std::string& key, const std::string& text) {
+  if (!active_) return;
+  const bool new_key = key != note_key_;
+  note_key_ = key;
+  note_ = text;
+  if (tty_) {
+    Draw(false);
+    return;
+  }
+  if (!new_key) return;
+  char time_text[32];
+  std::snprintf(time_text, sizeof(time_text), "%.1f s", Elapsed_s());
+  out_ << "lab: " << phase_ << " (" << time_text << "): " << text << "\n" << std::flush;
+}
+
 void Progress::End(const std::string& outcome) {
   if (!active_) return;
   if (outcome == "ok" && total_ > 0) done_ = total_;
@@ -79,6 +96,7 @@ void Progress::Draw(bool final_line) {
   for (int i = 0; i < filled; ++i) bar[i] = '=';
   if (filled < kBarWidth && filled > 0) bar[filled] = '>';
   out_ << "\r\033[K[" << bar << "] " << phase_ << counts << "  " << time_text
+       << (final_line || note_.empty() ? "" : "  " + note_)
        << (final_line || waiting_for_.empty() ? "" : "  waiting for " + waiting_for_) << std::flush;
 }
 

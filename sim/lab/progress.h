@@ -30,6 +30,10 @@ class Progress {
   // (at most 5 times a second), a plain line every plain_gap otherwise.
   // `waiting_for` is asked only when a line is due.
   void Tick(const std::function<std::string()>& waiting_for);
+  // What the phase's work is doing now (e.g. a calibration round's step), shown on the bar;
+  // a plain line is printed when `key` differs from the last note's (the bar shows every
+  // `text`). Cleared by Begin.
+  void Note(const std::string& key, const std::string& text);
   // Ends the current phase: "ok" or a short failure word.
   void End(const std::string& outcome = "ok");
 
@@ -47,6 +51,7 @@ class Progress {
   int total_ = 0, done_ = -1;
   bool active_ = false;
   std::string waiting_for_;
+  std::string note_key_, note_;
   std::chrono::steady_clock::time_point start_, last_tick_;
   std::vector<std::pair<std::string, double>> seconds_;
 };

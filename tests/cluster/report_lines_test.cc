@@ -83,6 +83,8 @@ std::vector<ReportLine> OneOfEach() {
           reblend,
           blended,
           Messages{3, 100, 2, 3, 4},
+          RoundProgress{
+              1, 2, 57, "structured light, colour 1", "colour 1 frame 12 capture", {0, 2}, 14.25},
           LabPhase{"hold", 10.0},
           LabDone{"ok", "out/report.md"}};
 }

@@ -35,6 +35,8 @@ TEST(LabLinesTest, EachKindFromItsRole) {
   reblend.peer = 4;
   lines.Take("node", blended, t0 + std::chrono::seconds(2));
   lines.Take("node", reblend, t0 + std::chrono::seconds(3));
+  lines.Take("node", report::RoundProgress{1, 1, 4, "pre-pass", "pre-pass white 0", {0}, 2.5},
+             t0 + std::chrono::seconds(4));
   EXPECT_EQ(lines.world_endpoint, "tcp://127.0.0.1:1");
   EXPECT_EQ(lines.coordinator_requests, "tcp://127.0.0.1:2");
   EXPECT_EQ(lines.coordinator_events, "tcp://127.0.0.1:3");
@@ -51,7 +53,21 @@ TEST(LabLinesTest, EachKindFromItsRole) {
   ASSERT_EQ(lines.reblends.size(), 1u);
   EXPECT_EQ(lines.reblends[0].peer, 4u);
   EXPECT_EQ(lines.last_blend_line, t0 + std::chrono::seconds(3));
+  ASSERT_TRUE(lines.round_progress.has_value());
+  EXPECT_EQ(lines.round_progress->detail, "pre-pass white 0");
+  EXPECT_EQ(lines.round_progress_at, t0 + std::chrono::seconds(4));
   EXPECT_EQ(lines.ignored, 0u);
+}
+
+TEST(LabLinesTest, ARoundsProgressReadsAsWordsWithItsUnitsAndTime) {
+  EXPECT_EQ(
+      RoundProgressText(report::RoundProgress{
+          0, 1, 57, "structured light, colour 1", "colour 1 frame 12 capture", {0, 2}, 14.25}),
+      "round by unit 0: colour 1 frame 12 capture (units 0, 2), 14.2 s in");
+  EXPECT_EQ(RoundProgressText(report::RoundProgress{2, 1, 90, "solve", "solve", {}, 30.0}),
+            "round by unit 2: solve, 30.0 s in");
+  EXPECT_EQ(RoundProgressText(report::RoundProgress{2, 1, 3, "pre-pass", "", {1}, 1.0}),
+            "round by unit 2: pre-pass (unit 1), 1.0 s in");
 }
 
 TEST(LabLinesTest, ALineFromARoleThatDoesNotPrintItIsIgnoredAndCounted) {

@@ -44,5 +44,34 @@ TEST(ProgressTest, OnATerminalTheBarCarriesWhatItWaitsForUntilTheEnd) {
   EXPECT_NE(last.find("ok"), std::string::npos) << last;
 }
 
+TEST(ProgressTest, ANotePrintsAPlainLineOnlyWhenItsKeyChanges) {
+  std::ostringstream out;
+  Progress progress(out, /*tty=*/false, kPlainGap);
+  progress.Begin("calibration held", 3);
+  progress.Note("pre-pass", "round by unit 0: pre-pass (unit 1)");
+  progress.Note("pre-pass", "round by unit 0: pre-pass (unit 2)");  // same step: no line
+  progress.Note("solve", "round by unit 0: solve");
+  const std::string text = out.str();
+  EXPECT_NE(text.find("): round by unit 0: pre-pass (unit 1)\n"), std::string::npos) << text;
+  EXPECT_EQ(text.find("pre-pass (unit 2)"), std::string::npos) << text;
+  EXPECT_NE(text.find("): round by unit 0: solve\n"), std::string::npos) << text;
+  progress.Begin("show", 0);  // a new phase forgets the note
+  progress.Note("solve", "round by unit 0: solve");
+  EXPECT_NE(out.str().find("lab: show ("), std::string::npos) << out.str();
+}
+
+TEST(ProgressTest, OnATerminalTheBarShowsEveryNoteUntilTheEnd) {
+  std::ostringstream out;
+  Progress progress(out, /*tty=*/true);
+  progress.Begin("calibration held", 3);
+  progress.Note("structured light, colour 1", "colour 1 frame 12 capture (units 0, 2)");
+  EXPECT_NE(out.str().find("calibration held 0/3"), std::string::npos) << out.str();
+  EXPECT_NE(out.str().find("colour 1 frame 12 capture (units 0, 2)"), std::string::npos)
+      << out.str();
+  progress.End();
+  const std::string last = out.str().substr(out.str().rfind('\r'));
+  EXPECT_EQ(last.find("colour 1"), std::string::npos) << "the final line: " << last;
+}
+
 }  // namespace
 }  // namespace sandtable::sim
