@@ -89,6 +89,19 @@ function ago(seconds) {
   return (seconds / 3600).toFixed(1) + " h";
 }
 
+function bytes(n) {
+  if (n < 1024) return n + " B";
+  if (n < 1024 * 1024) return (n / 1024).toFixed(1) + " kB";
+  return (n / (1024 * 1024)).toFixed(1) + " MB";
+}
+
+// The unit's link as the coordinator sees it: its last heartbeat, what came from it.
+function linkText(u) {
+  const heard = u.heartbeat_age_s === null ? "-" : ago(u.heartbeat_age_s) + " ago";
+  if (!u.link) return heard;
+  return heard + " · " + u.link.messages_in + " msgs, " + bytes(u.link.bytes_in) + " in";
+}
+
 function member(id) {
   return (doc.members || []).find((m) => m.node_id === id);
 }
@@ -192,7 +205,7 @@ function renderTable(units) {
       u.predicted_rms_mm > 0 ? fmt(u.predicted_rms_mm, 2, "mm") : "-",
       u.frame_ms_p50 > 0 ? fmt(u.frame_ms_p50, 1) + " / " + fmt(u.frame_ms_p99, 1, "ms") : "-",
       u.pattern && u.pattern !== "none" ? u.pattern : "show",
-      u.heartbeat_age_s === null ? "-" : ago(u.heartbeat_age_s) + " ago",
+      linkText(u),
       u.last_error || "",
     ];
     cells.forEach((text, i) => {

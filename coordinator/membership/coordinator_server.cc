@@ -239,6 +239,7 @@ void CoordinatorServer::HandleRequest(net::Incoming request) {
   const wire::Envelope& in = request.envelope;
   const NodeId sender = in.sender_id();
   const Clock::time_point now = Clock::now();
+  members_.CountReceived(sender, request.routing_id, request.wire_bytes);
   for (CoordinatorService* service : services_) {
     if (service->Serves(in.body_case())) {
       service->OnRequest(std::move(request), *this);

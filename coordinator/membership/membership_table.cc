@@ -132,6 +132,7 @@ HelloOutcome MembershipTable::OnHello(NodeId id, const wire::Hello& hello,
       std::chrono::duration_cast<std::chrono::nanoseconds>(now.time_since_epoch()).count());
   entry.routing_id = routing_id;
   entry.last_heard = now;
+  entry.link = LinkCounts{};
   ++version_;
   return outcome;
 }
@@ -183,6 +184,19 @@ wire::MemberList MembershipTable::ToWire() const {
 bool MembershipTable::IsMemberConnection(NodeId id, const std::string& routing_id) const {
   auto it = members_.find(id);
   return it != members_.end() && it->second.routing_id == routing_id;
+}
+
+void MembershipTable::CountReceived(NodeId id, const std::string& routing_id, size_t wire_bytes) {
+  auto it = members_.find(id);
+  if (it == members_.end() || it->second.routing_id != routing_id) return;
+  ++it->second.link.messages_in;
+  it->second.link.bytes_in += wire_bytes;
+}
+
+std::optional<MembershipTable::LinkCounts> MembershipTable::Link(NodeId id) const {
+  auto it = members_.find(id);
+  if (it == members_.end()) return std::nullopt;
+  return it->second.link;
 }
 
 std::optional<Clock::time_point> MembershipTable::LastHeard(NodeId id) const {

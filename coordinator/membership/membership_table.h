@@ -95,6 +95,14 @@ class MembershipTable {
   bool IsMemberConnection(NodeId id, const std::string& routing_id) const;
   // When the member was last heard (Hello or heartbeat); nullopt for a non-member.
   std::optional<Clock::time_point> LastHeard(NodeId id) const;
+  // What came from a member on its connection (any request: heartbeats, status, asks), counted
+  // by the server as it takes each off the socket; a message from another connection claiming
+  // the id, or from a non-member, is not counted. A restarted member starts from zero.
+  struct LinkCounts {
+    uint64_t messages_in = 0, bytes_in = 0;
+  };
+  void CountReceived(NodeId id, const std::string& routing_id, size_t wire_bytes);
+  std::optional<LinkCounts> Link(NodeId id) const;
   size_t size() const { return members_.size(); }
   uint64_t version() const { return version_; }
   const MembershipOptions& options() const { return options_; }
@@ -106,6 +114,7 @@ class MembershipTable {
     wire::Member member;
     std::string routing_id;
     Clock::time_point last_heard;
+    LinkCounts link;
   };
   MembershipOptions options_;
   void Erase(std::map<NodeId, Entry>::iterator it);

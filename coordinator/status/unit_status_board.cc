@@ -126,6 +126,7 @@ nlohmann::json UnitStatusBoard::Json(const MembershipTable& members, Clock::time
     json footprint = json::array();
     for (const wire::Vector2& p : s.footprint_m()) footprint.push_back({p.x(), p.y()});
     const std::optional<Clock::time_point> heard = members.LastHeard(id);
+    const std::optional<MembershipTable::LinkCounts> link = members.Link(id);
     const std::string state = ConsoleState(id, members, now);
     const Clock::time_point since =
         state == e.state ? e.state_since : (e.lost_since ? *e.lost_since : now);
@@ -134,6 +135,8 @@ nlohmann::json UnitStatusBoard::Json(const MembershipTable& members, Clock::time
          {"state", state},
          {"since_s", Seconds(now - since)},
          {"heartbeat_age_s", heard ? json(Seconds(now - *heard)) : json(nullptr)},
+         {"link", link ? json{{"messages_in", link->messages_in}, {"bytes_in", link->bytes_in}}
+                       : json(nullptr)},
          {"host_name", s.host_name()},
          {"calibration_state", wire::CalibrationState_Name(s.calibration_state())},
          {"phase", e.has_status ? s.phase() : std::string("discovered")},

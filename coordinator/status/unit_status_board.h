@@ -48,7 +48,8 @@ class UnitStatusBoard {
   // The console's state of a unit (see the header comment); "" for an unknown one.
   std::string ConsoleState(NodeId id, const MembershipTable& members, Clock::time_point now) const;
 
-  // [{"node_id", "state", "since_s", "heartbeat_age_s", "host_name", "footprint_m":
+  // [{"node_id", "state", "since_s", "heartbeat_age_s", "link": {"messages_in", "bytes_in"}
+  // (MembershipTable::Link; null for a unit that is not a member), "host_name", "footprint_m":
   // [[x, y], ...], "predicted_rms_mm", "projector_rms_px", "round", "frame_ms_p50",
   // "frame_ms_p99", "pattern", "blended", "neighbours", "last_error", "calibration_state",
   // "phase"}] sorted by node id: members and lost units.

@@ -130,6 +130,11 @@ try {
   }, 500);
   await until("every unit blending", kFootprintWaitMs, async () =>
       (await page.locator('#units tbody tr[data-state="blending"]').count()) === kUnits, 500);
+  // Each unit's link: its heartbeat's age and what came from it.
+  const links = await page.locator("#units tbody tr td:nth-child(8)").allTextContents();
+  if (links.length !== kUnits || !links.every((t) => /ago · \d+ msgs, [\d.]+ (B|kB|MB) in/.test(t))) {
+    fail(`the units' link cells read ${JSON.stringify(links)}`);
+  }
   await page.screenshot({path: path.join(outDir, "console.png")});
   fs.writeFileSync(path.join(outDir, "status.json"),
                    JSON.stringify(await (await fetch(site.status)).json(), null, 1) + "\n");

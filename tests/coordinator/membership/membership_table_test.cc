@@ -57,6 +57,29 @@ TEST(MembershipTableTest, JoinHeartbeatExpireAndRejoinOnce) {
   EXPECT_EQ(table.size(), 0u);
 }
 
+// The link counts: what a member sent on its own connection, not what another connection sent
+// in its name; a restart starts from zero; a non-member has none.
+TEST(MembershipTableTest, CountsWhatAMemberSentOnItsOwnConnection) {
+  MembershipTable table(MembershipOptions{});
+  const Clock::time_point t = Clock::time_point{} + std::chrono::hours(1);
+  EXPECT_FALSE(table.Link(1).has_value());
+  table.CountReceived(1, kConn, 100);  // not a member yet: not counted
+  ASSERT_EQ(table.OnHello(1, MakeHello(10, "tcp://a:1"), kConn, t, nullptr), HelloOutcome::kJoined);
+  table.CountReceived(1, kConn, 40);
+  table.CountReceived(1, kConn, 60);
+  table.CountReceived(1, kConn2, 1000);  // another connection claiming node 1
+  table.CountReceived(2, kConn, 1000);   // node 1's connection claiming another id
+  ASSERT_TRUE(table.Link(1).has_value());
+  EXPECT_EQ(table.Link(1)->messages_in, 2u);
+  EXPECT_EQ(table.Link(1)->bytes_in, 100u);
+  EXPECT_FALSE(table.Link(2).has_value());
+  ASSERT_EQ(table.OnHello(1, MakeHello(11, "tcp://a:1"), kConn, t, nullptr),
+            HelloOutcome::kRestarted);
+  EXPECT_EQ(table.Link(1)->messages_in, 0u);
+  EXPECT_EQ(table.OnGoodbye(1, 11, kConn), GoodbyeOutcome::kLeft);
+  EXPECT_FALSE(table.Link(1).has_value());
+}
+
 // A forger on another connection cannot take a member off the list (Goodbye), keep it alive
 // (Heartbeat), or take its id (Hello) while the member's connection is up, even when it copies
 // the member's incarnation from the published member list.

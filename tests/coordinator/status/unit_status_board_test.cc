@@ -55,8 +55,10 @@ TEST(UnitStatusBoardTest, KeepsAMembersOwnStatusAndSaysItsState) {
   ASSERT_TRUE(site.board.Update(3, "conn-3", Calibrated(true), site.members, site.t0).ok());
   EXPECT_EQ(site.board.ConsoleState(3, site.members, site.t0), "blending");
 
+  site.members.CountReceived(3, "conn-3", 120);
   const nlohmann::json units = site.board.Json(site.members, site.t0 + 50ms);
   ASSERT_EQ(units.size(), 1u);
+  EXPECT_EQ(units[0]["link"], nlohmann::json({{"messages_in", 1}, {"bytes_in", 120}}));
   EXPECT_EQ(units[0]["node_id"], 3);
   EXPECT_EQ(units[0]["state"], "blending");
   EXPECT_EQ(units[0]["host_name"], "unit-a");
@@ -128,6 +130,7 @@ TEST(UnitStatusBoardTest, SilentMembersStallAndGoneMembersAreLostThenForgotten) 
   EXPECT_EQ(units[1]["state"], "lost");
   EXPECT_NEAR(units[1]["since_s"].get<double>(), 1.0, 1e-6);
   EXPECT_TRUE(units[1]["heartbeat_age_s"].is_null());
+  EXPECT_TRUE(units[1]["link"].is_null());
   EXPECT_EQ(units[1]["footprint_m"].size(), 4u);
   site.board.Sweep(site.members, gone + kLostKeptFor + 1s);
   EXPECT_EQ(site.board.size(), 1u);
