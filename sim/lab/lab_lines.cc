@@ -89,12 +89,12 @@ void LabLines::Take(const std::string& role, const report::ReportLine& line,
   if (!taken) ++ignored;
 }
 
-std::string RoundProgressText(const report::RoundProgress& progress) {
+std::string RoundProgressText(const report::RoundProgress& progress, bool step_only) {
   std::string units;
   for (NodeId unit : progress.units) units += (units.empty() ? "" : ", ") + std::to_string(unit);
   char elapsed[32];
   std::snprintf(elapsed, sizeof(elapsed), "%.1f s in", progress.elapsed_s);
-  const std::string what = progress.detail.empty() ? progress.step : progress.detail;
+  const std::string what = step_only || progress.detail.empty() ? progress.step : progress.detail;
   return "round by unit " + std::to_string(progress.id) + ": " + what +
          (units.empty() ? ""
                         : (progress.units.size() == 1 ? " (unit " : " (units ") + units + ")") +

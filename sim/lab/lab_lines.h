@@ -45,7 +45,8 @@ struct LabLines {
 };
 
 // A round's progress line for a person: "round by unit 0: colour 1 frame 12 capture (units 0,
-// 2), 14.2 s in".
-std::string RoundProgressText(const report::RoundProgress& progress);
+// 2), 14.2 s in"; with `step_only`, the part of the round instead of the stage ("round by unit
+// 0: structured light, colour 1 (units 0, 2), 14.2 s in").
+std::string RoundProgressText(const report::RoundProgress& progress, bool step_only = false);
 
 }  // namespace sandtable::sim

@@ -543,7 +543,8 @@ Supervisor::LineHandler LabRun::Handler() {
     }
     // A round's steps on the bar, and a plain line when its step changes.
     if (const auto* round = std::get_if<report::RoundProgress>(&line)) {
-      progress_.Note(std::to_string(round->round) + " " + round->step, RoundProgressText(*round));
+      progress_.Note(std::to_string(round->round) + " " + round->step, RoundProgressText(*round),
+                     RoundProgressText(*round, /*step_only=*/true));
     }
     if ((std::holds_alternative<report::Calibrated>(line) ||
          std::holds_alternative<report::CalibrationFailed>(line)) &&

@@ -51,7 +51,8 @@ void Progress::Tick(const std::function<std::string()>& waiting_for) {
        << std::flush;
 }
 
-void Progress::Note(const std::string& key, const std::string& text) {
+void Progress::Note(const std::string& key, const std::string& text,
+                    const std::string& plain_text) {
   if (!active_) return;
   const bool new_key = key != note_key_;
   note_key_ = key;
@@ -63,7 +64,9 @@ void Progress::Note(const std::string& key, const std::string& text) {
   if (!new_key) return;
   char time_text[32];
   std::snprintf(time_text, sizeof(time_text), "%.1f s", Elapsed_s());
-  out_ << "lab: " << phase_ << " (" << time_text << "): " << text << "\n" << std::flush;
+  out_ << "lab: " << phase_ << " (" << time_text
+       << "): " << (plain_text.empty() ? text : plain_text) << "\n"
+       << std::flush;
 }
 
 void Progress::End(const std::string& outcome) {

@@ -30,10 +30,10 @@ class Progress {
   // (at most 5 times a second), a plain line every plain_gap otherwise.
   // `waiting_for` is asked only when a line is due.
   void Tick(const std::function<std::string()>& waiting_for);
-  // What the phase's work is doing now (e.g. a calibration round's step), shown on the bar;
-  // a plain line is printed when `key` differs from the last note's (the bar shows every
-  // `text`). Cleared by Begin.
-  void Note(const std::string& key, const std::string& text);
+  // What the phase's work is doing now (e.g. a calibration round's stage), shown on the bar;
+  // a plain line (`plain_text`, or `text` when empty) is printed when `key` differs from the
+  // last note's (the bar shows every `text`). Cleared by Begin.
+  void Note(const std::string& key, const std::string& text, const std::string& plain_text = "");
   // Ends the current phase: "ok" or a short failure word.
   void End(const std::string& outcome = "ok");
 

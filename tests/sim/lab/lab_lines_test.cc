@@ -64,6 +64,12 @@ TEST(LabLinesTest, ARoundsProgressReadsAsWordsWithItsUnitsAndTime) {
       RoundProgressText(report::RoundProgress{
           0, 1, 57, "structured light, colour 1", "colour 1 frame 12 capture", {0, 2}, 14.25}),
       "round by unit 0: colour 1 frame 12 capture (units 0, 2), 14.2 s in");
+  EXPECT_EQ(
+      RoundProgressText(
+          report::RoundProgress{
+              0, 1, 57, "structured light, colour 1", "colour 1 frame 12 capture", {0, 2}, 14.25},
+          /*step_only=*/true),
+      "round by unit 0: structured light, colour 1 (units 0, 2), 14.2 s in");
   EXPECT_EQ(RoundProgressText(report::RoundProgress{2, 1, 90, "solve", "solve", {}, 30.0}),
             "round by unit 2: solve, 30.0 s in");
   EXPECT_EQ(RoundProgressText(report::RoundProgress{2, 1, 3, "pre-pass", "", {1}, 1.0}),
