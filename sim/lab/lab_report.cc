@@ -139,6 +139,7 @@ json LabReportJson(const LabResult& r) {
               {"status", r.status},
               {"command", r.command},
               {"seed", r.seed},
+              {"noise_seed", r.noise_seed},
               {"total_s", r.total_s},
               {"machine", {{"load_average", r.load_average}, {"cores", r.cores}}}};
   json reasons = json::array();

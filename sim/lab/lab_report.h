@@ -66,6 +66,7 @@ struct LabResult {
   std::string status = "ok";  // ok | failed | interrupted
   std::string command;
   uint64_t seed = 1;
+  uint64_t noise_seed = 1;  // the world's capture noise
   std::string site_name, site_label, scene_label, site_path, scene_path;
   int num_units = 0;
   int scene_triangles = 0;

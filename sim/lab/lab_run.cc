@@ -42,6 +42,7 @@ Status WriteConsoleToken(const std::string& path) {
 int LabRun::Run() {
   result_.command = options_.command_line;
   result_.seed = options_.seed;
+  result_.noise_seed = options_.noise_seed;
   result_.site_label = options_.site;
   result_.scene_label = options_.scene;
   result_.metric_options.num_samples = options_.metric_samples;
@@ -164,10 +165,10 @@ bool LabRun::StartWorld() {
   Phase("start world", 1);
   const std::string bind =
       hosts_ ? "tcp://" + hosts_->Address("world") + ":*" : std::string("tcp://127.0.0.1:*");
-  ChildProcess* world =
-      StartChild("world", "world",
-                 {world_bin_, "serve", "--site", inputs_.site_path, "--scene", inputs_.scene_path,
-                  "--bind", bind, "--frame-log", FrameLogPath()});
+  ChildProcess* world = StartChild(
+      "world", "world",
+      {world_bin_, "serve", "--site", inputs_.site_path, "--scene", inputs_.scene_path, "--bind",
+       bind, "--frame-log", FrameLogPath(), "--noise-seed", std::to_string(options_.noise_seed)});
   if (!world) return false;
   return Wait(
       "start world", [&] { return !lines_.world_endpoint.empty(); }, ToMs(options_.start_timeout_s),

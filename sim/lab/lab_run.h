@@ -93,6 +93,9 @@ struct LabRunOptions {
   // with two frames of lag, a 30 fps camera with a two-frame queue, repeated and lost frames),
   // or "" (as the site file says; presets are ideal).
   std::string device_timing;
+  // The seed of the world's capture noise (sandtable-world serve --noise-seed): the same site
+  // and seed with another noise shows how much a figure moves with the noise alone.
+  uint64_t noise_seed = 1;
   // Membership heartbeat of the coordinator and the nodes, ms (a member is dead after 5 missed):
   // 0 = 100 ms up to 16 units, 100 ms x units / 16 beyond (64 processes on two cores: a
   // starved coordinator declared 56 of 64 nodes dead at once after a stall).

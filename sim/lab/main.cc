@@ -211,6 +211,9 @@ void AddRunShowFlags(CLI::App* run, sim::LabRunOptions& options, std::string& pr
                       "real (60 Hz projector two frames late, 30 fps camera with a two-frame "
                       "queue, 5 % repeated and 2 % lost frames); default: the site file's")
           ->check(CLI::IsMember({"ideal", "real"})));
+  run->add_option("--noise-seed", options.noise_seed,
+                  "Seed of the world's capture noise (the same site with other noise)")
+      ->check(cli::Integer<uint64_t>(0, UINT64_MAX));
   run->add_option("--heartbeat-ms", options.heartbeat_ms,
                   "Membership heartbeat of coordinator and nodes, ms (0: 100, or 100 x units / 16 "
                   "past 16 units)")
