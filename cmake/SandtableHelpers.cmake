@@ -46,7 +46,9 @@ endfunction()
 # sandtable_add_window_test(<name> SOURCES ... DEPS ...)
 #   A GoogleTest executable that needs an X display: CTest runs the whole binary under xvfb-run
 #   with a 24-bit screen (xvfb-run's default screen is 8 bits deep), label "window". Without
-#   xvfb-run it runs as is (its tests that need a display skip).
+#   xvfb-run it runs as is (its tests that need a display skip). Two run one after the other
+#   (RESOURCE_LOCK): `xvfb-run -a` started at once may both pick the same free display, and the
+#   first to end kills the X server under the other.
 function(sandtable_add_window_test name)
   cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
   if(NOT SANDTABLE_BUILD_TESTS)
@@ -63,7 +65,7 @@ function(sandtable_add_window_test name)
     add_test(NAME ${name} COMMAND ${name})
   endif()
   set_tests_properties(${name} PROPERTIES LABELS window TIMEOUT 120
-    WORKING_DIRECTORY ${PROJECT_SOURCE_DIR})
+    WORKING_DIRECTORY ${PROJECT_SOURCE_DIR} RESOURCE_LOCK xvfb_display)
 endfunction()
 
 # sandtable_embed_text(<target> HEADER <path under the build tree> NAMESPACE <ns>
