@@ -40,13 +40,22 @@ cv::Mat Draw(GlContext* context, const RenderContent& content) {
   return image.ok() ? *image : cv::Mat();
 }
 
-TEST(WindowRenderTest, TheWindowShowsWhatTheHeadlessContextDraws) {
+bool HaveDisplay() {
   const char* display = std::getenv("DISPLAY");
-  if (display == nullptr || display[0] == '\0') GTEST_SKIP() << "no DISPLAY (ctest uses xvfb-run)";
+  return display != nullptr && display[0] != '\0';
+}
+
+// A kW x kH window at the screen's origin.
+Expected<std::unique_ptr<WindowProjectorOutput>> OpenTestWindow() {
   WindowOptions options;
   options.windowed = true;
   options.windowed_size_px = cv::Size(kW, kH);
-  Expected<std::unique_ptr<WindowProjectorOutput>> window = WindowProjectorOutput::Open(options);
+  return WindowProjectorOutput::Open(options);
+}
+
+TEST(WindowRenderTest, TheWindowShowsWhatTheHeadlessContextDraws) {
+  if (!HaveDisplay()) GTEST_SKIP() << "no DISPLAY (ctest uses xvfb-run)";
+  Expected<std::unique_ptr<WindowProjectorOutput>> window = OpenTestWindow();
   ASSERT_TRUE(window.ok()) << window.status().ToString();
   std::unique_ptr<GlContext> window_context = CreateWindowContext(window->get());
   EXPECT_NE(window_context->description().find("GLFW window"), std::string::npos);
@@ -95,13 +104,8 @@ bool ScreenUniform(int level, bool equal = true) {
 }
 
 TEST(WindowRenderTest, TheRenderLoopDrawsIntoTheWindowAndCalibrationShowsBetweenItsFrames) {
-  const char* display = std::getenv("DISPLAY");
-  if (display == nullptr || display[0] == '\0') GTEST_SKIP() << "no DISPLAY (ctest uses xvfb-run)";
-  WindowOptions window_options;
-  window_options.windowed = true;
-  window_options.windowed_size_px = cv::Size(kW, kH);
-  Expected<std::unique_ptr<WindowProjectorOutput>> window =
-      WindowProjectorOutput::Open(window_options);
+  if (!HaveDisplay()) GTEST_SKIP() << "no DISPLAY (ctest uses xvfb-run)";
+  Expected<std::unique_ptr<WindowProjectorOutput>> window = OpenTestWindow();
   ASSERT_TRUE(window.ok()) << window.status().ToString();
   RenderLoopOptions options;
   options.max_fps = 200.0;
