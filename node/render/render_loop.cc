@@ -638,25 +638,28 @@ Expected<FrameStats> RenderLoop::Draw(ThreadState& t, FrameWork& work) {
 
 // The frame in the window's back buffer swapped in (no read back), unless calibration has the
 // projector: it then draws its own frames over it.
+bool RenderLoop::Suspended() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return suspended_;
+}
+
+void RenderLoop::MarkDrawn(ThreadState& t, const FrameWork& work) {
+  if (work.rewarp) return;
+  t.last_frame = Clock::now();
+  t.drawn_version = work.version;
+  t.drawn_frame_version = work.frame_version;
+}
+
 void RenderLoop::PresentFrame(ThreadState& t, FrameWork& work, const Expected<FrameStats>& stats) {
-  if (!work.rewarp) {
-    t.last_frame = Clock::now();
-    t.drawn_version = work.version;
-    t.drawn_frame_version = work.frame_version;
-  }
+  MarkDrawn(t, work);
   if (!stats.ok()) {
     work.status = stats.status();
     return;
   }
   const Clock::time_point show_start = Clock::now();
   std::lock_guard<std::mutex> showing(show_mutex_);
-  bool suspended = false;
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    suspended = suspended_;
-  }
   last_shown_hash_.reset();
-  if (!suspended) {
+  if (!Suspended()) {
     Expected<ShownFrame> done = t.context->Present();
     if (done.ok()) {
       work.shown = true;
@@ -675,22 +678,13 @@ void RenderLoop::ShowFrame(ThreadState& t, FrameWork& work, const Expected<Frame
   const Clock::time_point read_start = Clock::now();
   Expected<cv::Mat> frame =
       stats.ok() ? t.context->ReadOutput() : Expected<cv::Mat>(stats.status());
-  if (!work.rewarp) t.last_frame = Clock::now();
+  MarkDrawn(t, work);
   work.mask_frame.read_ms = MsBetween(read_start, Clock::now());
-  if (!work.rewarp) {
-    t.drawn_version = work.version;
-    t.drawn_frame_version = work.frame_version;
-  }
   const Clock::time_point show_start = Clock::now();
   if (frame.ok()) {
     std::lock_guard<std::mutex> showing(show_mutex_);
-    bool suspended = false;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      suspended = suspended_;
-    }
     const uint64_t hash = FrameHash(*frame);
-    if (suspended) {
+    if (Suspended()) {
       last_shown_hash_.reset();  // calibration shows its own frames meanwhile
     } else if (last_shown_hash_ == hash) {
       work.shown = true;  // the projector already shows exactly this

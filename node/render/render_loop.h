@@ -190,6 +190,9 @@ class RenderLoop {
   Expected<FrameStats> Draw(ThreadState& t, FrameWork& work);
   void ShowFrame(ThreadState& t, FrameWork& work, const Expected<FrameStats>& stats);
   void PresentFrame(ThreadState& t, FrameWork& work, const Expected<FrameStats>& stats);
+  // The frame's inputs as drawn, and when (not for a re-warp of the last frame).
+  void MarkDrawn(ThreadState& t, const FrameWork& work);
+  bool Suspended() const;  // under mutex_
   void RecordFrame(FrameWork& work, const Expected<FrameStats>& stats);
   void LogFrame(ThreadState& t, const FrameWork& work, const FrameStats& stats);
   void PrepareStandby(ThreadState& t);

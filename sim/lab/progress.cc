@@ -8,6 +8,12 @@ namespace {
 constexpr int kBarWidth = 24;
 }
 
+std::string Progress::ElapsedText() const {
+  char text[32];
+  std::snprintf(text, sizeof(text), "%.1f s", Elapsed_s());
+  return text;
+}
+
 double Progress::Elapsed_s() const {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
 }
@@ -43,8 +49,7 @@ void Progress::Tick(const std::function<std::string()>& waiting_for) {
     Draw(false);
     return;
   }
-  char time_text[32];
-  std::snprintf(time_text, sizeof(time_text), "%.1f s", Elapsed_s());
+  const std::string time_text = ElapsedText();
   out_ << "lab: " << phase_ << " "
        << (total_ > 0 ? std::to_string(done_) + "/" + std::to_string(total_) + " " : "") << "("
        << time_text << (waiting_for_.empty() ? "" : "; waiting for " + waiting_for_) << ")\n"
@@ -62,8 +67,7 @@ void Progress::Note(const std::string& key, const std::string& text,
     return;
   }
   if (!new_key) return;
-  char time_text[32];
-  std::snprintf(time_text, sizeof(time_text), "%.1f s", Elapsed_s());
+  const std::string time_text = ElapsedText();
   out_ << "lab: " << phase_ << " (" << time_text
        << "): " << (plain_text.empty() ? text : plain_text) << "\n"
        << std::flush;
@@ -73,8 +77,7 @@ void Progress::End(const std::string& outcome) {
   if (!active_) return;
   if (outcome == "ok" && total_ > 0) done_ = total_;
   seconds_.emplace_back(phase_, Elapsed_s());
-  char time_text[32];
-  std::snprintf(time_text, sizeof(time_text), "%.1f s", Elapsed_s());
+  const std::string time_text = ElapsedText();
   if (tty_) {
     Draw(true);
     out_ << "  " << outcome << "\n" << std::flush;
@@ -85,8 +88,7 @@ void Progress::End(const std::string& outcome) {
 }
 
 void Progress::Draw(bool final_line) {
-  char time_text[32];
-  std::snprintf(time_text, sizeof(time_text), "%.1f s", Elapsed_s());
+  const std::string time_text = ElapsedText();
   const std::string counts =
       total_ > 0 ? " " + std::to_string(done_) + "/" + std::to_string(total_) : "";
   if (!tty_) {

@@ -43,6 +43,7 @@ class Progress {
  private:
   void Draw(bool final_line);
   double Elapsed_s() const;
+  std::string ElapsedText() const;  // "1.4 s"
 
   std::ostream& out_;
   bool tty_;
